@@ -1,0 +1,256 @@
+"""Pinhole camera in the SoccerNet convention, with SoccerNet's lens distortion model.
+
+``x_cam = R (X - C)``: ``R`` rotates world into camera coordinates (camera x right, y down, z
+forward) and ``C`` is the camera centre in the world (metres, z down). ``K`` has square pixels by
+default and zero skew. Distortion follows the SoccerNet evaluator (and OpenCV's rational + thin
+prism model): radial ``k1..k6`` (numerator k1..k3, denominator k4..k6), tangential ``p1, p2``,
+thin prism ``s1..s4``.
+
+SoccerNet camera JSON: ``pan_degrees, tilt_degrees, roll_degrees, position_meters,
+x_focal_length, y_focal_length, principal_point, radial_distortion, tangential_distortion,
+thin_prism_distortion`` with ``R^T = Rz(pan) Rx(tilt) Rz(roll)``. The evaluator takes the image
+width as ``2 * principal_point[0]``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+#: Points closer to the camera plane than this (metres along the optical axis) are not projected;
+#: the SoccerNet evaluator uses the same bound.
+MIN_DEPTH = 1e-3
+
+
+def _rz(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _rx(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rotation_from_pan_tilt_roll(pan: float, tilt: float, roll: float) -> np.ndarray:
+    """World-to-camera rotation from SoccerNet angles (radians): ``R = (Rz(pan) Rx(tilt) Rz(roll))^T``."""
+    return (_rz(pan) @ _rx(tilt) @ _rz(roll)).T
+
+
+def pan_tilt_roll_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
+    """Inverse of :func:`rotation_from_pan_tilt_roll` (radians). Of the two decompositions, the one
+    with the smaller |roll| is returned, as the SoccerNet package does (operators avoid roll)."""
+    o = np.asarray(R, dtype=float).T  # orientation = Rz(pan) Rx(tilt) Rz(roll)
+    first = math.acos(max(-1.0, min(1.0, o[2, 2])))
+    solutions = []
+    for tilt in (first, -first):
+        s = 1.0 if math.sin(tilt) > 0 else -1.0
+        solutions.append((math.atan2(s * o[0, 2], -s * o[1, 2]), tilt, math.atan2(s * o[2, 0], s * o[2, 1])))
+    return solutions[0] if abs(solutions[0][2]) < abs(solutions[1][2]) else solutions[1]
+
+
+def look_at_rotation(position: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.ndarray:
+    """World-to-camera rotation of a camera at ``position`` looking at ``target`` with the image
+    'up' as close as possible to world up (-z), then rolled by ``roll`` radians about the axis."""
+    z = np.asarray(target, float) - np.asarray(position, float)
+    z /= np.linalg.norm(z)
+    down = np.array([0.0, 0.0, 1.0])
+    x = np.cross(down, z)  # camera x points right when y points down
+    if np.linalg.norm(x) < 1e-9:
+        x = np.array([1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    return _rz(roll).T @ R if roll else R
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A calibrated camera for an image of ``width`` x ``height`` pixels."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    R: np.ndarray  # (3, 3) world -> camera
+    C: np.ndarray  # (3,) camera centre in world metres
+    width: float
+    height: float
+    radial: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    tangential: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    thin_prism: np.ndarray = field(default_factory=lambda: np.zeros(4))
+
+    def __post_init__(self):
+        for name, shape in (("R", (3, 3)), ("C", (3,)), ("radial", (6,)), ("tangential", (2,)), ("thin_prism", (4,))):
+            arr = np.array(getattr(self, name), dtype=float)
+            if arr.shape != shape:
+                raise ValueError(f"Camera.{name} must have shape {shape}, got {arr.shape}")
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_look_at(cls, position, target, *, hfov_deg: float, width: float, height: float,
+                     roll_deg: float = 0.0, k1: float = 0.0) -> "Camera":
+        """Square-pixel camera with centred principal point and horizontal field of view ``hfov_deg``."""
+        f = (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
+        radial = np.zeros(6)
+        radial[0] = k1
+        return cls(f, f, width / 2.0, height / 2.0, look_at_rotation(position, target, math.radians(roll_deg)),
+                   np.asarray(position, float), width, height, radial)
+
+    @classmethod
+    def from_soccernet(cls, d: dict, width: float | None = None, height: float | None = None) -> "Camera":
+        """From a SoccerNet camera dict. The image size defaults to twice the principal point, as
+        in the official evaluator."""
+        pp = [float(v) for v in d["principal_point"]]
+        R = rotation_from_pan_tilt_roll(*(math.radians(float(d[k])) for k in ("pan_degrees", "tilt_degrees", "roll_degrees")))
+        return cls(float(d["x_focal_length"]), float(d["y_focal_length"]), pp[0], pp[1], R,
+                   np.asarray(d["position_meters"], float),
+                   float(width) if width is not None else 2 * pp[0],
+                   float(height) if height is not None else 2 * pp[1],
+                   np.asarray(d.get("radial_distortion", np.zeros(6)), float),
+                   np.asarray(d.get("tangential_distortion", np.zeros(2)), float),
+                   np.asarray(d.get("thin_prism_distortion", np.zeros(4)), float))
+
+    def to_soccernet(self) -> dict:
+        """SoccerNet camera dict (plus ``rotation_matrix``, as PnLCalib writes it)."""
+        pan, tilt, roll = pan_tilt_roll_from_rotation(self.R)
+        return {
+            "pan_degrees": math.degrees(pan),
+            "tilt_degrees": math.degrees(tilt),
+            "roll_degrees": math.degrees(roll),
+            "position_meters": [float(v) for v in self.C],
+            "x_focal_length": float(self.fx),
+            "y_focal_length": float(self.fy),
+            "principal_point": [float(self.cx), float(self.cy)],
+            "radial_distortion": [float(v) for v in self.radial],
+            "tangential_distortion": [float(v) for v in self.tangential],
+            "thin_prism_distortion": [float(v) for v in self.thin_prism],
+            "rotation_matrix": self.R.tolist(),
+        }
+
+    # ------------------------------------------------------------------ derived matrices
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def t(self) -> np.ndarray:
+        """Translation of ``x_cam = R X + t``."""
+        return -self.R @ self.C
+
+    @property
+    def P(self) -> np.ndarray:
+        """3x4 projection matrix ``K R [I | -C]`` (no distortion)."""
+        return self.K @ np.hstack([self.R, self.t[:, None]])
+
+    def ground_homography(self) -> np.ndarray:
+        """3x3 homography from ground-plane points (X, Y, 1) at z = 0 to pixels (no distortion)."""
+        P = self.P
+        return P[:, [0, 1, 3]]
+
+    @property
+    def hfov_deg(self) -> float:
+        return math.degrees(2 * math.atan(self.width / (2 * self.fx)))
+
+    @property
+    def pan_tilt_roll_deg(self) -> tuple[float, float, float]:
+        return tuple(math.degrees(a) for a in pan_tilt_roll_from_rotation(self.R))
+
+    @property
+    def has_distortion(self) -> bool:
+        return bool(np.any(self.radial) or np.any(self.tangential) or np.any(self.thin_prism))
+
+    @property
+    def opencv_dist_coeffs(self) -> np.ndarray:
+        """Distortion in OpenCV's order (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4)."""
+        k, p, s = self.radial, self.tangential, self.thin_prism
+        return np.array([k[0], k[1], p[0], p[1], k[2], k[3], k[4], k[5], s[0], s[1], s[2], s[3]])
+
+    def scaled(self, width: float, height: float) -> "Camera":
+        """The same camera for the image resized to ``width`` x ``height``."""
+        sx, sy = width / self.width, height / self.height
+        return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy,
+                       width=float(width), height=float(height))
+
+    def with_pose(self, R: np.ndarray, C: np.ndarray) -> "Camera":
+        return replace(self, R=np.asarray(R, float), C=np.asarray(C, float))
+
+    # ------------------------------------------------------------------ projection
+    def to_camera(self, X: np.ndarray) -> np.ndarray:
+        """World points (N, 3) -> camera coordinates (N, 3)."""
+        return (np.asarray(X, float).reshape(-1, 3) - self.C) @ self.R.T
+
+    def distort(self, xn: np.ndarray) -> np.ndarray:
+        """Apply the lens model to normalised image points (N, 2)."""
+        if not self.has_distortion:
+            return xn
+        x, y = xn[:, 0], xn[:, 1]
+        r2 = x * x + y * y
+        k, p, s = self.radial, self.tangential, self.thin_prism
+        num = 1 + r2 * (k[0] + r2 * (k[1] + r2 * k[2]))
+        den = 1 + r2 * (k[3] + r2 * (k[4] + r2 * k[5]))
+        f = num / den
+        xd = x * f + 2 * p[0] * x * y + p[1] * (r2 + 2 * x * x) + s[0] * r2 + s[1] * r2 * r2
+        yd = y * f + 2 * p[1] * x * y + p[0] * (r2 + 2 * y * y) + s[2] * r2 + s[3] * r2 * r2
+        return np.stack([xd, yd], axis=1)
+
+    def undistort(self, xd: np.ndarray, iterations: int = 20) -> np.ndarray:
+        """Normalised distorted points (N, 2) -> undistorted normalised points, by Newton's method
+        on :meth:`distort` (vectorised 2x2 solves; converges to ~1e-14 for broadcast lenses)."""
+        xd = np.asarray(xd, float).reshape(-1, 2)
+        if not self.has_distortion:
+            return xd
+        x = xd.copy()
+        eps = 1e-7
+        for _ in range(iterations):
+            r = self.distort(x) - xd
+            if np.nanmax(np.abs(r), initial=0.0) < 1e-14:
+                break
+            jx = (self.distort(x + [eps, 0]) - self.distort(x - [eps, 0])) / (2 * eps)
+            jy = (self.distort(x + [0, eps]) - self.distort(x - [0, eps])) / (2 * eps)
+            det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dx = (jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det
+                dy = (-jx[:, 1] * r[:, 0] + jx[:, 0] * r[:, 1]) / det
+            x = x - np.stack([dx, dy], axis=1)
+        return x
+
+    def project(self, X: np.ndarray, *, distort: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points (N, 3). Returns pixels (N, 2) and depth (N,); points at depth
+        <= :data:`MIN_DEPTH` (behind or on the camera plane) get NaN pixels."""
+        Xc = self.to_camera(X)
+        z = Xc[:, 2]
+        ok = z > MIN_DEPTH
+        xn = np.full((len(Xc), 2), np.nan)
+        xn[ok] = Xc[ok, :2] / z[ok, None]
+        if distort:
+            xn[ok] = self.distort(xn[ok])
+        uv = np.empty_like(xn)
+        uv[:, 0] = xn[:, 0] * self.fx + self.cx
+        uv[:, 1] = xn[:, 1] * self.fy + self.cy
+        return uv, z
+
+    def pixel_rays(self, uv: np.ndarray) -> np.ndarray:
+        """Unit world directions (N, 3) of the rays through pixels ``uv`` (N, 2), distortion removed."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        xd = np.stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy], axis=1)
+        xn = self.undistort(xd)
+        d = np.hstack([xn, np.ones((len(xn), 1))]) @ self.R  # R^T applied to row vectors
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def back_project_to_ground(self, uv: np.ndarray, z: float = 0.0) -> np.ndarray:
+        """World points (N, 3) where the rays through ``uv`` meet the plane z = ``z``; NaN where the
+        ray does not reach it in front of the camera."""
+        d = self.pixel_rays(uv)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (z - self.C[2]) / d[:, 2]
+        s = np.where(s > 0, s, np.nan)
+        return self.C + s[:, None] * d
+
+    def in_image(self, uv: np.ndarray) -> np.ndarray:
+        uv = np.asarray(uv)
+        return (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)

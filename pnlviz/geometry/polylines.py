@@ -1,0 +1,120 @@
+"""Project sampled pitch polylines into an image and clip them at the image border, with the same
+rules as the SoccerNet evaluator (``get_polylines``), so that anything built on it (synthetic
+annotations, metrics, overlays) agrees with the official scores.
+
+The evaluator's rules, restated:
+
+* points at depth <= 1e-3 m are skipped: they neither start nor end a visible run and are not
+  remembered as the previous point;
+* a point is inside when ``0 <= u < W`` and ``0 <= v < H`` (W, H given, not the camera's);
+* when the polyline enters the image after its first point, the crossing of the segment (as an
+  infinite line through the previous and current projected points) with the image border lines
+  ``u = 0``, ``u = W - 1``, ``v = 0``, ``v = H - 1`` that lies inside and is closest to the current
+  point is inserted before it; the same when it leaves, after the last inside point;
+* all visible runs of a class are concatenated into one list.
+
+``evaluator_precision=True`` reproduces the evaluator's float32 pixel arithmetic bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pnlviz.geometry.camera import MIN_DEPTH, Camera
+
+
+def _project_like_evaluator(camera: Camera, X: np.ndarray, evaluator_precision: bool) -> tuple[np.ndarray, np.ndarray]:
+    Xc = camera.to_camera(X)
+    z = Xc[:, 2]
+    ok = z > MIN_DEPTH
+    xn = np.zeros((len(X), 2))
+    xn[ok] = Xc[ok, :2] / z[ok, None]
+    xn[ok] = camera.distort(xn[ok])
+    if evaluator_precision:
+        # The evaluator's distort() returns float32, and the pixel maths then stays in float32.
+        x32 = xn.astype(np.float32)
+        uv = np.empty_like(x32)
+        uv[:, 0] = x32[:, 0] * np.float32(camera.fx) + np.float32(camera.cx)
+        uv[:, 1] = x32[:, 1] * np.float32(camera.fy) + np.float32(camera.cy)
+        uv = uv.astype(np.float64)
+    else:
+        uv = np.empty_like(xn)
+        uv[:, 0] = xn[:, 0] * camera.fx + camera.cx
+        uv[:, 1] = xn[:, 1] * camera.fy + camera.cy
+    return uv, ok
+
+
+def _border_crossing(cur: np.ndarray, prev: np.ndarray, width: float, height: float) -> np.ndarray | None:
+    """Crossing of the line through two homogeneous points with the border lines, as the evaluator
+    computes it (the candidate inside the image closest to ``cur``), or None."""
+    line = np.cross(cur, prev)
+    best, best_d = None, np.inf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for side in ((1.0, 0.0, 0.0), (1.0, 0.0, -width + 1), (0.0, 1.0, 0.0), (0.0, 1.0, -height + 1)):
+            p = np.cross(line, side)
+            p = p / p[2]
+            if 0 <= p[0] < width and 0 <= p[1] < height:
+                d = np.sqrt(np.sum(np.square(p - cur)))
+                if d < best_d:  # np.argmin keeps the first minimum
+                    best, best_d = p, d
+    return best
+
+
+def clip_polyline(uv: np.ndarray, valid: np.ndarray, width: float, height: float) -> np.ndarray:
+    """Visible part of one projected polyline, (M, 2) (possibly M = 0). ``valid`` marks points in
+    front of the camera."""
+    idx = np.flatnonzero(valid)  # the evaluator skips the others entirely
+    pts = uv[idx]
+    inside = (pts[:, 0] >= 0) & (pts[:, 0] < width) & (pts[:, 1] >= 0) & (pts[:, 1] < height)
+    if not inside.any():
+        # A polyline can cross the image between two outside samples; the evaluator ignores that
+        # case (it only looks for crossings next to an inside sample), and so do we.
+        return np.zeros((0, 2))
+    flags = np.concatenate([[False], inside, [False]]).astype(np.int8)
+    starts = np.flatnonzero(np.diff(flags) == 1)  # first inside of each run
+    ends = np.flatnonzero(np.diff(flags) == -1) - 1  # last inside of each run
+    hom = np.hstack([pts, np.ones((len(pts), 1))])
+    out: list[np.ndarray] = []
+    for a, b in zip(starts, ends):
+        if idx[a] > 0:  # entering: crossing between the previous remembered point and this one
+            prev = hom[a - 1] if a > 0 else np.zeros(3)
+            crossing = _border_crossing(hom[a], prev, width, height)
+            if crossing is not None:
+                out.append(crossing[None, :2])
+        out.append(pts[a:b + 1])
+        if b + 1 < len(pts):  # leaving: crossing between the last inside point and the next one
+            crossing = _border_crossing(hom[b + 1], hom[b], width, height)
+            if crossing is not None:
+                out.append(crossing[None, :2])
+    return np.vstack(out)
+
+
+def project_polylines(camera: Camera, polylines: dict[str, np.ndarray], width: float | None = None,
+                      height: float | None = None, *, evaluator_precision: bool = False) -> dict[str, np.ndarray]:
+    """``{class: (N, 3) world points}`` -> ``{class: (M, 2) pixels}`` of the classes that are
+    visible, clipped at the border of a ``width`` x ``height`` image (default: the camera's)."""
+    width = camera.width if width is None else width
+    height = camera.height if height is None else height
+    names = list(polylines)
+    counts = [len(polylines[n]) for n in names]
+    uv_all, ok_all = _project_like_evaluator(camera, np.vstack([polylines[n] for n in names]), evaluator_precision)
+    out: dict[str, np.ndarray] = {}
+    start = 0
+    for name, n in zip(names, counts):
+        clipped = clip_polyline(uv_all[start:start + n], ok_all[start:start + n], width, height)
+        start += n
+        if len(clipped):
+            out[name] = clipped
+    return out
+
+
+def visible_pitch(camera: Camera, width: float = 960, height: float = 540, *, spacing: float = 0.9,
+                  evaluator_precision: bool = False, model=None) -> dict[str, np.ndarray]:
+    """The pitch model as the official evaluator sees it through ``camera`` at ``width`` x
+    ``height`` (its ``get_polylines(camera, 960, 540, sampling_factor=0.9)``): the camera is used
+    as given, not rescaled, exactly like the evaluator."""
+    from pnlviz.field.model import load_field_model
+
+    model = model or load_field_model()
+    return project_polylines(camera, model.sample_polylines(spacing), width, height,
+                             evaluator_precision=evaluator_precision)

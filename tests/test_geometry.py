@@ -1,0 +1,192 @@
+"""Camera model, SoccerNet camera JSON, evaluator-identical clipping, and conics."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pnlviz.field import load_field_model
+from pnlviz.geometry import Camera, visible_pitch
+from pnlviz.geometry.conics import Conic, ConicError, fit_ellipse, intersect_lines, line_through
+from pnlviz.geometry.homography import apply_homography
+
+MODEL = load_field_model()
+sn = pytest.importorskip("SoccerNet.Evaluation.utils_calibration")
+
+
+def random_camera(rng, distortion=False, width=960, height=540):
+    pos = np.array([rng.uniform(-30, 30), rng.uniform(35, 70), -rng.uniform(6, 30)])
+    if rng.random() < 0.2:
+        pos[1] *= -1
+    target = np.array([rng.uniform(-55, 55), rng.uniform(-30, 30), 0.0])
+    cam = Camera.from_look_at(pos, target, hfov_deg=rng.uniform(8, 80), width=width, height=height,
+                              roll_deg=rng.normal(0, 2))
+    if distortion:
+        cam = Camera(cam.fx, cam.fy, cam.cx, cam.cy, cam.R, cam.C, width, height,
+                     rng.normal(0, 0.05, 6), rng.normal(0, 0.005, 2), rng.normal(0, 0.005, 4))
+    return cam
+
+
+def sn_camera(d):
+    c = sn.Camera()
+    c.from_json_parameters(d)
+    return c
+
+
+def test_catalogue_projects_and_comes_back_through_the_ground_homography_exactly():
+    rng = np.random.default_rng(1)
+    ground = [k for k in MODEL.keypoint_ids if MODEL.keypoints[k].xyz[2] == 0]
+    X = MODEL.keypoint_xyz(ground)
+    for _ in range(50):
+        cam = random_camera(rng)
+        uv, depth = cam.project(X)
+        front = depth > 1
+        H = cam.ground_homography()
+        np.testing.assert_allclose(apply_homography(H, X[front, :2]), uv[front], rtol=1e-10, atol=1e-7)
+        back = apply_homography(np.linalg.inv(H), uv[front])
+        np.testing.assert_allclose(back, X[front, :2], atol=1e-7)
+        # and through the ray model (back-projection onto z = 0)
+        np.testing.assert_allclose(cam.back_project_to_ground(uv[front])[:, :2], X[front, :2], atol=1e-6)
+
+
+def test_non_planar_keypoints_project_through_P():
+    cam = random_camera(np.random.default_rng(2))
+    X = MODEL.keypoint_xyz([12, 15, 16, 19])  # crossbar corners, z = -2.44
+    uv, _ = cam.project(X)
+    h = np.hstack([X, np.ones((4, 1))]) @ cam.P.T
+    np.testing.assert_allclose(uv, h[:, :2] / h[:, 2:], rtol=1e-12)
+
+
+def test_points_behind_the_camera_do_not_project():
+    cam = Camera.from_look_at([0, 50, -15], [0, 0, 0], hfov_deg=40, width=960, height=540)
+    uv, depth = cam.project(np.array([[0, 80, 0], [0, 0, 0]]))
+    assert depth[0] < 0 and np.all(np.isnan(uv[0]))
+    assert np.all(np.isfinite(uv[1]))
+    assert np.allclose(uv[1], [480, 270])  # look-at target lands on the principal point
+
+
+@pytest.mark.parametrize("distortion", [False, True])
+def test_soccernet_json_round_trip_and_agreement_with_the_official_package(distortion):
+    rng = np.random.default_rng(3 + distortion)
+    X = MODEL.keypoint_xyz()
+    for _ in range(40):
+        cam = random_camera(rng, distortion)
+        d = cam.to_soccernet()
+        back = Camera.from_soccernet(d)
+        np.testing.assert_allclose(back.R, cam.R, atol=1e-12)
+        np.testing.assert_allclose(back.C, cam.C)
+        assert (back.width, back.height) == (960, 540)
+        theirs = sn_camera(d)
+        np.testing.assert_allclose(theirs.rotation, cam.R, atol=1e-12)
+        # the package's own decomposition gives the same angles
+        pan, tilt, roll = sn.rotation_matrix_to_pan_tilt_roll(cam.R)
+        np.testing.assert_allclose([d["pan_degrees"], d["tilt_degrees"], d["roll_degrees"]],
+                                   np.degrees([pan, tilt, roll]), atol=1e-9)
+        uv, depth = cam.project(X)
+        for x, p, z in zip(X, uv, depth):
+            if z > 1:
+                ref = theirs.project_point(x)
+                np.testing.assert_allclose(p, ref[:2], rtol=1e-6, atol=2e-3)  # the package rounds to float32
+
+
+def test_rescaling_scales_pixels():
+    cam = random_camera(np.random.default_rng(5), width=1280, height=720)
+    small = cam.scaled(960, 540)
+    X = MODEL.keypoint_xyz()
+    uv, z = cam.project(X)
+    uv2, _ = small.project(X)
+    ok = z > 1
+    np.testing.assert_allclose(uv2[ok], uv[ok] * 0.75, rtol=1e-12, atol=1e-9)
+    assert small.to_soccernet()["principal_point"] == [480.0, 270.0]
+
+
+def test_distortion_is_inverted_by_pixel_rays():
+    rng = np.random.default_rng(6)
+    cam = random_camera(rng, distortion=True)
+    uv = rng.uniform([0, 0], [960, 540], size=(200, 2))
+    rays = cam.pixel_rays(uv)
+    uv2, _ = cam.project(cam.C + 30 * rays)
+    np.testing.assert_allclose(uv2, uv, atol=1e-6)
+
+
+def test_visible_pitch_is_identical_to_the_official_get_polylines():
+    rng = np.random.default_rng(7)
+    for i in range(120):
+        cam = random_camera(rng, distortion=i % 4 == 0)
+        d = cam.to_soccernet()
+        theirs = sn.get_polylines(d, 960, 540, sampling_factor=0.9)
+        ours = visible_pitch(Camera.from_soccernet(d), evaluator_precision=True)
+        assert set(ours) == set(theirs)
+        for name, pts in theirs.items():
+            np.testing.assert_array_equal(ours[name], [[p["x"], p["y"]] for p in pts])
+
+
+def test_visible_pitch_in_float64_stays_within_a_millipixel_of_the_evaluator():
+    rng = np.random.default_rng(8)
+    for _ in range(30):
+        cam = random_camera(rng)
+        theirs = sn.get_polylines(cam.to_soccernet(), 960, 540, sampling_factor=0.9)
+        ours = visible_pitch(cam)
+        assert set(ours) == set(theirs)
+        for name, pts in theirs.items():
+            np.testing.assert_allclose(ours[name], [[p["x"], p["y"]] for p in pts], atol=1e-3)
+
+
+# ----------------------------------------------------------------------------------------- conics
+ellipses = st.tuples(
+    st.floats(100, 900), st.floats(100, 500),  # centre
+    st.floats(20, 400), st.floats(0.1, 1.0),  # major semi-axis, minor/major ratio
+    st.floats(0, math.pi),
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(ellipses, st.integers(6, 60), st.floats(0.5, 2 * math.pi))
+def test_fit_ellipse_recovers_exact_ellipses_from_any_arc(e, n, span):
+    cu, cv, a, ratio, ang = e
+    truth = Conic.from_ellipse((cu, cv), (a, a * ratio), ang)
+    t = np.linspace(0, span, n)
+    c, s = math.cos(ang), math.sin(ang)
+    local = np.stack([a * np.cos(t), a * ratio * np.sin(t)], 1)
+    pts = local @ np.array([[c, s], [-s, c]]) + [cu, cv]
+    fit = fit_ellipse(pts)
+    center, axes, _ = fit.ellipse_params()
+    np.testing.assert_allclose(center, [cu, cv], atol=1e-4 * a)
+    np.testing.assert_allclose(sorted(axes), sorted([a, a * ratio]), rtol=1e-5)
+
+
+def test_fit_ellipse_refuses_too_few_or_collinear_points():
+    with pytest.raises(ConicError, match="at least 5"):
+        fit_ellipse(np.zeros((4, 2)))
+    with pytest.raises(ConicError):
+        fit_ellipse(np.stack([np.arange(10.0), 2 * np.arange(10.0)], 1))
+
+
+@settings(max_examples=60, deadline=None)
+@given(ellipses, st.floats(-math.pi, math.pi), st.floats(1.2, 5))
+def test_tangent_points_touch_and_line_intersections_lie_on_the_ellipse(e, phi, dist):
+    cu, cv, a, ratio, ang = e
+    conic = Conic.from_ellipse((cu, cv), (a, a * ratio), ang)
+    external = np.array([cu, cv]) + dist * a * np.array([math.cos(phi), math.sin(phi)])
+    tps = conic.tangent_points(external)
+    assert len(tps) == 2
+    for tp in tps:
+        assert abs(conic.residuals(tp[None])[0]) < 1e-9 * np.abs(conic.Q).max() * a * a
+        # the line from the external point through tp meets the ellipse only there (double root)
+        hits = conic.intersect_line(line_through(external, tp))
+        assert np.allclose(hits, tp, atol=1e-3 * a)
+    # a line through the centre cuts the ellipse twice, at points on it
+    hits = conic.intersect_line(line_through((cu, cv), external))
+    assert len(hits) == 2
+    center, _, _ = conic.ellipse_params()
+    np.testing.assert_allclose(hits.mean(0), center, atol=1e-6 * a)
+
+
+def test_line_helpers():
+    l1 = line_through((0, 0), (1, 1))
+    l2 = line_through((0, 1), (1, 0))
+    np.testing.assert_allclose(intersect_lines(l1, l2), [0.5, 0.5])
+    assert intersect_lines(l1, line_through((0, 1), (1, 2))) is None
+    assert len(Conic.from_ellipse((0, 0), (1, 1), 0).intersect_line(line_through((0, 5), (1, 5)))) == 0
