@@ -1,0 +1,170 @@
+"""SoccerNet camera JSON files (``camera_<stem>.json``) and flat zips of them.
+
+Cameras stay raw dicts here (as the official evaluator reads them); converting them to a camera
+object is the geometry package's job. A camera dict must hold :data:`REQUIRED_CAMERA_KEYS`
+(PnLCalib also writes ``rotation_matrix``; extra keys are kept).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import zipfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from .atomic import atomic_open, atomic_write_text
+from .errors import DataError, member_source
+from .jsonio import as_number, describe, dumps, parse_json_bytes, read_file_bytes, to_jsonable
+from .layout import is_junk, sort_stems, split_member
+
+__all__ = [
+    "REQUIRED_CAMERA_KEYS",
+    "camera_member_name",
+    "validate_camera_dict",
+    "parse_camera_bytes",
+    "read_camera_json",
+    "write_camera_json",
+    "read_camera_zip",
+    "write_camera_zip",
+]
+
+#: Keys of a SoccerNet camera JSON, with the number of values each holds (1 = a scalar).
+_CAMERA_SHAPES: dict[str, int] = {
+    "pan_degrees": 1,
+    "tilt_degrees": 1,
+    "roll_degrees": 1,
+    "position_meters": 3,
+    "x_focal_length": 1,
+    "y_focal_length": 1,
+    "principal_point": 2,
+    "radial_distortion": 6,
+    "tangential_distortion": 2,
+    "thin_prism_distortion": 4,
+}
+REQUIRED_CAMERA_KEYS: tuple[str, ...] = tuple(_CAMERA_SHAPES)
+
+_CAMERA_NAME = re.compile(r"camera_(.+)\.json")
+
+
+def camera_member_name(stem: str) -> str:
+    """File name of the camera of annotation ``<stem>.json``: ``camera_<stem>.json``."""
+    return f"camera_{stem}.json"
+
+
+def _check_number(value: Any, key: str, source: str) -> None:
+    v = as_number(value)
+    if v is None:
+        raise DataError(source, f"camera key {key!r} must be a number, got {describe(value)}")
+    if not math.isfinite(v):
+        raise DataError(source, f"camera key {key!r} is not finite ({v})")
+
+
+def validate_camera_dict(obj: Any, source: str = "<camera>") -> dict:
+    """Check a decoded camera JSON object; returns it unchanged (a dict).
+
+    Raises :class:`DataError` naming the first missing key, or a value of the wrong shape
+    (scalars for angles and focal lengths; 3, 2, 6, 2, 4 numbers for position, principal point,
+    radial, tangential and thin-prism distortion).
+    """
+    if not isinstance(obj, Mapping):
+        raise DataError(source, f"expected a JSON object with the camera parameters, got {describe(obj)}")
+    for key, size in _CAMERA_SHAPES.items():
+        if key not in obj:
+            raise DataError(source, f"camera is missing key {key!r}")
+        value = obj[key]
+        if size == 1:
+            _check_number(value, key, source)
+            continue
+        if not isinstance(value, (list, tuple)) or len(value) != size:
+            raise DataError(source, f"camera key {key!r} must be a list of {size} numbers, got {describe(value)}"
+                            + (f" of length {len(value)}" if isinstance(value, (list, tuple)) else ""))
+        for v in value:
+            _check_number(v, key, source)
+    return obj if isinstance(obj, dict) else dict(obj)
+
+
+def parse_camera_bytes(data: bytes | str, source: str) -> dict:
+    """Decode and validate one camera JSON document."""
+    return validate_camera_dict(parse_json_bytes(data, source), source)
+
+
+def read_camera_json(path: str | os.PathLike) -> dict:
+    """Read and validate one camera JSON file (raw dict)."""
+    return parse_camera_bytes(read_file_bytes(path), os.fspath(path))
+
+
+def _camera_text(camera: Mapping, source: str) -> str:
+    cam = to_jsonable(dict(camera)) if isinstance(camera, Mapping) else camera
+    validate_camera_dict(cam, source)
+    try:
+        return dumps(cam)
+    except (TypeError, ValueError) as e:
+        raise DataError(source, f"camera cannot be written as JSON: {e}") from None
+
+
+def write_camera_json(path: str | os.PathLike, camera: Mapping) -> None:
+    """Validate and write one camera JSON file atomically (numpy values become plain JSON)."""
+    atomic_write_text(path, _camera_text(camera, os.fspath(path)))
+
+
+def _open_zip(path: str | os.PathLike) -> zipfile.ZipFile:
+    try:
+        return zipfile.ZipFile(path)
+    except (OSError, zipfile.BadZipFile) as e:
+        raise DataError(os.fspath(path), f"cannot open zip archive: {e}") from None
+
+
+def read_camera_zip(path: str | os.PathLike) -> dict[str, dict]:
+    """Read a zip of ``camera_<stem>.json`` files -> ``{stem: camera dict}`` in natural order.
+
+    The files are normally at the top level; one folder level (all cameras in the same folder)
+    is accepted too. Other members are ignored. Each camera is validated.
+    """
+    zpath = os.fspath(path)
+    with _open_zip(path) as zf:
+        found: dict[str, str] = {}
+        folders = set()
+        for name in zf.namelist():
+            if is_junk(name):
+                continue
+            prefix, base = split_member(name)
+            m = _CAMERA_NAME.fullmatch(base)
+            if not m:
+                continue
+            stem = m.group(1)
+            if stem in found:
+                raise DataError(zpath, f"camera of frame {stem!r} appears twice ({found[stem]!r} and {name!r})")
+            found[stem] = name
+            folders.add(prefix)
+        if len(folders) > 1:
+            listed = ", ".join(repr(f or "/") for f in sorted(folders)[:3])
+            raise DataError(zpath, f"camera files are spread over several folders ({listed}); expected one flat folder")
+        out: dict[str, dict] = {}
+        for stem in sort_stems(found):
+            member = found[stem]
+            source = member_source(zpath, member)
+            try:
+                data = zf.read(member)
+            except (OSError, zipfile.BadZipFile, EOFError) as e:
+                raise DataError(source, f"cannot read zip member: {e}") from None
+            out[stem] = parse_camera_bytes(data, source)
+    return out
+
+
+def write_camera_zip(path: str | os.PathLike, cameras: Mapping[str, Mapping]) -> None:
+    """Write ``{stem: camera dict}`` as a flat zip of ``camera_<stem>.json``, atomically."""
+    zpath = os.fspath(path)
+    by_stem = {str(stem): cam for stem, cam in cameras.items()}
+    if len(by_stem) != len(cameras):
+        raise DataError(zpath, "two cameras have the same stem once written as text")
+    texts = {}
+    for stem in sort_stems(by_stem):
+        name = camera_member_name(stem)
+        texts[name] = _camera_text(by_stem[stem], member_source(zpath, name))
+    Path(zpath).parent.mkdir(parents=True, exist_ok=True)
+    with atomic_open(zpath, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name, text in texts.items():
+            zf.writestr(name, text)

@@ -1,0 +1,413 @@
+"""A SoccerNet-style dataset: a folder or a .zip of ``<stem>.jpg|png`` + ``<stem>.json``.
+
+Layout (folder or zip, or a zip holding one folder with it)::
+
+    00001.jpg  00001.json  00002.jpg  ...   frames: image and/or annotation (either may be missing)
+    match_info.json                         optional, not a frame
+    cameras/camera_00001.json ...           optional ground-truth cameras (``pnlviz synth``)
+
+Opening only lists names (``os.scandir`` / the zip's central directory); annotations, images and
+cameras are read when asked for, so a 23k-frame folder opens in a blink. Annotations are cached
+in a small LRU. A :class:`Dataset` pickles (a zip is reopened in the worker process).
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import threading
+import zipfile
+from collections import OrderedDict
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .annotations import Annotation, parse_annotation_bytes
+from .cameras import camera_member_name, parse_camera_bytes
+from .errors import DataError, member_source
+from .jsonio import describe, parse_json_bytes
+from .layout import find_root, is_junk, sort_stems, split_member
+
+__all__ = ["Frame", "Dataset", "open_dataset", "IMAGE_EXTENSIONS"]
+
+#: Image file extensions recognised as frames, in order of preference for a stem with several.
+IMAGE_EXTENSIONS: tuple[str, ...] = (".jpg", ".jpeg", ".png")
+MATCH_INFO = "match_info.json"
+CAMERAS_DIR = "cameras"
+
+
+@dataclass(frozen=True)
+class Frame:
+    """Where the files of one frame are.
+
+    ``image_path`` / ``annotation_path`` are file paths for a folder dataset, member names for a
+    zip dataset (then ``archive`` is the zip's path), or None when the frame lacks that file.
+    """
+
+    stem: str
+    image_path: str | None
+    annotation_path: str | None
+    archive: str | None = None
+
+    @property
+    def has_image(self) -> bool:
+        return self.image_path is not None
+
+    @property
+    def has_annotation(self) -> bool:
+        return self.annotation_path is not None
+
+    def source(self, name: str) -> str:
+        """The ``<file>`` part of an error message for ``name`` (a path or a zip member)."""
+        return member_source(self.archive, name) if self.archive else name
+
+
+def _classify(base: str) -> tuple[str, str] | None:
+    """``("image"|"annotation", stem)`` for a frame file name, else None."""
+    lower = base.lower()
+    if lower == MATCH_INFO or base.startswith("."):
+        return None
+    stem, dot, ext = base.rpartition(".")
+    if not dot or not stem:
+        return None
+    ext = "." + ext.lower()
+    if ext == ".json":
+        return ("annotation", stem)
+    if ext in IMAGE_EXTENSIONS:
+        return ("image", stem)
+    return None
+
+
+def _image_rank(name: str) -> int:
+    return IMAGE_EXTENSIONS.index("." + name.rpartition(".")[2].lower())
+
+
+class Dataset:
+    """Lazily indexed frames of a folder or zip; see the module docstring.
+
+    Use :func:`open_dataset` to create one. ``len(ds)``, ``ds.stems`` (natural order),
+    ``ds.frame(stem)``, ``ds.annotation(stem)``, ``ds.image(stem)``, ``ds.image_size(stem)``,
+    ``ds.camera_dict(stem)``, ``ds.match_info``, ``ds.iter_annotations(on_error=...)``.
+    Unknown stems raise KeyError; problems with file contents raise :class:`DataError`.
+    """
+
+    def __init__(self, path: str | os.PathLike, cache_size: int = 64):
+        self.path = Path(path)
+        self.cache_size = cache_size
+        #: ``(stem, DataError)`` of the frames the last :meth:`iter_annotations` skipped.
+        self.skipped: list[tuple[str, DataError]] = []
+        self._lock = threading.RLock()
+        self._zf: zipfile.ZipFile | None = None
+        self._cache: OrderedDict[tuple[str, bool], Annotation] = OrderedDict()
+        self._sizes: dict[str, tuple[int, int]] = {}
+        self._match_info: Any = ...
+        if not self.path.exists():
+            raise DataError(os.fspath(self.path), "no such file or folder")
+        self.is_zip = not self.path.is_dir()
+        if self.is_zip:
+            self._index_zip()
+        else:
+            self._index_folder()
+        self._stems = tuple(sort_stems(set(self._images) | set(self._annotations)))
+
+    # ----------------------------------------------------------------- indexing
+    def _add(self, base: str, name: str) -> None:
+        kind = _classify(base)
+        if kind is None:
+            return
+        what, stem = kind
+        if what == "annotation":
+            self._annotations[stem] = name
+        else:
+            old = self._images.get(stem)
+            if old is None or _image_rank(name) < _image_rank(old):
+                self._images[stem] = name
+
+    def _index_folder(self) -> None:
+        self._images: dict[str, str] = {}
+        self._annotations: dict[str, str] = {}
+        root = self.path
+        for _ in range(2):  # the folder itself, or the single folder inside it
+            subdirs = []
+            with os.scandir(root) as it:
+                for entry in it:
+                    if entry.name.startswith("."):
+                        continue
+                    if entry.is_dir():
+                        if entry.name != CAMERAS_DIR:
+                            subdirs.append(entry.path)
+                    elif _classify(entry.name) is not None:
+                        self._add(entry.name, entry.path)
+            if self._images or self._annotations or len(subdirs) != 1:
+                break
+            root = Path(subdirs[0])
+        self._root_dir = Path(root)
+        self._camera_names: set[str] | None = None  # checked on demand in a folder
+
+    def _index_zip(self) -> None:
+        zpath = os.fspath(self.path)
+        try:
+            zf = zipfile.ZipFile(self.path)
+        except zipfile.BadZipFile:
+            raise DataError(zpath, "not a folder or a valid .zip archive") from None
+        except OSError as e:
+            raise DataError(zpath, f"cannot open zip archive: {e.strerror or e}") from None
+        self._zf = zf
+        names = [n for n in zf.namelist() if not is_junk(n)]
+        candidates = [n for n in names if n.split("/", 1)[0] != CAMERAS_DIR]
+        root = find_root(candidates, lambda b: _classify(b) is not None)
+        self._root = root
+        self._images = {}
+        self._annotations = {}
+        self._camera_names = set()
+        self._names = set(names)
+        cam_prefix = root + CAMERAS_DIR + "/"
+        for n in names:
+            prefix, base = split_member(n)
+            if prefix == root:
+                self._add(base, n)
+            elif prefix == cam_prefix:
+                self._camera_names.add(base)
+
+    # ------------------------------------------------------------- pickling
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_zf"] = None
+        state["_lock"] = None
+        state["_cache"] = OrderedDict()
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.RLock()
+
+    def close(self) -> None:
+        """Close the zip archive (reopened if the dataset is used again)."""
+        with self._lock:
+            if self._zf is not None:
+                self._zf.close()
+                self._zf = None
+
+    def __enter__(self) -> Dataset:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ----------------------------------------------------------- basic access
+    def __len__(self) -> int:
+        return len(self._stems)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._stems)
+
+    def __contains__(self, stem: object) -> bool:
+        return stem in self._images or stem in self._annotations
+
+    def __repr__(self) -> str:
+        return f"Dataset({os.fspath(self.path)!r}, frames={len(self)})"
+
+    @property
+    def stems(self) -> tuple[str, ...]:
+        """Frame stems in natural order (numeric when all digits)."""
+        return self._stems
+
+    def frame(self, stem: str) -> Frame:
+        """The :class:`Frame` of ``stem`` (KeyError if the dataset has no such frame)."""
+        if stem not in self:
+            raise KeyError(f"no frame {stem!r} in {os.fspath(self.path)}")
+        return Frame(
+            stem=stem,
+            image_path=self._images.get(stem),
+            annotation_path=self._annotations.get(stem),
+            archive=os.fspath(self.path) if self.is_zip else None,
+        )
+
+    def _source(self, name: str) -> str:
+        return member_source(self.path, name) if self.is_zip else name
+
+    def _read(self, name: str) -> bytes:
+        """Bytes of a file (folder) or member (zip); DataError when unreadable."""
+        if not self.is_zip:
+            try:
+                with open(name, "rb") as f:
+                    return f.read()
+            except OSError as e:
+                raise DataError(name, f"cannot read file: {e.strerror or e}") from None
+        with self._lock:
+            try:
+                if self._zf is None:
+                    self._zf = zipfile.ZipFile(self.path)
+                return self._zf.read(name)
+            except (OSError, zipfile.BadZipFile, EOFError, KeyError) as e:
+                raise DataError(self._source(name), f"cannot read zip member: {e}") from None
+
+    # ------------------------------------------------------------ annotations
+    def _parse_annotation(self, stem: str, keep_unknown: bool) -> Annotation | None:
+        name = self.frame(stem).annotation_path
+        if name is None:
+            return None
+        return parse_annotation_bytes(self._read(name), self._source(name), keep_unknown=keep_unknown)
+
+    def annotation(self, stem: str, keep_unknown: bool = False) -> Annotation | None:
+        """The validated annotation of ``stem`` (``{class: (N, 2) normalised}``), None if it has none.
+
+        Results are cached (small LRU); the caller gets its own copy and may modify it.
+        """
+        key = (stem, keep_unknown)
+        with self._lock:
+            hit = self._cache.get(key)
+            if hit is not None:
+                self._cache.move_to_end(key)
+                return {k: v.copy() for k, v in hit.items()}
+        ann = self._parse_annotation(stem, keep_unknown)
+        if ann is None:
+            return None
+        with self._lock:
+            self._cache[key] = ann
+            while len(self._cache) > max(self.cache_size, 0):
+                self._cache.popitem(last=False)
+        return {k: v.copy() for k, v in ann.items()}
+
+    def iter_annotations(
+        self,
+        on_error: Callable[[str, DataError], Any] | None = None,
+        keep_unknown: bool = False,
+    ) -> Iterator[tuple[str, Annotation]]:
+        """Yield ``(stem, annotation)`` for every annotated frame, going on past bad ones.
+
+        A frame whose annotation raises :class:`DataError` is skipped: ``on_error(stem, err)``
+        is called if given, and ``(stem, err)`` is appended to ``self.skipped`` (cleared when
+        the iteration starts). Bypasses the LRU cache.
+        """
+        self.skipped = []
+        for stem in self._stems:
+            if stem not in self._annotations:
+                continue
+            try:
+                ann = self._parse_annotation(stem, keep_unknown)
+            except DataError as err:
+                self.skipped.append((stem, err))
+                if on_error is not None:
+                    on_error(stem, err)
+                continue
+            yield stem, ann
+
+    # ------------------------------------------------------------------ images
+    def image_bytes(self, stem: str) -> bytes | None:
+        """The encoded image file of ``stem``, None if it has none."""
+        name = self.frame(stem).image_path
+        return None if name is None else self._read(name)
+
+    def image(self, stem: str) -> np.ndarray | None:
+        """The image of ``stem`` as BGR uint8 ``(H, W, 3)``, pixels as stored (EXIF orientation
+        ignored); None if the frame has no image. Corrupt data raises DataError."""
+        name = self.frame(stem).image_path
+        if name is None:
+            return None
+        img = decode_image(self._read(name), self._source(name))
+        with self._lock:
+            self._sizes[stem] = (img.shape[1], img.shape[0])
+        return img
+
+    def image_size(self, stem: str) -> tuple[int, int] | None:
+        """``(width, height)`` of the image of ``stem`` (reads the header only when Pillow is
+        installed); None if the frame has no image."""
+        with self._lock:
+            if stem in self._sizes:
+                return self._sizes[stem]
+        name = self.frame(stem).image_path
+        if name is None:
+            return None
+        size = self._header_size(name)
+        if size is None:
+            img = decode_image(self._read(name), self._source(name))
+            size = (img.shape[1], img.shape[0])
+        with self._lock:
+            self._sizes[stem] = size
+        return size
+
+    def _header_size(self, name: str) -> tuple[int, int] | None:
+        """Size from the image header only (Pillow), None if that is not possible."""
+        try:
+            if not self.is_zip:
+                with open(name, "rb") as f:
+                    return _pil_size(f)
+            with self._lock:
+                if self._zf is None:
+                    self._zf = zipfile.ZipFile(self.path)
+                with self._zf.open(name) as f:
+                    return _pil_size(f)
+        except (OSError, zipfile.BadZipFile, EOFError, KeyError):
+            return None
+
+    # ------------------------------------------------------- cameras, match info
+    def camera_dict(self, stem: str) -> dict | None:
+        """The ground-truth camera ``cameras/camera_<stem>.json`` (raw dict, validated), or None."""
+        base = camera_member_name(stem)
+        if self.is_zip:
+            if base not in self._camera_names:
+                return None
+            name = self._root + CAMERAS_DIR + "/" + base
+        else:
+            path = self._root_dir / CAMERAS_DIR / base
+            if not path.is_file():
+                return None
+            name = os.fspath(path)
+        return parse_camera_bytes(self._read(name), self._source(name))
+
+    @property
+    def match_info(self) -> dict | None:
+        """The content of ``match_info.json`` (a dict), or None when the dataset has none."""
+        if self._match_info is ...:
+            if self.is_zip:
+                name = self._root + MATCH_INFO
+                present = name in self._names
+            else:
+                name = os.fspath(self._root_dir / MATCH_INFO)
+                present = os.path.isfile(name)
+            info = None
+            if present:
+                source = self._source(name)
+                info = parse_json_bytes(self._read(name), source)
+                if not isinstance(info, dict):
+                    raise DataError(source, f"match info must be a JSON object, got {describe(info)}")
+            self._match_info = info
+        return copy.deepcopy(self._match_info)
+
+
+def decode_image(data: bytes, source: str) -> np.ndarray:
+    """Decode image file bytes to BGR uint8 with OpenCV; DataError when corrupt."""
+    import cv2
+
+    if not data:
+        raise DataError(source, "corrupt image: the file is empty")
+    try:
+        img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    except cv2.error as e:
+        raise DataError(source, f"corrupt image: OpenCV cannot decode it ({str(e).strip()})") from None
+    if img is None or img.size == 0:
+        raise DataError(source, "corrupt image: OpenCV cannot decode it (corrupt or unsupported format)")
+    return img
+
+
+def _pil_size(fileobj) -> tuple[int, int] | None:
+    """Image size from the header with Pillow (no decode); None when unavailable."""
+    try:
+        from PIL import Image
+    except ImportError:
+        return None
+    try:
+        with Image.open(fileobj) as im:
+            w, h = im.size
+    except Exception:  # noqa: BLE001 - any Pillow failure: fall back to OpenCV
+        return None
+    return (int(w), int(h)) if w > 0 and h > 0 else None
+
+
+def open_dataset(path: str | os.PathLike, cache_size: int = 64) -> Dataset:
+    """Open a folder or ``.zip`` dataset (lazy index; see :class:`Dataset`)."""
+    return Dataset(path, cache_size=cache_size)

@@ -1,0 +1,60 @@
+"""Names inside folders and zip archives: natural sort of stems, locating the frame folder."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+
+__all__ = ["natural_key", "sort_stems", "split_member", "find_root"]
+
+_DIGITS = re.compile(r"([0-9]+)")
+
+
+def natural_key(stem: str) -> tuple:
+    """Sort key: ``"2" < "10"``, ``"frame2" < "frame10"``; ties broken by the raw string."""
+    parts = []
+    for i, tok in enumerate(_DIGITS.split(stem)):
+        if i % 2:
+            parts.append((1, int(tok), ""))
+        elif tok:
+            parts.append((0, 0, tok.lower()))
+    return (tuple(parts), stem)
+
+
+def sort_stems(stems: Iterable[str]) -> list[str]:
+    """Stems in natural order (numeric when all digits)."""
+    return sorted(stems, key=natural_key)
+
+
+def is_junk(name: str) -> bool:
+    """Zip/OS noise: macOS resource forks, hidden files, folder entries."""
+    parts = name.split("/")
+    return name.endswith("/") or any(p.startswith(".") or p == "__MACOSX" for p in parts if p)
+
+
+def split_member(name: str) -> tuple[str, str]:
+    """``"a/b/c.json"`` -> ``("a/b/", "c.json")``; ``"c.json"`` -> ``("", "c.json")``."""
+    head, sep, tail = name.rpartition("/")
+    return (head + sep, tail)
+
+
+def find_root(names: Iterable[str], is_wanted) -> str:
+    """The folder prefix (``""`` or ``"dir/"``) holding the wanted files of an archive.
+
+    Files at the top level win; otherwise, if every wanted file sits in one and the same
+    single top-level folder, that folder is the root. ``is_wanted(basename)`` selects files.
+    """
+    top_dirs = set()
+    for name in names:
+        if is_junk(name):
+            continue
+        prefix, base = split_member(name)
+        if not is_wanted(base):
+            continue
+        if prefix == "":
+            return ""
+        if prefix.count("/") == 1:
+            top_dirs.add(prefix)
+    if len(top_dirs) == 1:
+        return top_dirs.pop()
+    return ""
