@@ -1,0 +1,96 @@
+"""``pnlviz synth``: synthetic broadcast frames with exact ground-truth cameras and annotations.
+
+Wiring into the main command line::
+
+    from pnlviz.synth.cli import add_synth_parser
+    add_synth_parser(subparsers)          # sets func=run_synth on the sub-command
+    args = parser.parse_args(); sys.exit(args.func(args))
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+
+_SIZE_RE = re.compile(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"960x540"`` -> (960, 540); an ``argparse.ArgumentTypeError`` for anything else."""
+    m = _SIZE_RE.match(text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 960x540, got {text!r}")
+    w, h = int(m.group(1)), int(m.group(2))
+    if not (16 <= w <= 16384 and 16 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"image size {w}x{h} out of range (16..16384 per side)")
+    return w, h
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {value}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {value}")
+    return value
+
+
+def add_synth_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``synth`` sub-command to an ``argparse`` sub-parsers object."""
+    p = subparsers.add_parser(
+        "synth", help="synthetic broadcast frames with exact ground-truth cameras and annotations",
+        description="Render synthetic broadcast-like frames with SoccerNet line annotations and "
+                    "ground-truth cameras: DIR/NNNNN.jpg, DIR/NNNNN.json, DIR/cameras/camera_NNNNN.json. "
+                    "Frame i depends only on (seed, i).")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("-n", "--num", dest="n", type=_positive_int, required=True, metavar="N", help="number of frames")
+    p.add_argument("--seed", type=_non_negative_int, default=0, help="random seed (default 0)")
+    p.add_argument("--size", type=parse_size, default=(960, 540), metavar="WxH",
+                   help="image size (default 960x540); cameras and annotations stay at the 960x540 evaluation scale")
+    p.add_argument("--start-index", type=_non_negative_int, default=0, metavar="I",
+                   help="index (file stem) of the first frame (default 0)")
+    p.add_argument("--workers", type=_positive_int, default=1, metavar="K", help="worker processes (default 1)")
+    p.add_argument("--force", action="store_true",
+                   help="write into a non-empty folder that is not a previous synthetic output")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_synth)
+    return p
+
+
+def run_synth(args: argparse.Namespace) -> int:
+    """Run ``pnlviz synth``; returns the process exit code."""
+    from .writer import OutputFolderError, generate
+
+    try:
+        summary = generate(args.out, args.n, args.seed, size=tuple(args.size), start_index=args.start_index,
+                           workers=args.workers, progress=not args.no_progress, force=args.force)
+    except OutputFolderError as exc:
+        print(f"pnlviz synth: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {summary.frames} frames to {summary.out_dir} in {summary.seconds:.1f} s "
+          f"({summary.frames_per_second:.2f} frames/s)")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone entry point (``python -m pnlviz.synth.cli``) until the main CLI wires it."""
+    parser = argparse.ArgumentParser(prog="pnlviz")
+    add_synth_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,190 @@
+"""Write synthetic frames to a folder: images, SoccerNet annotations, ground-truth cameras.
+
+Layout (nothing else is written)::
+
+    DIR/NNNNN.jpg                   the rendered frame (JPEG, quality 60-95)
+    DIR/NNNNN.json                  line annotation {class: [{"x": .., "y": ..}, ...]}
+    DIR/cameras/camera_NNNNN.json   ground-truth camera (SoccerNet camera JSON)
+
+Stems are 5-digit frame indices starting at ``start_index``. Every file is written atomically
+(a temporary file in the same folder, then ``os.replace``), so an interrupted run leaves whole
+files only; leftover temporaries of a killed run are removed by the next run.
+
+Cameras are stored at the 960 x 540 evaluation scale (``camera.scaled(960, 540).to_soccernet()``)
+whatever the image size, because the official evaluator takes the image size from the principal
+point (width = 2 x principal_point[0]) and evaluates at 960 x 540; the rendered size is kept in
+the extra key ``"synth": {"kind": ..., "image_size": [W, H]}``. Annotations are normalised at
+that scale too (``x_px = x * (960 - 1)``).
+
+Frame ``i`` of seed ``s`` is made from ``np.random.default_rng([s, i])`` alone (camera, scene,
+noise, annotation clicks, JPEG quality, in that order), so the output does not depend on the
+number of worker processes or on which frames are generated together.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from pnlviz.data.atomic import atomic_write_bytes
+
+from .annotate import EVAL_H, EVAL_W, annotate, annotation_to_json
+from .cameras import sample_camera
+from .render import render_frame
+
+CAMERA_DIR = "cameras"
+STEM_DIGITS = 5
+_IMAGE_RE = re.compile(r"^\d{5,}\.jpg$")
+_ANNOTATION_RE = re.compile(r"^\d{5,}\.json$")
+_CAMERA_RE = re.compile(r"^camera_\d{5,}\.json$")
+# Temporaries of pnlviz.data.atomic: ".<name>.<random>.tmp" next to the target.
+_TEMP_RE = re.compile(r"^\.(\d{5,}\.(jpg|json)|camera_\d{5,}\.json)\..+\.tmp$")
+OPTIONAL_FILES = ("match_info.json",)
+
+
+class OutputFolderError(RuntimeError):
+    """The output folder holds files that are not a previous synthetic output."""
+
+
+@dataclass(frozen=True)
+class SynthSummary:
+    out_dir: Path
+    frames: int
+    seconds: float
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.frames / self.seconds if self.seconds > 0 else float("inf")
+
+
+def frame_stem(index: int) -> str:
+    return f"{index:0{STEM_DIGITS}d}"
+
+
+def foreign_entries(out_dir: str | os.PathLike) -> list[str]:
+    """Entries of ``out_dir`` that a synthetic output would not hold (relative paths)."""
+    root = Path(out_dir)
+    if not root.exists():
+        return []
+    foreign = []
+    for entry in sorted(root.iterdir()):
+        name = entry.name
+        if entry.is_dir() and name == CAMERA_DIR:
+            foreign += [f"{CAMERA_DIR}/{e.name}" for e in sorted(entry.iterdir())
+                        if not (e.is_file() and (_CAMERA_RE.match(e.name) or _TEMP_RE.match(e.name)))]
+        elif not (entry.is_file() and (_IMAGE_RE.match(name) or _ANNOTATION_RE.match(name)
+                                       or _TEMP_RE.match(name) or name in OPTIONAL_FILES)):
+            foreign.append(name + ("/" if entry.is_dir() else ""))
+    return foreign
+
+
+def check_output_folder(out_dir: str | os.PathLike, force: bool = False) -> None:
+    """Refuse (``OutputFolderError``) a non-empty folder that is not a previous synthetic output,
+    unless ``force``. A file in the way of the folder itself is always refused."""
+    root = Path(out_dir)
+    if root.exists() and not root.is_dir():
+        raise OutputFolderError(f"{root} exists and is not a folder")
+    if force:
+        return
+    foreign = foreign_entries(root)
+    if foreign:
+        listed = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise OutputFolderError(f"{root} is not empty and is not a synthetic output (it holds {listed}); "
+                                "choose an empty folder or pass --force")
+
+
+def _remove_stale_temporaries(root: Path) -> None:
+    for folder in (root, root / CAMERA_DIR):
+        if folder.is_dir():
+            for entry in folder.iterdir():
+                if entry.is_file() and _TEMP_RE.match(entry.name):
+                    entry.unlink(missing_ok=True)
+
+
+def _dumps(obj) -> bytes:
+    return (json.dumps(obj, indent=1, allow_nan=False) + "\n").encode()
+
+
+def make_frame(index: int, seed: int, size: tuple[int, int] = (960, 540)) -> dict:
+    """Everything of frame ``index``: ``{"image": BGR uint8, "annotation": dict, "camera": dict,
+    "kind": str, "jpeg_quality": int}`` (nothing written)."""
+    rng = np.random.default_rng([int(seed), int(index)])
+    width, height = size
+    camera, kind = sample_camera(rng, width, height)
+    image = render_frame(camera, rng)
+    annotation = annotate(camera, rng)
+    quality = int(rng.integers(60, 96))
+    cam_json = camera.scaled(EVAL_W, EVAL_H).to_soccernet()
+    cam_json["synth"] = {"kind": kind, "image_size": [int(width), int(height)]}
+    return {"image": image, "annotation": annotation_to_json(annotation), "camera": cam_json,
+            "kind": kind, "jpeg_quality": quality}
+
+
+def write_frame(out_dir: str | os.PathLike, index: int, seed: int, size: tuple[int, int] = (960, 540)) -> str:
+    """Make frame ``index`` and write its three files; returns the stem."""
+    root = Path(out_dir)
+    frame = make_frame(index, seed, size)
+    stem = frame_stem(index)
+    ok, jpg = cv2.imencode(".jpg", frame["image"], [cv2.IMWRITE_JPEG_QUALITY, frame["jpeg_quality"]])
+    if not ok:
+        raise RuntimeError(f"JPEG encoding failed for frame {stem}")
+    atomic_write_bytes(root / CAMERA_DIR / f"camera_{stem}.json", _dumps(frame["camera"]))
+    atomic_write_bytes(root / f"{stem}.json", _dumps(frame["annotation"]))
+    atomic_write_bytes(root / f"{stem}.jpg", jpg.tobytes())
+    return stem
+
+
+def _worker_init() -> None:
+    cv2.setNumThreads(1)
+
+
+def _worker(job: tuple) -> str:
+    return write_frame(*job)
+
+
+def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int] = (960, 540),
+             start_index: int = 0, workers: int = 1, progress: bool = True, *, force: bool = False) -> SynthSummary:
+    """Write frames ``start_index .. start_index + n - 1`` of ``seed`` into ``out_dir``.
+
+    ``workers > 1`` renders in that many processes (same output). Refuses a non-empty folder
+    that is not a previous synthetic output unless ``force`` (see :func:`check_output_folder`).
+    """
+    if n < 0:
+        raise ValueError("n must be >= 0")
+    if start_index < 0:
+        raise ValueError("start_index must be >= 0")
+    width, height = (int(v) for v in size)
+    if width < 2 or height < 2:
+        raise ValueError(f"image size must be at least 2 x 2, got {width} x {height}")
+    root = Path(out_dir)
+    check_output_folder(root, force)
+    (root / CAMERA_DIR).mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(root)
+    jobs = [(str(root), i, int(seed), (width, height)) for i in range(start_index, start_index + n)]
+    from tqdm import tqdm
+
+    start = time.perf_counter()
+    with tqdm(total=n, desc="synth", unit="frame", disable=not progress) as bar:
+        if workers <= 1 or n <= 1:
+            for job in jobs:
+                _worker(job)
+                bar.update(1)
+        else:
+            import multiprocessing
+
+            ctx = multiprocessing.get_context("spawn")
+            with ctx.Pool(min(workers, n), initializer=_worker_init) as pool:
+                for _ in pool.imap_unordered(_worker, jobs):
+                    bar.update(1)
+    return SynthSummary(root, n, time.perf_counter() - start)
+
+
+__all__ = ["generate", "make_frame", "write_frame", "frame_stem", "check_output_folder", "foreign_entries",
+           "OutputFolderError", "SynthSummary", "CAMERA_DIR"]
