@@ -1,0 +1,146 @@
+"""``pnlviz eval``: the SoccerNet calibration score of a camera zip, and the WC14 / TSWC homography
+metrics. Bad files are reported one line each and skipped; they never stop the command."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import os
+import sys
+from pathlib import Path
+
+DESCRIPTION = """\
+Score predicted cameras against SoccerNet-format line annotations exactly as the official
+SoccerNet evaluator does (JaC@5/10/20, completeness CR, final score FS = CR x JaC@5, at 960x540),
+and, with --homographies, the WC14/TS-WorldCup homography metrics (IoU part, IoU whole,
+projection error in metres, reprojection error / image height). Bad annotations or cameras are
+reported and skipped."""
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1280x720, got {text!r}") from None
+    if not (w > 0 and h > 0):
+        raise argparse.ArgumentTypeError(f"image size must be positive, got {text!r}")
+    return w, h
+
+
+def add_eval_parser(subparsers) -> argparse.ArgumentParser:
+    p = subparsers.add_parser("eval", help="JaC/CR/FS of predicted cameras (official protocol); WC14 homography metrics",
+                              description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--gt", type=Path, help="ground-truth annotations: folder or zip of <stem>.json")
+    p.add_argument("--pred", type=Path, help="predicted cameras: zip (or folder) of camera_<stem>.json")
+    p.add_argument("--csv", type=Path, help="write per-frame results to this CSV file")
+    p.add_argument("--thresholds", type=float, nargs="+", default=[5.0, 10.0, 20.0], metavar="PX",
+                   help="distance thresholds in pixels at 960x540 (default: 5 10 20)")
+    p.add_argument("--ignore-unknown", action="store_true",
+                   help="drop 'Goal unknown'/'Line unknown' from the annotations (the official score counts "
+                        "them as false negatives)")
+    p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--homographies", type=Path, metavar="GT.json",
+                   help="ground-truth template->image homographies (WC14/TSWC, 1280x720): also print the "
+                        "homography metrics of --pred-homographies, or of the --pred cameras")
+    p.add_argument("--pred-homographies", type=Path, metavar="PRED.json", help="predicted homographies, same format")
+    p.add_argument("--camera-size", type=_size, metavar="WxH",
+                   help="image size the --pred cameras were made for (default: twice their principal point); "
+                        "used only to turn cameras into homographies")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_eval)
+    return p
+
+
+def _report(line: str) -> None:
+    print(f"skipped: {line}", file=sys.stderr)
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    from pnlviz.data import atomic_write_text
+
+    buf = io.StringIO()
+    if rows:
+        writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+        writer.writeheader()
+        for row in rows:  # accuracies are float32 values: 7 significant digits print them exactly
+            writer.writerow({k: (f"{v:.7g}" if isinstance(v, float) else v) for k, v in row.items()})
+    atomic_write_text(path, buf.getvalue())
+
+
+def _read_homographies_leniently(path: Path) -> dict:
+    """``{stem: 3x3}`` from a JSON file; a malformed entry is reported and skipped."""
+    from pnlviz.data import DataError
+    from pnlviz.data.homographies import parse_homographies
+    from pnlviz.data.jsonio import parse_json_bytes, read_file_bytes
+
+    source = os.fspath(path)
+    obj = parse_json_bytes(read_file_bytes(path), source)
+    if not isinstance(obj, dict):
+        return parse_homographies(obj, source)  # raises the one-line error
+    out = {}
+    for stem, value in obj.items():
+        try:
+            out.update(parse_homographies({stem: value}, source))
+        except DataError as e:
+            _report(str(e))
+    return out
+
+
+def run_eval(args) -> int:
+    from pnlviz.data import DataError
+
+    if args.gt is None and args.homographies is None:
+        print("error: give --gt (with --pred) and/or --homographies", file=sys.stderr)
+        return 2
+    if args.gt is not None and args.pred is None:
+        print("error: --gt needs --pred (the predicted cameras)", file=sys.stderr)
+        return 2
+    if args.homographies is not None and args.pred_homographies is None and args.pred is None:
+        print("error: --homographies needs --pred-homographies or --pred cameras", file=sys.stderr)
+        return 2
+    if any(t <= 0 for t in args.thresholds):
+        print("error: thresholds must be positive", file=sys.stderr)
+        return 2
+    progress = not args.no_progress
+    cameras = None
+    if args.pred is not None:
+        from pnlviz.metrics.soccernet import read_cameras
+
+        cameras, _ = read_cameras(args.pred, on_error=_report)
+    if args.gt is not None:
+        from pnlviz.metrics.soccernet import evaluate_dataset
+
+        summary = evaluate_dataset(args.gt, cameras, args.thresholds, progress=progress,
+                                   count_unknown=not args.ignore_unknown, workers=max(1, args.workers),
+                                   on_error=_report)
+        print(f"SoccerNet camera calibration (960x540): {args.gt} vs {args.pred}")
+        print(summary.table())
+        skipped = len(summary.skipped_annotations)
+        if skipped:
+            print(f"{skipped} annotation(s) skipped (not counted)")
+        if summary.unmatched_cameras:
+            print(f"{len(summary.unmatched_cameras)} camera(s) without an annotation (ignored)")
+        if args.csv is not None:
+            _write_csv(args.csv, summary.rows())
+            print(f"wrote {args.csv} ({summary.n_frames} frames)")
+    if args.homographies is not None:
+        from pnlviz.data import read_homographies
+        from pnlviz.metrics.homography import evaluate_homographies, homography_from_camera
+
+        gt_h = read_homographies(args.homographies)
+        if args.pred_homographies is not None:
+            pred_h = _read_homographies_leniently(args.pred_homographies)
+            what = args.pred_homographies
+        else:
+            pred_h = {}
+            for stem, cam in cameras.items():
+                try:
+                    pred_h[stem] = homography_from_camera(cam, source_size=args.camera_size)
+                except (DataError, ValueError) as e:
+                    _report(f"camera_{stem}.json: {e}")
+            what = args.pred
+        hs = evaluate_homographies(gt_h, pred_h, progress=progress)
+        print(f"Homography metrics (1280x720 image, 115x74 yd template): {args.homographies} vs {what}")
+        print(hs.table())
+    return 0
