@@ -124,12 +124,14 @@ def build_parser() -> argparse.ArgumentParser:
                                      "synthetic data, labels, calibration and an inspection app.")
     parser.add_argument("--version", action="version", version=f"pnlviz {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    from pnlviz.calib.cli import add_calibrate_parser
     from pnlviz.labels.cli import add_labels_parser
     from pnlviz.metrics.cli import add_eval_parser
     from pnlviz.synth.cli import add_synth_parser
 
     add_synth_parser(sub)
     add_labels_parser(sub)
+    add_calibrate_parser(sub)
     add_eval_parser(sub)
     _add_validate(sub)
     _add_sheet(sub)

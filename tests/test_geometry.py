@@ -190,3 +190,18 @@ def test_line_helpers():
     np.testing.assert_allclose(intersect_lines(l1, l2), [0.5, 0.5])
     assert intersect_lines(l1, line_through((0, 1), (1, 2))) is None
     assert len(Conic.from_ellipse((0, 0), (1, 1), 0).intersect_line(line_through((0, 5), (1, 5)))) == 0
+
+
+def test_fit_line_is_total_least_squares():
+    from pnlviz.geometry.conics import fit_line
+
+    rng = np.random.default_rng(9)
+    t = rng.uniform(-100, 100, 50)
+    pts = np.stack([300 + 0.8 * t, 200 + 0.6 * t], 1) + rng.normal(0, 0.5, (50, 2)) * [[-0.6, 0.8]]
+    l = fit_line(pts)
+    assert abs(np.hypot(l[0], l[1]) - 1) < 1e-12
+    np.testing.assert_allclose(abs(l[:2] @ [0.8, 0.6]), 0, atol=0.01)  # normal is perpendicular to the direction
+    assert abs(l @ [300, 200, 1]) < 0.5
+    # a vertical line, where y-on-x regression would fail
+    l = fit_line(np.array([[5.0, 0], [5, 10], [5, 20]]))
+    np.testing.assert_allclose(abs(l[0]), 1) and np.testing.assert_allclose(abs(l[2]), 5)

@@ -27,6 +27,15 @@ def line_through(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return np.cross(np.append(np.asarray(p, float)[:2], 1.0), np.append(np.asarray(q, float)[:2], 1.0))
 
 
+def fit_line(points: np.ndarray) -> np.ndarray:
+    """Total-least-squares homogeneous line (a, b, c), a^2 + b^2 = 1, through 2D points (N >= 2)."""
+    pts = np.asarray(points, float).reshape(-1, 2)
+    mean = pts.mean(axis=0)
+    _, _, vt = np.linalg.svd(pts - mean, full_matrices=False)
+    normal = vt[-1]
+    return np.array([normal[0], normal[1], -normal @ mean])
+
+
 def intersect_lines(l1: np.ndarray, l2: np.ndarray) -> np.ndarray | None:
     """Intersection of two homogeneous lines as a 2D point, or None when they are parallel."""
     x = np.cross(l1, l2)

@@ -1,0 +1,361 @@
+"""Camera calibration from keypoints (and lines): candidates over keypoint subsets and RANSAC
+thresholds, heuristic voting, PnL refinement, and a final refinement of focal length and k1.
+
+The pipeline for one frame (paper Sec. "Camera Parameters Estimation" and "Point and Line
+Refinement Module", plus what the data asked for):
+
+1. For each keypoint subset (``full``: every keypoint; ``main``: line-line intersections of the
+   annotation; ``ground``: keypoints with z = 0) and each RANSAC threshold, fit a plane homography
+   with RANSAC (the ground plane, or a goal plane x = +-52.5 when the ground has too few points),
+   decompose it into an initial camera (principal point at the centre, square pixels, no
+   distortion), and refine focal length and pose on the subset's inliers with the non-planar
+   points included (the 3-plane rig). Identical inlier sets are solved once.
+2. Heuristic voting: every candidate is scored on *all* observations (keypoints, and the points on
+   lines and circles) with a truncated quadratic ``sum(min(r^2, tau^2))``; the lowest score wins,
+   the ``full`` subset winning ties as in the paper.
+3. PnL refinement: pose only, K fixed, cost ``alpha * lines + (1 - alpha) * points``; a line
+   joins when both its extreme observed points are within ``line_gate_px`` of the line projected
+   by the voted camera, a keypoint when within ``point_gate_px``.
+4. Optional final refinement of focal length and radial k1 together with the pose, robust loss.
+
+Every threshold is a :class:`CalibParams` field, given at 960 px image width and scaled with the
+image width.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from pnlviz.calib.observations import Observations
+from pnlviz.calib.refine import CameraProblem, RefineParams
+from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.geometry.camera import Camera
+from pnlviz.geometry.homography import camera_from_ground_homography
+
+SUBSETS = ("full", "main", "ground")
+
+
+@dataclass(frozen=True)
+class CalibParams:
+    """Calibration settings. Pixel values are for a 960 px wide image and scale with the width."""
+
+    subsets: tuple[str, ...] = SUBSETS
+    ransac_thresholds: tuple[float, ...] = (5.0, 10.0, 20.0, 40.0)
+    min_points: int = 4  #: keypoints needed on one plane for a homography
+    vote_tau: float = 10.0  #: truncation of the voting score, pixels
+    max_rms: float = 15.0  #: a calibration whose inlier RMS (px) is above this is a failure
+    min_hfov_deg: float = 1.0
+    max_hfov_deg: float = 130.0
+    pnl: bool = True  #: run the PnL refinement
+    alpha: float = 0.6  #: PnL weight of lines vs points (paper: 0.6)
+    line_gate_px: float = 20.0  #: a line joins PnL when its ends are this close to the initial projection
+    point_gate_px: float = 20.0  #: a keypoint joins PnL when this close to its initial projection
+    refine_focal: bool = True  #: final refinement of the focal length with the pose
+    refine_k1: bool = True  #: final refinement of radial distortion k1 with the pose (+3 JaC@5 on SN22 and WC14)
+    final_loss: str = "soft_l1"
+    final_f_scale: float = 2.0  #: px where the final robust loss bends
+    prior_search: bool = True  #: with too few keypoints for a homography, start from broadcast priors
+    prior_good_rms: float = 3.0  #: stop the prior search at a camera fitting everything this well (px RMS)
+
+    def px(self, value: float, width: float) -> float:
+        return value * width / 960.0
+
+
+@dataclass
+class Candidate:
+    subset: str
+    threshold: float
+    plane: str
+    camera: Camera
+    inliers: np.ndarray  # keypoint ids
+    rms: float
+    score: float = np.inf
+
+
+@dataclass
+class CalibrationResult:
+    """One frame's calibration and the evidence for it (what the app shows)."""
+
+    camera: Camera | None
+    initial_camera: Camera | None = None
+    subset: str | None = None
+    threshold: float | None = None
+    plane: str | None = None
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    point_residuals_initial: dict[int, float] = field(default_factory=dict)
+    point_residuals: dict[int, float] = field(default_factory=dict)
+    line_residuals_initial: dict[str, float] = field(default_factory=dict)
+    line_residuals: dict[str, float] = field(default_factory=dict)
+    pnl_lines: list[str] = field(default_factory=list)
+    candidates: list[dict] = field(default_factory=list)
+    failure: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.camera is not None
+
+
+# ------------------------------------------------------------------------------ initial cameras
+def _plane_frame(plane: str, model: FieldModel) -> tuple[np.ndarray, np.ndarray] | None:
+    """Rotation ``B`` (rows: local x', y', z' in world) and origin of a plane's local frame in
+    which the plane is z' = 0 and the camera side is z' < 0."""
+    hl = model.dimensions["pitch_length"] / 2
+    if plane == "ground":
+        return np.eye(3), np.zeros(3)
+    if plane == "goal_left":  # x = -52.5, pitch side x > -52.5: z' = -(x + 52.5)
+        return np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]), np.array([-hl, 0.0, 0.0])
+    if plane == "goal_right":  # x = +52.5, pitch side x < 52.5: z' = x - 52.5
+        return np.array([[0.0, 1, 0], [0, 0, 1], [1, 0, 0]]), np.array([hl, 0.0, 0.0])
+    return None
+
+
+def plane_masks(xyz: np.ndarray, model: FieldModel) -> dict[str, np.ndarray]:
+    hl = model.dimensions["pitch_length"] / 2
+    return {"ground": np.abs(xyz[:, 2]) < 1e-9,
+            "goal_left": np.abs(xyz[:, 0] + hl) < 1e-9,
+            "goal_right": np.abs(xyz[:, 0] - hl) < 1e-9}
+
+
+def camera_from_plane(xyz: np.ndarray, xy: np.ndarray, plane: str, threshold: float, width: int, height: int,
+                      model: FieldModel) -> tuple[Camera, np.ndarray] | None:
+    """RANSAC homography between a plane's points and their pixels, decomposed into a camera.
+    Returns the camera and the inlier mask, or None."""
+    B, origin = _plane_frame(plane, model)
+    local = (xyz - origin) @ B.T
+    if len(local) < 4:
+        return None
+    if len(local) == 4:
+        H, mask = cv2.findHomography(local[:, :2], xy, 0)
+        mask = np.ones((4, 1), np.uint8) if H is not None else None
+    else:
+        H, mask = cv2.findHomography(local[:, :2], xy, cv2.RANSAC, threshold, maxIters=500, confidence=0.999)
+    if H is None or mask is None or mask.sum() < 4:
+        return None
+    cam = camera_from_ground_homography(H, width, height)
+    if cam is None:
+        return None
+    # back to the world frame: x_cam = R_l (B (X - o) - C_l) = (R_l B) (X - (o + B^T C_l))
+    R = cam.R @ B
+    C = origin + B.T @ cam.C
+    return cam.with_pose(R, C), mask.ravel().astype(bool)
+
+
+def _sane(cam: Camera, params: CalibParams) -> str | None:
+    if not np.all(np.isfinite(cam.R)) or not np.all(np.isfinite(cam.C)):
+        return "non-finite camera"
+    if cam.C[2] >= 0:
+        return "camera below the pitch"
+    if not params.min_hfov_deg <= cam.hfov_deg <= params.max_hfov_deg:
+        return f"field of view {cam.hfov_deg:.1f} deg out of range"
+    return None
+
+
+def _kp_errors(cam: Camera, obs: Observations) -> np.ndarray:
+    uv, z = cam.project(obs.kp_xyz)
+    err = np.linalg.norm(uv - obs.kp_xy, axis=1)
+    return np.where(z > 1e-3, err, np.inf)
+
+
+def _subset_mask(obs: Observations, subset: str) -> np.ndarray:
+    if subset == "full":
+        return np.ones(obs.n_keypoints, bool)
+    if subset == "main":
+        return obs.kp_main.copy()
+    if subset == "ground":
+        return obs.ground.copy()
+    raise ValueError(f"unknown keypoint subset {subset!r}")
+
+
+def make_candidates(obs: Observations, params: CalibParams, model: FieldModel) -> list[Candidate]:
+    """Step 1: one refined camera per (subset, threshold) with a distinct inlier set."""
+    W, H = obs.width, obs.height
+    seen: dict[tuple, Candidate] = {}
+    out: list[Candidate] = []
+    for subset in params.subsets:
+        mask = _subset_mask(obs, subset)
+        if mask.sum() < params.min_points:
+            continue
+        sub = obs.subset(mask)
+        sub.lines, sub.circles = {}, {}  # candidates come from keypoints alone; lines join in PnL
+        planes = plane_masks(sub.kp_xyz, model)
+        # the ground plane first; a goal plane only when the ground has too few points
+        order = sorted(planes, key=lambda p: (p != "ground", -planes[p].sum()))
+        for thr in params.ransac_thresholds:
+            thr_px = params.px(thr, W)
+            for plane in order:
+                pm = planes[plane]
+                if pm.sum() < params.min_points or (plane != "ground" and planes["ground"].sum() >= params.min_points):
+                    continue
+                init = camera_from_plane(sub.kp_xyz[pm], sub.kp_xy[pm], plane, thr_px, W, H, model)
+                if init is None:
+                    continue
+                cam0, inl_plane = init
+                # inliers over the whole subset (non-planar points too), then refine f + pose
+                err = _kp_errors(cam0, sub)
+                inl = err < max(thr_px, params.px(5.0, W))
+                inl[np.flatnonzero(pm)[inl_plane]] = True
+                key = (tuple(sub.kp_ids[inl]),)
+                if key in seen:
+                    continue
+                quick = RefineParams(refine_focal=True, max_iter=20, tol=1e-6)
+                cam, _ = CameraProblem(cam0, sub, quick, model, use_keypoints=inl).solve()
+                err = _kp_errors(cam, sub)
+                # one re-selection pass with the refined camera
+                inl2 = err < thr_px
+                if inl2.sum() >= params.min_points and not np.array_equal(inl2, inl):
+                    cam, _ = CameraProblem(cam, sub, quick, model, use_keypoints=inl2).solve()
+                    inl = inl2
+                    err = _kp_errors(cam, sub)
+                if _sane(cam, params):
+                    continue
+                rms = float(np.sqrt(np.mean(err[inl] ** 2)))
+                cand = Candidate(subset, thr, plane, cam, sub.kp_ids[inl], rms)
+                seen[key] = cand
+                out.append(cand)
+                break  # one plane per (subset, threshold)
+    return out
+
+
+# ------------------------------------------------------------------------------ prior-based start
+#: Broadcast camera positions (x, y, z) tried when keypoints alone cannot give a camera: the main
+#: camera high on the near side (y > 0), along the pitch, 10-20 m up.
+PRIOR_POSITIONS = tuple((x, y, -h) for x in (-30.0, -10.0, 10.0, 30.0) for y in (45.0, 60.0) for h in (12.0, 20.0))
+PRIOR_HFOV_DEG = (15.0, 30.0, 50.0)
+
+
+def _align_rays(cam_dirs: np.ndarray, world_dirs: np.ndarray) -> np.ndarray:
+    """Rotation R (world -> camera) with R world_dirs ~ cam_dirs (Kabsch on unit vectors, the
+    cross product of the first two added so two rays suffice)."""
+    a = np.vstack([cam_dirs, np.cross(cam_dirs[0], cam_dirs[1])])
+    b = np.vstack([world_dirs, np.cross(world_dirs[0], world_dirs[1])])
+    U, _, Vt = np.linalg.svd(a.T @ b)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt
+
+
+def prior_candidates(obs: Observations, params: CalibParams, model: FieldModel) -> list[Candidate]:
+    """Cameras for frames with too few keypoints for a homography: start from typical broadcast
+    positions and fields of view, rotate so that two keypoints (or line intersections) line up,
+    and fit focal length and pose to every observation (keypoints, lines, circles). Mirrored
+    positions (y < 0) are covered by the evaluator's left/right symmetry of the labels."""
+    if obs.n_keypoints < 2 or not (obs.lines or obs.circles):
+        return []
+    W, H = obs.width, obs.height
+    # the two keypoints farthest apart in the image give the best-conditioned rotation
+    d = np.linalg.norm(obs.kp_xy[:, None] - obs.kp_xy[None], axis=2)
+    i, j = np.unravel_index(np.argmax(d), d.shape)
+    out = []
+    tau = params.px(params.vote_tau, W)
+    for hfov in PRIOR_HFOV_DEG:
+        f = (W / 2) / np.tan(np.radians(hfov) / 2)
+        rays = np.array([[(obs.kp_xy[k, 0] - W / 2) / f, (obs.kp_xy[k, 1] - H / 2) / f, 1.0] for k in (i, j)])
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        for pos in PRIOR_POSITIONS:
+            C = np.array(pos)
+            wd = obs.kp_xyz[[i, j]] - C
+            wd /= np.linalg.norm(wd, axis=1, keepdims=True)
+            R = _align_rays(rays, wd)
+            cam0 = Camera(f, f, W / 2, H / 2, R, C, W, H)
+            if np.any(cam0.to_camera(obs.kp_xyz[[i, j]])[:, 2] <= 0):
+                continue
+            cam, info = CameraProblem(cam0, obs, RefineParams(alpha=0.5, loss="soft_l1", f_scale=tau, max_iter=40),
+                                      model).solve()
+            if _sane(cam, params):
+                continue
+            err = _kp_errors(cam, obs)
+            inl = err < params.px(params.ransac_thresholds[-1], W)
+            out.append(Candidate("prior", float(params.ransac_thresholds[-1]), "ground", cam, obs.kp_ids[inl],
+                                 float(np.sqrt(np.mean(np.minimum(err, 1e3) ** 2)))))
+            r = CameraProblem(cam, obs, RefineParams(alpha=0.5), model).residuals()
+            if np.sqrt(np.mean(r * r)) < params.px(params.prior_good_rms, W):
+                return out  # good enough: every observation fits within a few pixels
+    return out
+
+
+# ------------------------------------------------------------------------------ voting
+def vote(cands: list[Candidate], obs: Observations, params: CalibParams, model: FieldModel) -> Candidate | None:
+    """Step 2: truncated-quadratic score of each candidate on all observations; lowest wins."""
+    if not cands:
+        return None
+    tau = params.px(params.vote_tau, obs.width)
+    rank = {s: i for i, s in enumerate(SUBSETS)}
+    for c in cands:
+        r = CameraProblem(c.camera, obs, RefineParams(alpha=0.5), model).residuals()
+        c.score = float(np.sum(np.minimum(r * r, tau * tau)))
+    return min(cands, key=lambda c: (round(c.score, 6), rank.get(c.subset, 9), c.threshold))
+
+
+# ------------------------------------------------------------------------------ residual reports
+def point_residuals(cam: Camera, obs: Observations) -> dict[int, float]:
+    return {int(i): float(e) for i, e in zip(obs.kp_ids, _kp_errors(cam, obs))}
+
+
+def line_residuals(cam: Camera, obs: Observations, model: FieldModel) -> dict[str, float]:
+    """Largest distance (px) of a class's observed points to its projection (lines and circles)."""
+    noky = Observations(obs.width, obs.height, lines=obs.lines, circles=obs.circles)
+    per_class = CameraProblem(cam, noky, RefineParams(alpha=1.0), model).class_residuals()
+    return {name: float(np.max(r)) for name, r in per_class.items()}
+
+
+# ------------------------------------------------------------------------------ PnL
+def pnl_refine(cam: Camera, obs: Observations, params: CalibParams, model: FieldModel,
+               *, refine_focal: bool = False, refine_k1: bool = False, loss: str = "linear") -> tuple[Camera, list[str]]:
+    """Step 3 (and 4 with ``refine_focal``/``refine_k1``): refine against gated points and lines."""
+    gate_l = params.px(params.line_gate_px, obs.width)
+    gate_p = params.px(params.point_gate_px, obs.width)
+    lres = line_residuals(cam, obs, model)
+    lines = {k: v for k, v in obs.lines.items() if lres.get(k, np.inf) < gate_l}
+    circles = {k: v for k, v in obs.circles.items() if lres.get(k, np.inf) < gate_l}
+    kp_ok = _kp_errors(cam, obs) < gate_p
+    gated = Observations(obs.width, obs.height, obs.kp_ids[kp_ok], obs.kp_xy[kp_ok], obs.kp_xyz[kp_ok],
+                         obs.kp_sets[kp_ok], obs.kp_main[kp_ok], lines, circles)
+    rp = RefineParams(alpha=params.alpha, refine_focal=refine_focal, refine_k1=refine_k1, loss=loss,
+                      f_scale=params.px(params.final_f_scale, obs.width))
+    prob = CameraProblem(cam, gated, rp, model)
+    if prob.n_res < prob.n_free + 1:
+        return cam, []
+    new, _ = prob.solve()
+    if _sane(new, params):
+        return cam, []
+    return new, sorted(list(lines) + list(circles))
+
+
+# ------------------------------------------------------------------------------ the whole frame
+def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: FieldModel | None = None) -> CalibrationResult:
+    """Calibrate one frame. Never raises on bad geometry: failures come back with a reason."""
+    model = model or load_field_model()
+    if obs.n_keypoints < (2 if params.prior_search else params.min_points):
+        return CalibrationResult(None, failure=f"too few keypoints ({obs.n_keypoints} < {params.min_points})")
+    cands = make_candidates(obs, params, model)
+    if not cands and params.prior_search:
+        cands = prior_candidates(obs, params, model)
+    best = vote(cands, obs, params, model)
+    table = [{"subset": c.subset, "threshold": c.threshold, "plane": c.plane, "inliers": len(c.inliers),
+              "rms": c.rms, "score": c.score} for c in cands]
+    if best is None:
+        planes = plane_masks(obs.kp_xyz, model)
+        counts = ", ".join(f"{p} {int(m.sum())}" for p, m in planes.items())
+        return CalibrationResult(None, candidates=table,
+                                 failure=f"degenerate geometry: no plane with {params.min_points} consistent keypoints ({counts})")
+    result = CalibrationResult(best.camera, initial_camera=best.camera, subset=best.subset, threshold=best.threshold,
+                               plane=best.plane, inliers=best.inliers, candidates=table)
+    result.point_residuals_initial = point_residuals(best.camera, obs)
+    result.line_residuals_initial = line_residuals(best.camera, obs, model)
+    cam = best.camera
+    if params.pnl and (obs.lines or obs.circles):
+        cam, result.pnl_lines = pnl_refine(cam, obs, params, model)
+    if params.refine_focal or params.refine_k1:
+        cam, _ = pnl_refine(cam, obs, params, model, refine_focal=params.refine_focal, refine_k1=params.refine_k1,
+                            loss=params.final_loss)
+    result.camera = cam
+    result.point_residuals = point_residuals(cam, obs)
+    result.line_residuals = line_residuals(cam, obs, model)
+    inl = np.isin(obs.kp_ids, best.inliers)
+    rms = float(np.sqrt(np.mean(np.array([result.point_residuals[int(i)] for i in obs.kp_ids[inl]]) ** 2)))
+    if not rms <= params.px(params.max_rms, obs.width):
+        result.camera = None
+        result.failure = f"residual above the limit (inlier RMS {rms:.1f} px > {params.px(params.max_rms, obs.width):.1f})"
+    return result

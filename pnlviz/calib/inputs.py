@@ -1,0 +1,80 @@
+"""Turn the two kinds of input into :class:`Observations`: PnLCalib 2D detections, and SoccerNet
+line annotations (through the keypoint labels of :mod:`pnlviz.labels`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pnlviz.calib.observations import Observations
+from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.field.names import LINE_ID_TO_CLASS
+from pnlviz.geometry.conics import fit_line, intersect_lines
+
+#: Keypoint ids PnLCalib's published networks predict (1..57; 58-73 are not predicted).
+PREDICTED_KEYPOINTS = range(1, 58)
+
+
+def auxiliary_keypoints(lines: dict[str, np.ndarray], width: int, height: int, model: FieldModel,
+                        skip: set[int] = frozenset(), beyond: float = 0.5) -> dict[int, tuple[float, float]]:
+    """Keypoints at the intersections of pairs of observed straight lines (catalogue ``line_line``
+    and ``extended_line_line`` definitions), kept when inside the image or at most ``beyond`` of
+    its size outside it (the paper's rule for extended intersections)."""
+    out = {}
+    for kp in model.keypoints.values():
+        d = kp.definition
+        if kp.id in skip or d["kind"] not in ("line_line", "extended_line_line"):
+            continue
+        a, b = d["lines"]
+        if a not in lines or b not in lines:
+            continue
+        pa, pb = lines[a], lines[b]
+        x = intersect_lines(fit_line(pa), fit_line(pb))
+        if x is None:
+            continue
+        if -beyond * width <= x[0] <= (1 + beyond) * width and -beyond * height <= x[1] <= (1 + beyond) * height:
+            out[kp.id] = (float(x[0]), float(x[1]))
+    return out
+
+
+def observations_from_predictions(pred, width: int, height: int, *, kp_threshold: float = 0.1,
+                                  line_threshold: float = 0.1, auxiliary: bool = True,
+                                  model: FieldModel | None = None) -> Observations:
+    """Observations from PnLCalib-format detections (``pnlviz.data.Predictions``), in pixels of a
+    ``width`` x ``height`` image (x_px = x * W). Keypoints use PnLCalib's positions (id 52 at
+    x = 9.0, where its networks were trained). Lines are the two detected extremities of each
+    line whose both ends pass ``line_threshold``; the intersections of detected line pairs add
+    auxiliary keypoints where the network found none (the paper's augmentation)."""
+    model = model or load_field_model()
+    kps = {}
+    for kid, (x, y, p) in pred.keypoints.items():
+        if kid in PREDICTED_KEYPOINTS and p >= kp_threshold:
+            kps[int(kid)] = (x * width, y * height)
+    lines = {}
+    for lid, (x1, y1, p1, x2, y2, p2) in pred.lines.items():
+        if p1 >= line_threshold and p2 >= line_threshold and (x1, y1) != (x2, y2):
+            lines[LINE_ID_TO_CLASS[int(lid)]] = np.array([[x1 * width, y1 * height], [x2 * width, y2 * height]])
+    sets = {k: model.keypoints[k].group for k in kps}
+    if auxiliary:
+        aux = auxiliary_keypoints(lines, width, height, model, skip=set(kps))
+        kps.update(aux)
+        sets.update({k: "Kpe" for k in aux})
+    obs = Observations.from_keypoints(width, height, kps, sets, lines=lines, pnlcalib_positions=True, model=model)
+    return obs
+
+
+def observations_from_annotation(annotation: dict[str, np.ndarray], width: int, height: int, *,
+                                 label_params=None, model: FieldModel | None = None):
+    """Observations from a SoccerNet annotation (normalised, x_px = x (W - 1)): the keypoint
+    labels of every set (:func:`pnlviz.labels.keypoints_from_annotation`) and the annotated points
+    of every straight class and circle. Returns ``(observations, labels)``."""
+    from pnlviz.labels import LabelParams, keypoints_from_annotation
+
+    model = model or load_field_model()
+    labels = keypoints_from_annotation(annotation, width, height, label_params or LabelParams(), model=model)
+    scale = np.array([width - 1, height - 1], float)
+    lines = {k: np.asarray(v, float) * scale for k, v in annotation.items() if k in model.lines and len(v) >= 2}
+    circles = {k: np.asarray(v, float) * scale for k, v in annotation.items() if k in model.circles and len(v) >= 2}
+    kps = {k: (lab.x, lab.y) for k, lab in labels.keypoints.items()}
+    sets = {k: lab.set for k, lab in labels.keypoints.items()}
+    obs = Observations.from_keypoints(width, height, kps, sets, lines=lines, circles=circles, model=model)
+    return obs, labels

@@ -1,0 +1,74 @@
+"""What a calibration is fitted to: keypoints with known world positions, and points observed on
+the pitch's straight lines and circles. Pixels of the frame as stored (or of the evaluation size).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.field.names import CIRCLE_CLASSES, STRAIGHT_CLASSES
+
+
+@dataclass
+class Observations:
+    """Inputs of a calibration.
+
+    * ``kp_ids`` (N,), ``kp_xy`` (N, 2) pixels, ``kp_xyz`` (N, 3) world metres, ``kp_sets`` (N,)
+      the keypoint set each came from (``Kp``, ``Kpe``, ``Kp1``, ``Kp2``, ``Kp3``), ``kp_main``
+      (N,) True for line-line intersections of the original annotation (the paper's
+      'main-keypoints' subset).
+    * ``lines``: straight class -> (M, 2) pixels on that line (annotated points or detected
+      extremities); ``circles``: circle class -> (M, 2) pixels on it.
+    """
+
+    width: int
+    height: int
+    kp_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    kp_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    kp_xyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    kp_sets: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype="<U3"))
+    kp_main: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    lines: dict[str, np.ndarray] = field(default_factory=dict)
+    circles: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @classmethod
+    def from_keypoints(cls, width: int, height: int, keypoints: dict[int, tuple[float, float]],
+                       sets: dict[int, str] | None = None, *, lines=None, circles=None,
+                       pnlcalib_positions: bool = False, model: FieldModel | None = None) -> "Observations":
+        """From ``{id: (x_px, y_px)}``; world positions from the catalogue (``pnlcalib_positions``
+        for detections of PnLCalib's published networks: id 52 at x = 9.0)."""
+        model = model or load_field_model()
+        ids = np.array(sorted(keypoints), dtype=int)
+        xy = np.array([keypoints[i][:2] for i in ids], float).reshape(-1, 2)
+        groups = np.array([(sets or {}).get(int(i), model.keypoints[int(i)].group) for i in ids], dtype="<U3")
+        main = np.array([model.keypoints[int(i)].group == "Kp" and g == "Kp" for i, g in zip(ids, groups)], bool)
+        return cls(width, height, ids, xy, model.keypoint_xyz(ids, pnlcalib=pnlcalib_positions), groups, main,
+                   dict(lines or {}), dict(circles or {}))
+
+    @property
+    def n_keypoints(self) -> int:
+        return len(self.kp_ids)
+
+    @property
+    def ground(self) -> np.ndarray:
+        """Mask of keypoints on the ground plane (z = 0)."""
+        return np.abs(self.kp_xyz[:, 2]) < 1e-9
+
+    def subset(self, mask: np.ndarray) -> "Observations":
+        """The same observations with only the keypoints in ``mask``."""
+        return Observations(self.width, self.height, self.kp_ids[mask], self.kp_xy[mask], self.kp_xyz[mask],
+                            self.kp_sets[mask], self.kp_main[mask], self.lines, self.circles)
+
+    def scaled(self, width: int, height: int) -> "Observations":
+        s = np.array([width / self.width, height / self.height])
+        return Observations(width, height, self.kp_ids, self.kp_xy * s, self.kp_xyz, self.kp_sets, self.kp_main,
+                            {k: v * s for k, v in self.lines.items()}, {k: v * s for k, v in self.circles.items()})
+
+
+def check_classes(lines: dict, circles: dict) -> None:
+    bad = [k for k in lines if k not in STRAIGHT_CLASSES] + [k for k in circles if k not in CIRCLE_CLASSES]
+    if bad:
+        raise ValueError(f"not straight/circle classes: {bad}")

@@ -1,0 +1,230 @@
+"""Calibration engine: exact recovery, robustness, PnL, failure reasons, real-data scores."""
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from pnlviz.calib.calibrate import CalibParams, calibrate
+from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions
+from pnlviz.calib.observations import Observations
+from pnlviz.calib.refine import CameraProblem, RefineParams, so3_exp
+from pnlviz.cli import main as cli_main
+from pnlviz.field import load_field_model
+from pnlviz.geometry import Camera, visible_pitch
+from pnlviz.synth import sample_camera
+
+MODEL = load_field_model()
+
+
+def cameras(seed, n, kind=None):
+    rng = np.random.default_rng(seed)
+    out = []
+    while len(out) < n:
+        cam, _ = sample_camera(rng, 960, 540, kind=kind)
+        out.append(Camera(cam.fx, cam.fy, cam.cx, cam.cy, cam.R, cam.C, 960, 540))  # no distortion
+    return out
+
+
+def keypoint_obs(cam, rng=None, noise=0.0, outliers=0.0, lines=False):
+    uv, z = cam.project(MODEL.keypoint_xyz())
+    ok = (z > 0) & cam.in_image(uv)
+    ids, uv = MODEL.keypoint_ids[ok], uv[ok]
+    if rng is not None:
+        uv = uv + rng.normal(0, noise, uv.shape)
+        bad = rng.random(len(ids)) < outliers
+        uv[bad] += rng.uniform(40, 150, (bad.sum(), 2)) * rng.choice([-1, 1], (bad.sum(), 2))
+    seen = {}
+    if lines:
+        seen = {k: v[:: max(1, len(v) // 4)] for k, v in visible_pitch(cam).items() if k in MODEL.lines}
+    return Observations.from_keypoints(960, 540, {int(k): p for k, p in zip(ids, uv)}, lines=seen)
+
+
+def test_noise_free_keypoints_recover_focal_and_position_to_1e_3():
+    done = 0
+    for cam in cameras(0, 40):
+        obs = keypoint_obs(cam)
+        if obs.n_keypoints < 6:
+            continue
+        res = calibrate(obs, CalibParams(pnl=False, refine_k1=False))
+        assert res.ok, res.failure
+        assert abs(res.camera.fx / cam.fx - 1) < 1e-3
+        assert np.linalg.norm(res.camera.C - cam.C) / np.linalg.norm(cam.C) < 1e-3
+        done += 1
+    assert done >= 25
+
+
+def test_voting_finds_the_camera_with_1px_noise_and_20_percent_outliers():
+    rng = np.random.default_rng(1)
+    focal_err, pos_err, n = [], [], 0
+    for cam in cameras(2, 40, kind="main"):
+        obs = keypoint_obs(cam, rng, noise=1.0, outliers=0.2, lines=True)
+        if obs.n_keypoints < 8:
+            continue
+        n += 1
+        res = calibrate(obs)
+        assert res.ok, res.failure
+        focal_err.append(abs(res.camera.fx / cam.fx - 1))
+        pos_err.append(np.linalg.norm(res.camera.C - cam.C) / np.linalg.norm(cam.C))
+        # the outliers are not inliers of the winning candidate
+        uv, _ = cam.project(obs.kp_xyz)
+        true_out = obs.kp_ids[np.linalg.norm(uv - obs.kp_xy, axis=1) > 20]
+        assert not set(true_out) & set(res.inliers.tolist())
+    assert n >= 20
+    assert np.median(focal_err) < 0.01 and np.percentile(focal_err, 90) < 0.03
+    assert np.median(pos_err) < 0.01 and np.percentile(pos_err, 90) < 0.03
+
+
+def test_goal_plane_alone_gives_a_camera():
+    """Only the goal mouth: posts, crossbar corners and points on the goal line (plane x = -52.5)."""
+    cam = Camera.from_look_at([-40, 30, -12], [-52.5, 0, -1], hfov_deg=30, width=960, height=540)
+    ids = [12, 13, 16, 17, 8]  # crossbar corners, post feet, small-box corner on the goal line
+    uv, _ = cam.project(MODEL.keypoint_xyz(ids))
+    assert cam.in_image(uv).all()
+    obs = Observations.from_keypoints(960, 540, {i: p for i, p in zip(ids, uv)})
+    assert obs.ground.sum() == 3  # too few for a ground homography: the goal plane must do
+    res = calibrate(obs, CalibParams(pnl=False, refine_k1=False))
+    assert res.ok and res.plane == "goal_left", (res.failure, res.plane)
+    assert abs(res.camera.fx / cam.fx - 1) < 1e-3
+
+
+def test_pnl_uses_lines_to_correct_noisy_points():
+    rng = np.random.default_rng(3)
+    gains = []
+    for cam in cameras(4, 15, kind="main"):
+        obs = keypoint_obs(cam, rng, noise=3.0, lines=True)  # bad points, exact lines
+        if obs.n_keypoints < 6 or len(obs.lines) < 3:
+            continue
+        base = calibrate(obs, CalibParams(pnl=False, refine_focal=False, refine_k1=False))
+        pnl = calibrate(obs, CalibParams(refine_focal=False, refine_k1=False))
+        assert pnl.pnl_lines, "lines consistent with the initial camera join the PnL set"
+
+        def err(c):
+            uv, _ = cam.project(MODEL.keypoint_xyz())
+            uv2, _ = c.project(MODEL.keypoint_xyz())
+            ok = cam.in_image(uv)
+            return np.median(np.linalg.norm(uv[ok] - uv2[ok], axis=1))
+
+        gains.append(err(base.camera) - err(pnl.camera))
+    assert len(gains) >= 8 and np.median(gains) > 0.3
+
+
+def test_failures_come_back_with_a_reason():
+    res = calibrate(Observations(960, 540))
+    assert not res.ok and "too few keypoints" in res.failure
+    # four collinear keypoints on the halfway line: no homography
+    ids = [2, 32, 35, 29]
+    cam = Camera.from_look_at([0, 50, -15], [0, 0, 0], hfov_deg=40, width=960, height=540)
+    uv, _ = cam.project(MODEL.keypoint_xyz(ids))
+    res = calibrate(Observations.from_keypoints(960, 540, {i: p for i, p in zip(ids, uv)}),
+                    CalibParams(prior_search=False))
+    assert not res.ok and "degenerate" in res.failure
+
+
+def test_analytic_jacobian_matches_finite_differences():
+    cam = Camera.from_look_at([5, 50, -15], [-30, 0, 0], hfov_deg=40, width=960, height=540, k1=0.05)
+    rng = np.random.default_rng(5)
+    vis = visible_pitch(cam)
+    obs = keypoint_obs(cam, rng, noise=2.0)
+    obs.lines = {k: v[::3] + 2.0 for k, v in vis.items() if k in MODEL.lines}
+    obs.circles = {k: v[::3] + 1.0 for k, v in vis.items() if k in MODEL.circles}
+    prob = CameraProblem(cam, obs, RefineParams())
+    R, C, f, k1 = cam.R, cam.C, cam.fx, cam.radial[0]
+    _, J = prob._eval(R, C, f, k1, jac=True)
+    h = 1e-6
+    for i in range(6):
+        d = np.zeros(6)
+        d[i] = h
+        if i < 3:
+            plus, minus = prob._eval(so3_exp(d[:3]) @ R, C, f, k1), prob._eval(so3_exp(-d[:3]) @ R, C, f, k1)
+        else:
+            plus, minus = prob._eval(R, C + d[3:], f, k1), prob._eval(R, C - d[3:], f, k1)
+        np.testing.assert_allclose(J[:, i], (plus - minus) / (2 * h), atol=2e-3 * np.abs(J).max())
+
+
+def test_refinement_recovers_focal_pose_and_k1_from_lines_and_circles():
+    rng = np.random.default_rng(6)
+    for _ in range(10):
+        pos = np.array([rng.uniform(-20, 20), rng.uniform(40, 70), -rng.uniform(8, 25)])
+        cam = Camera.from_look_at(pos, [rng.uniform(-40, 40), rng.uniform(-20, 15), 0], hfov_deg=rng.uniform(20, 50),
+                                  width=960, height=540, k1=rng.uniform(0, 0.08))
+        vis = visible_pitch(cam, spacing=0.5)
+        obs = keypoint_obs(cam)
+        obs.lines = {k: v[1:-1:4] for k, v in vis.items() if k in MODEL.lines and len(v) > 6}
+        obs.circles = {k: v[1:-1:6] for k, v in vis.items() if k in MODEL.circles and len(v) > 12}
+        start = Camera(cam.fx * 1.05, cam.fy * 1.05, 480, 270, so3_exp(rng.normal(0, 0.01, 3)) @ cam.R,
+                       cam.C + rng.normal(0, 1, 3), 960, 540)
+        out, info = CameraProblem(start, obs, RefineParams(refine_k1=True)).solve()
+        assert info["success"]
+        assert abs(out.fx / cam.fx - 1) < 2e-3
+        assert abs(out.radial[0] - cam.radial[0]) < 5e-3
+
+
+# ------------------------------------------------------------------------------ real data
+def _scores(gt_zip, cams):
+    from pnlviz.metrics.soccernet import evaluate_dataset  # bit-identical to the official evaluator
+
+    return evaluate_dataset(gt_zip, cams, progress=False)
+
+
+def test_wc14_from_published_detections_beats_pnlcalib_cameras(shared_dir):
+    from pnlviz.data import read_predictions
+
+    data = shared_dir / "data" / "wc14_test_half"
+    preds = read_predictions(data / "detections_pnlcalib.zip")
+    scores = {}
+    for name, params in (("pnl", CalibParams()), ("no_pnl", CalibParams(pnl=False, refine_focal=False, refine_k1=False))):
+        cams = {}
+        for stem, p in preds.items():
+            res = calibrate(observations_from_predictions(p, 960, 540), params)
+            if res.ok:
+                cams[stem] = res.camera
+        scores[name] = _scores(data / "annotations.zip", cams)
+    pnl = scores["pnl"]
+    assert pnl.completeness == 1.0
+    assert pnl.jac(5) >= 0.87  # PnLCalib's own cameras: 0.860
+    assert pnl.jac(5) > scores["no_pnl"].jac(5)
+
+
+def test_sn22_cameras_agree_with_the_annotations(shared_dir, tmp_path):
+    from pnlviz.data import open_dataset
+    from pnlviz.metrics.soccernet import evaluate_dataset
+
+    src = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
+    ds = open_dataset(src)
+    stems = ds.stems[::4]  # 100 of the 400 frames
+    gt = tmp_path / "gt.zip"
+    with zipfile.ZipFile(gt, "w") as zf, zipfile.ZipFile(src) as zsrc:
+        for stem in stems:
+            zf.writestr(f"{stem}.json", zsrc.read(f"{stem}.json"))
+    cams = {}
+    for stem in stems:
+        obs, _ = observations_from_annotation(ds.annotation(stem), 960, 540)
+        res = calibrate(obs)
+        if res.ok:
+            cams[stem] = res.camera
+    summary = evaluate_dataset(gt, cams, progress=False)
+    assert summary.completeness >= 0.97
+    assert summary.final_score >= 0.85  # the authors' calibration code on the same inputs: 0.689
+
+
+def test_calibrate_cli_writes_an_evaluator_ready_zip_and_a_report(tmp_path):
+    from pnlviz import EXAMPLES_DIR
+
+    out, report = tmp_path / "cams.zip", tmp_path / "report.jsonl"
+    assert cli_main(["calibrate", "--data", str(EXAMPLES_DIR / "sample"), "--out", str(out), "--report", str(report),
+                     "--no-progress"]) == 0
+    with zipfile.ZipFile(out) as zf:
+        names = zf.namelist()
+        assert all(n.startswith("camera_") and "/" not in n for n in names)
+        cam = json.loads(zf.read(names[0]))
+        assert cam["principal_point"] == [480.0, 270.0]
+    rows = [json.loads(line) for line in report.read_text().splitlines()]
+    assert len(rows) == 32 and len(names) >= 30
+    assert all("point_residuals" in r for r in rows if r["stem"] in {n[7:-5] for n in names})
+    # synthetic frames: the cameras agree with the ground truth
+    from pnlviz.metrics.soccernet import evaluate_dataset
+
+    summary = evaluate_dataset(EXAMPLES_DIR / "sample", out, progress=False)
+    assert summary.jac(5) > 0.9
