@@ -1,22 +1,26 @@
 """Camera calibration from keypoints (and lines): candidates over keypoint subsets and RANSAC
-thresholds, heuristic voting, PnL refinement, and a final refinement of focal length and k1.
+thresholds, heuristic voting, PnL refinement (by default over focal length and k1 too).
 
 The pipeline for one frame (paper Sec. "Camera Parameters Estimation" and "Point and Line
 Refinement Module", plus what the data asked for):
 
-1. For each keypoint subset (``full``: every keypoint; ``main``: line-line intersections of the
-   annotation; ``ground``: keypoints with z = 0) and each RANSAC threshold, fit a plane homography
-   with RANSAC (the ground plane, or a goal plane x = +-52.5 when the ground has too few points),
-   decompose it into an initial camera (principal point at the centre, square pixels, no
-   distortion), and refine focal length and pose on the subset's inliers with the non-planar
-   points included (the 3-plane rig). Identical inlier sets are solved once.
-2. Heuristic voting: every candidate is scored on *all* observations (keypoints, and the points on
-   lines and circles) with a truncated quadratic ``sum(min(r^2, tau^2))``; the lowest score wins,
-   the ``full`` subset winning ties as in the paper.
-3. PnL refinement: pose only, K fixed, cost ``alpha * lines + (1 - alpha) * points``; a line
-   joins when both its extreme observed points are within ``line_gate_px`` of the line projected
-   by the voted camera, a keypoint when within ``point_gate_px``.
-4. Optional final refinement of focal length and radial k1 together with the pose, robust loss.
+1. Candidates: for each keypoint subset (``full``: every keypoint; ``main``: the line-line
+   intersections of the annotation or detector; ``ground``: keypoints with z = 0) and each RANSAC
+   threshold, a plane homography with RANSAC (the ground plane, or a goal plane x = +-52.5 when
+   the ground has too few points) decomposed into a camera (principal point at the centre,
+   square pixels, no distortion); its inliers are counted over the subset, non-planar points
+   included. Identical inlier sets are kept once.
+2. Heuristic voting: every candidate is scored on *all* observations (keypoints, and the points
+   on lines and circles) with a truncated quadratic ``sum(min(r^2, tau^2))``. The best
+   ``refine_top`` are refined (focal length and pose on their inliers over all three planes: the
+   3-plane rig of the paper, the homography giving the intrinsic initial guess), scored again, and
+   the lowest score wins (ties: ``full`` first, as in the paper). Frames with too few keypoints
+   for a homography start from broadcast camera priors instead (:func:`prior_candidates`).
+3. PnL refinement, cost ``alpha * lines + (1 - alpha) * points`` (squares): a line or circle
+   joins when all its observed points are within ``line_gate_px`` of its projection by the voted
+   camera, a keypoint when within ``point_gate_px``. The paper refines the pose with K fixed
+   (``refine_focal=False, refine_k1=False``); by default the focal length and radial k1 are
+   refined with the pose, which the data supports (+5.5 JaC@5 on WC14, +4 on SN22; see README).
 
 Every threshold is a :class:`CalibParams` field, given at 960 px image width and scaled with the
 image width.
@@ -51,13 +55,15 @@ class CalibParams:
     max_hfov_deg: float = 130.0
     pnl: bool = True  #: run the PnL refinement
     alpha: float = 0.6  #: PnL weight of lines vs points (paper: 0.6)
-    line_gate_px: float = 20.0  #: a line joins PnL when its ends are this close to the initial projection
+    line_gate_px: float = 20.0  #: a line/circle joins PnL when all its points are this close to its projection
     point_gate_px: float = 20.0  #: a keypoint joins PnL when this close to its initial projection
-    refine_focal: bool = True  #: final refinement of the focal length with the pose
-    refine_k1: bool = True  #: final refinement of radial distortion k1 with the pose (+3 JaC@5 on SN22 and WC14)
-    final_loss: str = "soft_l1"
-    final_f_scale: float = 2.0  #: px where the final robust loss bends
+    refine_focal: bool = True  #: PnL refines the focal length with the pose (the paper keeps K fixed)
+    refine_k1: bool = True  #: PnL refines radial distortion k1 too (+3 JaC@5 on SN22 and WC14)
+    final_loss: str = "linear"  #: loss of PnL with intrinsics; soft_l1 and a quartic loss scored lower on SN22
+    final_f_scale: float = 2.0  #: px where a robust final loss bends
     prior_search: bool = True  #: with too few keypoints for a homography, start from broadcast priors
+    refine_top: int = 3  #: candidates refined (focal + pose) after the first vote
+    tol: float = 1e-6  #: refinements stop when the cost drops by less than this fraction
     prior_good_rms: float = 3.0  #: stop the prior search at a camera fitting everything this well (px RMS)
 
     def px(self, value: float, width: float) -> float:
@@ -119,28 +125,31 @@ def plane_masks(xyz: np.ndarray, model: FieldModel) -> dict[str, np.ndarray]:
             "goal_right": np.abs(xyz[:, 0] - hl) < 1e-9}
 
 
-def camera_from_plane(xyz: np.ndarray, xy: np.ndarray, plane: str, threshold: float, width: int, height: int,
-                      model: FieldModel) -> tuple[Camera, np.ndarray] | None:
-    """RANSAC homography between a plane's points and their pixels, decomposed into a camera.
-    Returns the camera and the inlier mask, or None."""
-    B, origin = _plane_frame(plane, model)
-    local = (xyz - origin) @ B.T
-    if len(local) < 4:
+def plane_homography(local_xy: np.ndarray, xy: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """RANSAC homography (OpenCV, least-squares refit on the inliers) from plane coordinates to
+    pixels, with its inlier mask; exact for 4 points; None when degenerate."""
+    if len(xy) < 4:
         return None
-    if len(local) == 4:
-        H, mask = cv2.findHomography(local[:, :2], xy, 0)
-        mask = np.ones((4, 1), np.uint8) if H is not None else None
+    if len(xy) == 4:
+        H, _ = cv2.findHomography(local_xy, xy, 0)
+        mask = np.ones(4, bool)
     else:
-        H, mask = cv2.findHomography(local[:, :2], xy, cv2.RANSAC, threshold, maxIters=500, confidence=0.999)
+        H, mask = cv2.findHomography(local_xy, xy, cv2.RANSAC, threshold, maxIters=500, confidence=0.999)
     if H is None or mask is None or mask.sum() < 4:
         return None
+    return H, np.asarray(mask).ravel().astype(bool)
+
+
+def camera_from_plane_homography(H: np.ndarray, plane: str, width: int, height: int,
+                                  model: FieldModel) -> Camera | None:
+    """Decompose a homography from a plane's local coordinates (see :func:`_plane_frame`) to
+    pixels into a world camera (centred principal point, square pixels)."""
     cam = camera_from_ground_homography(H, width, height)
     if cam is None:
         return None
+    B, origin = _plane_frame(plane, model)
     # back to the world frame: x_cam = R_l (B (X - o) - C_l) = (R_l B) (X - (o + B^T C_l))
-    R = cam.R @ B
-    C = origin + B.T @ cam.C
-    return cam.with_pose(R, C), mask.ravel().astype(bool)
+    return cam.with_pose(cam.R @ B, origin + B.T @ cam.C)
 
 
 def _sane(cam: Camera, params: CalibParams) -> str | None:
@@ -170,53 +179,69 @@ def _subset_mask(obs: Observations, subset: str) -> np.ndarray:
 
 
 def make_candidates(obs: Observations, params: CalibParams, model: FieldModel) -> list[Candidate]:
-    """Step 1: one refined camera per (subset, threshold) with a distinct inlier set."""
+    """Step 1: per (subset, threshold), the camera decomposed from a RANSAC plane homography and
+    its inliers over the subset, non-planar points included. Identical inlier sets are kept once."""
     W, H = obs.width, obs.height
-    seen: dict[tuple, Candidate] = {}
+    seen: set[tuple] = set()
     out: list[Candidate] = []
+    thresholds = {params.px(t, W): t for t in params.ransac_thresholds}
     for subset in params.subsets:
         mask = _subset_mask(obs, subset)
         if mask.sum() < params.min_points:
             continue
         sub = obs.subset(mask)
-        sub.lines, sub.circles = {}, {}  # candidates come from keypoints alone; lines join in PnL
         planes = plane_masks(sub.kp_xyz, model)
-        # the ground plane first; a goal plane only when the ground has too few points
-        order = sorted(planes, key=lambda p: (p != "ground", -planes[p].sum()))
-        for thr in params.ransac_thresholds:
-            thr_px = params.px(thr, W)
-            for plane in order:
-                pm = planes[plane]
-                if pm.sum() < params.min_points or (plane != "ground" and planes["ground"].sum() >= params.min_points):
+        # the ground plane; a goal plane only when the ground has too few points
+        if planes["ground"].sum() >= params.min_points:
+            order = ["ground"]
+        else:
+            order = sorted((p for p in planes if p != "ground" and planes[p].sum() >= params.min_points),
+                           key=lambda p: -planes[p].sum())
+        for plane in order:
+            pm = planes[plane]
+            B, origin = _plane_frame(plane, model)
+            local = (sub.kp_xyz[pm] - origin) @ B.T
+            found = False
+            for thr_px in thresholds:
+                fit = plane_homography(local[:, :2], sub.kp_xy[pm], thr_px)
+                if fit is None:
                     continue
-                init = camera_from_plane(sub.kp_xyz[pm], sub.kp_xy[pm], plane, thr_px, W, H, model)
-                if init is None:
+                Hp, inl_plane = fit
+                cam0 = camera_from_plane_homography(Hp, plane, W, H, model)
+                if cam0 is None or _sane(cam0, params):
                     continue
-                cam0, inl_plane = init
-                # inliers over the whole subset (non-planar points too), then refine f + pose
                 err = _kp_errors(cam0, sub)
                 inl = err < max(thr_px, params.px(5.0, W))
                 inl[np.flatnonzero(pm)[inl_plane]] = True
-                key = (tuple(sub.kp_ids[inl]),)
+                key = tuple(sub.kp_ids[inl])
+                found = True
                 if key in seen:
                     continue
-                quick = RefineParams(refine_focal=True, max_iter=20, tol=1e-6)
-                cam, _ = CameraProblem(cam0, sub, quick, model, use_keypoints=inl).solve()
-                err = _kp_errors(cam, sub)
-                # one re-selection pass with the refined camera
-                inl2 = err < thr_px
-                if inl2.sum() >= params.min_points and not np.array_equal(inl2, inl):
-                    cam, _ = CameraProblem(cam, sub, quick, model, use_keypoints=inl2).solve()
-                    inl = inl2
-                    err = _kp_errors(cam, sub)
-                if _sane(cam, params):
-                    continue
-                rms = float(np.sqrt(np.mean(err[inl] ** 2)))
-                cand = Candidate(subset, thr, plane, cam, sub.kp_ids[inl], rms)
-                seen[key] = cand
-                out.append(cand)
-                break  # one plane per (subset, threshold)
+                seen.add(key)
+                out.append(Candidate(subset, thresholds[thr_px], plane, cam0, sub.kp_ids[inl],
+                                     float(np.sqrt(np.mean(err[inl] ** 2)))))
+            if found:
+                break
     return out
+
+
+def refine_candidate(c: Candidate, obs: Observations, params: CalibParams, model: FieldModel) -> Candidate | None:
+    """Focal length and pose of a candidate refined on its inliers (all three planes), with one
+    re-selection of the inliers among the subset's keypoints."""
+    sub = obs.subset(_subset_mask(obs, c.subset))
+    sub.lines, sub.circles = {}, {}  # candidates come from keypoints alone; lines join in PnL
+    quick = RefineParams(refine_focal=True, max_iter=20, tol=1e-6)
+    inl = np.isin(sub.kp_ids, c.inliers)
+    cam, _ = CameraProblem(c.camera, sub, quick, model, use_keypoints=inl).solve()
+    err = _kp_errors(cam, sub)
+    inl2 = err < params.px(c.threshold, obs.width)
+    if inl2.sum() >= params.min_points and not np.array_equal(inl2, inl):
+        cam, _ = CameraProblem(cam, sub, quick, model, use_keypoints=inl2).solve()
+        inl = inl2
+        err = _kp_errors(cam, sub)
+    if _sane(cam, params):
+        return None
+    return Candidate(c.subset, c.threshold, c.plane, cam, sub.kp_ids[inl], float(np.sqrt(np.mean(err[inl] ** 2))))
 
 
 # ------------------------------------------------------------------------------ prior-based start
@@ -313,7 +338,7 @@ def pnl_refine(cam: Camera, obs: Observations, params: CalibParams, model: Field
     gated = Observations(obs.width, obs.height, obs.kp_ids[kp_ok], obs.kp_xy[kp_ok], obs.kp_xyz[kp_ok],
                          obs.kp_sets[kp_ok], obs.kp_main[kp_ok], lines, circles)
     rp = RefineParams(alpha=params.alpha, refine_focal=refine_focal, refine_k1=refine_k1, loss=loss,
-                      f_scale=params.px(params.final_f_scale, obs.width))
+                      f_scale=params.px(params.final_f_scale, obs.width), tol=params.tol)
     prob = CameraProblem(cam, gated, rp, model)
     if prob.n_res < prob.n_free + 1:
         return cam, []
@@ -329,12 +354,16 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
     model = model or load_field_model()
     if obs.n_keypoints < (2 if params.prior_search else params.min_points):
         return CalibrationResult(None, failure=f"too few keypoints ({obs.n_keypoints} < {params.min_points})")
-    cands = make_candidates(obs, params, model)
+    raw = make_candidates(obs, params, model)
+    # vote on the decomposed cameras, refine the best few, vote again among the refined ones
+    vote(raw, obs, params, model)
+    raw.sort(key=lambda c: c.score)
+    cands = [r for r in (refine_candidate(c, obs, params, model) for c in raw[: params.refine_top]) if r is not None]
     if not cands and params.prior_search:
         cands = prior_candidates(obs, params, model)
     best = vote(cands, obs, params, model)
     table = [{"subset": c.subset, "threshold": c.threshold, "plane": c.plane, "inliers": len(c.inliers),
-              "rms": c.rms, "score": c.score} for c in cands]
+              "rms": c.rms, "score": c.score, "refined": c in cands} for c in raw + [c for c in cands if c.subset == "prior"]]
     if best is None:
         planes = plane_masks(obs.kp_xyz, model)
         counts = ", ".join(f"{p} {int(m.sum())}" for p, m in planes.items())
@@ -346,10 +375,11 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
     result.line_residuals_initial = line_residuals(best.camera, obs, model)
     cam = best.camera
     if params.pnl and (obs.lines or obs.circles):
-        cam, result.pnl_lines = pnl_refine(cam, obs, params, model)
-    if params.refine_focal or params.refine_k1:
-        cam, _ = pnl_refine(cam, obs, params, model, refine_focal=params.refine_focal, refine_k1=params.refine_k1,
-                            loss=params.final_loss)
+        # one refinement: the paper's PnL (pose, K fixed) or, by default, PnL over pose + focal + k1
+        intrinsics = params.refine_focal or params.refine_k1
+        cam, result.pnl_lines = pnl_refine(cam, obs, params, model, refine_focal=params.refine_focal,
+                                           refine_k1=params.refine_k1,
+                                           loss=params.final_loss if intrinsics else "linear")
     result.camera = cam
     result.point_residuals = point_residuals(cam, obs)
     result.line_residuals = line_residuals(cam, obs, model)

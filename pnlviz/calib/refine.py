@@ -82,7 +82,7 @@ class RefineParams:
     max_iter: int = 50
     tol: float = 1e-8  #: stop when the cost drops by less than this fraction
     k1_bound: float = 0.5
-    circle_step: float = 0.25  #: metres between samples of projected circles
+    circle_step: float = 0.5  #: metres between samples of projected circles (chord error < 4 mm)
 
 
 def _robust_weights(r: np.ndarray, loss: str, c: float) -> np.ndarray:

@@ -1,0 +1,84 @@
+"""Calibration speed and quality on the real data in ../shared/data, measured inside the process.
+
+    python benchmarks/bench_calib.py [--shared ../shared] [--frames N]
+
+For each input (WC14 half from the published PnLCalib detections; SN22 subset from the human
+annotations) and each setting (full voting without PnL; with PnL; with PnL + focal + k1, the
+default), prints ms per frame (median, p90) of ``calibrate()`` alone (inputs prepared beforehand,
+one core: run it with ``taskset -c 0``), JaC@5/10/20, completeness and final score under the
+metric that equals the official evaluator, and the peak memory of the process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from pnlviz.calib.calibrate import CalibParams, calibrate
+from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions
+from pnlviz.data import open_dataset, read_predictions
+from pnlviz.metrics.soccernet import evaluate_dataset
+
+SETTINGS = {
+    "no PnL": replace(CalibParams(), pnl=False, refine_focal=False, refine_k1=False),
+    "PnL": replace(CalibParams(), refine_focal=False, refine_k1=False),
+    "PnL + focal + k1 (default)": CalibParams(),
+}
+
+
+def run(name: str, gt: Path, observations: dict, frames: int) -> None:
+    print(f"\n{name}: {len(observations)} frames")
+    print(f"{'setting':28s} {'median ms':>9s} {'p90 ms':>7s} {'JaC@5':>7s} {'JaC@10':>7s} {'JaC@20':>7s} {'CR':>6s} {'FS':>6s}")
+    for label, params in SETTINGS.items():
+        times, cams = [], {}
+        for stem, obs in observations.items():
+            t0 = time.perf_counter()
+            res = calibrate(obs, params)
+            times.append(time.perf_counter() - t0)
+            if res.ok:
+                cams[stem] = res.camera
+        s = evaluate_dataset(gt, cams, progress=False)
+        print(f"{label:28s} {1e3 * np.median(times):9.1f} {1e3 * np.percentile(times, 90):7.1f} "
+              f"{s.jac(5):7.4f} {s.jac(10):7.4f} {s.jac(20):7.4f} {s.completeness:6.3f} {s.final_score:6.3f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shared", type=Path, default=Path(__file__).resolve().parents[2] / "shared")
+    ap.add_argument("--frames", type=int, default=0, help="use only the first N frames of each set")
+    args = ap.parse_args()
+    data = args.shared / "data"
+
+    wc14 = data / "wc14_test_half"
+    preds = read_predictions(wc14 / "detections_pnlcalib.zip")
+    stems = sorted(preds, key=int)[: args.frames or None]
+    run("WC14 half, published PnLCalib detections", wc14 / "annotations.zip",
+        {s: observations_from_predictions(preds[s], 960, 540) for s in stems}, args.frames)
+
+    sn22 = data / "sn22_test_subset" / "annotations.zip"
+    ds = open_dataset(sn22)
+    stems = ds.stems[: args.frames or None]
+    t0 = time.perf_counter()
+    obs = {s: observations_from_annotation(ds.annotation(s), 960, 540)[0] for s in stems}
+    label_ms = 1e3 * (time.perf_counter() - t0) / len(stems)
+    gt = sn22
+    if args.frames:
+        import tempfile
+        import zipfile
+
+        gt = Path(tempfile.mkdtemp()) / "gt.zip"
+        with zipfile.ZipFile(gt, "w") as zf, zipfile.ZipFile(sn22) as src:
+            for s in stems:
+                zf.writestr(f"{s}.json", src.read(f"{s}.json"))
+    run(f"SN22 subset, human annotations (keypoint labels: {label_ms:.1f} ms/frame, not included)", gt, obs,
+        args.frames)
+    print(f"\npeak memory (ru_maxrss): {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+
+
+if __name__ == "__main__":
+    main()

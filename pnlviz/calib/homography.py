@@ -1,0 +1,632 @@
+"""Homography-only calibration (the paper's planar estimation): the ground plane alone, no camera
+model. Paper Sec. "Homography Estimation" and "Point and Line Refinement Module" ("or a
+homography matrix H in the case of planar estimation").
+
+The pipeline for one frame, the planar twin of :mod:`pnlviz.calib.calibrate`:
+
+1. Candidates. For each keypoint subset (``full``, ``main``, ``ground``, each restricted to the
+   keypoints on the ground, z = 0) and each RANSAC threshold (pixels at 960 px width, scaled with
+   the image width), ``cv2.findHomography`` with RANSAC between the keypoints' field positions
+   (X, Y metres) and their pixels, then a least-squares refit on the inliers (OpenCV's method 0:
+   DLT followed by Levenberg-Marquardt on the reprojection error, the paper's refinement) and one
+   re-selection of the inliers with the refitted H. Identical inlier sets are kept once. For a
+   homography ``full`` restricted to the ground is the ``ground`` subset itself: a subset with
+   the same points as an earlier one is skipped (OpenCV's RANSAC is deterministic), so
+   ``ground`` only counts when asked for alone (``subsets=("ground",)``); the names stay those of
+   the camera pipeline.
+2. Heuristic voting: every candidate is scored on *all* ground observations, the ground keypoints
+   and the points observed on ground lines (distance to the segment mapped by H) and circles
+   (distance to the mapped arc), with a truncated quadratic ``sum(min(d^2, tau^2))``; the lowest
+   score wins, ``full`` winning ties. The winner is polished by Levenberg-Marquardt on its
+   inliers in float64 (``findHomography`` works on float32 points: ~1e-7 relative).
+3. Optional PnL refinement (:func:`refine_homography_pnl`): the 8 degrees of freedom of H
+   against ``alpha * lines + (1 - alpha) * points`` (in squares, as least squares needs), the
+   lines and keypoints gated by the voted H.
+
+Sign and scale of the returned H (field metres (X, Y, 1) -> pixels of ``obs``): unit Frobenius
+norm and the third homogeneous coordinate positive for points in front of the camera, like
+``Camera.ground_homography()`` (whose third row is the depth). A camera above the pitch (z
+down) then has ``det(H) > 0``; a candidate with ``det(H) < 0`` would be the mirror image of the
+pitch (a camera under the ground, or left/right-swapped labels) and is rejected.
+
+Why the residuals are written here and not by a library: ``scipy.optimize.least_squares`` does
+the solving, but the line residual (the distance to the image of a model segment, with its
+overshoot beyond the segment's ends, as :mod:`pnlviz.calib.refine` measures it for cameras) and
+its Jacobian are vectorised numpy code that no library offers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from pnlviz.calib.observations import Observations
+from pnlviz.field.model import FieldModel, load_field_model
+
+__all__ = ["SUBSETS", "HomographyParams", "HomographyResult", "estimate_homography", "refine_homography_pnl",
+           "HomographyProblem", "template_homography", "normalize_visible"]
+
+SUBSETS = ("full", "main", "ground")
+
+#: Scale of the field coordinates inside the solver (metres -> ~unit), for a well-conditioned chart.
+_FIELD_SCALE = 1.0 / 50.0
+
+
+@dataclass(frozen=True)
+class HomographyParams:
+    """Settings. Pixel values are for a 960 px wide image and scale with the width."""
+
+    subsets: tuple[str, ...] = SUBSETS
+    ransac_thresholds: tuple[float, ...] = (5.0, 10.0, 20.0, 40.0)
+    min_points: int = 4  #: ground keypoints needed for a homography
+    ransac_iters: int = 500
+    ransac_confidence: float = 0.999
+    vote_tau: float = 10.0  #: truncation of the voting score, pixels
+    max_rms: float = 15.0  #: a homography whose inlier RMS (px) is above this is a failure
+    pnl: bool = False  #: run the PnL refinement after the vote
+    alpha: float = 0.6  #: PnL weight of lines vs points (paper: 0.6)
+    gate_px: float = 20.0  #: a line joins PnL when all its points are this close to the initial mapped segment
+    point_gate_px: float | None = None  #: a keypoint joins PnL when this close to its initial projection (default gate_px)
+    circles: bool = True  #: ground circles take part in voting and PnL
+    circle_step: float = 0.25  #: metres between samples of mapped circles
+    max_iter: int = 100  #: function evaluations of the PnL solver, per parameter
+
+    def px(self, value: float, width: float) -> float:
+        return value * width / 960.0
+
+
+@dataclass
+class HomographyResult:
+    """One frame's ground homography and the evidence for it.
+
+    ``H`` and ``initial_H`` map field metres (X, Y, 1) on the ground to pixels of the
+    observations' image (``width`` x ``height``), unit norm, positive third coordinate in front of
+    the camera. ``initial_H`` is the voted candidate, ``H`` the final one (after PnL when run).
+    Residuals are pixel distances: per ground keypoint id, and per ground line/circle class the
+    largest distance of its observed points.
+    """
+
+    H: np.ndarray | None
+    width: int = 0
+    height: int = 0
+    initial_H: np.ndarray | None = None
+    subset: str | None = None
+    threshold: float | None = None
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    point_residuals_initial: dict[int, float] = field(default_factory=dict)
+    point_residuals: dict[int, float] = field(default_factory=dict)
+    line_residuals_initial: dict[str, float] = field(default_factory=dict)
+    line_residuals: dict[str, float] = field(default_factory=dict)
+    pnl_lines: list[str] = field(default_factory=list)
+    candidates: list[dict] = field(default_factory=list)
+    failure: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.H is not None
+
+    def template_homography(self, image_size: tuple[int, int] = (1280, 720), model: FieldModel | None = None,
+                            initial: bool = False) -> np.ndarray | None:
+        """WC14-convention homography: template yards -> pixels at ``image_size``."""
+        H = self.initial_H if initial else self.H
+        if H is None:
+            return None
+        return template_homography(H, self.width, self.height, image_size, model)
+
+    def camera(self, refine: bool = False):
+        """The pinhole camera closest to ``H`` (:func:`camera_from_ground_homography`), or None."""
+        from pnlviz.geometry.homography import camera_from_ground_homography
+
+        return None if self.H is None else camera_from_ground_homography(self.H, self.width, self.height, refine=refine)
+
+
+def template_homography(H: np.ndarray, width: float, height: float, image_size: tuple[int, int] = (1280, 720),
+                        model: FieldModel | None = None) -> np.ndarray:
+    """A field-metres -> pixels homography of a ``width`` x ``height`` image as a WC14 one:
+    template yards -> pixels at ``image_size`` (pixels scaled as x * W' / W, the same scaling as
+    ``Camera.scaled``)."""
+    model = model or load_field_model()
+    S = np.diag([image_size[0] / width, image_size[1] / height, 1.0])
+    return S @ np.asarray(H, float) @ model.template_to_field_matrix
+
+
+def normalize_visible(H: np.ndarray, X: np.ndarray | None = None) -> np.ndarray:
+    """``H`` scaled to unit Frobenius norm, with the sign that makes the third homogeneous
+    coordinate of the field points ``X`` (N, 2) positive (by majority; by ``det > 0`` without
+    points)."""
+    H = np.asarray(H, float) / np.linalg.norm(H)
+    if X is not None and len(X):
+        w = X @ H[2, :2] + H[2, 2]
+        return H if np.sum(np.sign(w)) >= 0 else -H
+    return H if np.linalg.det(H) >= 0 else -H
+
+
+# ------------------------------------------------------------------------------ residuals
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (broadcasting), without ``np.cross``'s overhead."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def _closest_on_polyline(pts: np.ndarray, poly: np.ndarray):
+    """For each point (M, 2), the closest point of the polyline (S, 2): distance, segment index
+    j, parameter t on segment j, and the offset point - closest (vectorised over M x S)."""
+    a, ab = poly[:-1], poly[1:] - poly[:-1]
+    L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-18)
+    ap = pts[:, None, :] - a[None]
+    t = np.clip(np.einsum("msk,sk->ms", ap, ab) / L2, 0.0, 1.0)
+    d = ap - t[..., None] * ab[None]
+    d2 = np.einsum("msk,msk->ms", d, d)
+    j = np.argmin(d2, axis=1)
+    m = np.arange(len(pts))
+    return np.sqrt(d2[m, j]), j, t[m, j], d[m, j]
+
+
+def _hom(xy: np.ndarray) -> np.ndarray:
+    return np.hstack([np.asarray(xy, float).reshape(-1, 2), np.ones((len(xy), 1))])
+
+
+class HomographyProblem:
+    """Residuals (and their Jacobian) of a ground homography against :class:`Observations`.
+
+    Only the ground plane: keypoints with z = 0, straight classes whose model plane is the ground,
+    and (optionally) the circles. Field points are held in normalised homogeneous coordinates
+    ``Xn = Tn (X, Y, 1)`` with ``Tn = diag(s, s, 1)``, s = 1/50 m. The chart around a start ``H0``
+    is ``H(P) = A (I + P) Tn`` with ``A = H0 Tn^-1`` and ``P`` a 3x3 matrix with ``P[2, 2] = 0``:
+    eight parameters, well scaled, no entry of H singled out (``H[2, 2] = 1`` breaks down when the
+    field origin lies near the camera's horizon line).
+
+    Residuals, pixels: keypoints 2 per point (projection - detection), weighted
+    ``sqrt(1 - alpha)``; straight classes 2 per observed point, the signed distance to the image
+    of the infinite model line ``l = (H a) x (H b)`` (= ``cof(H) (a x b)``, i.e. ``H^-T L`` up to
+    scale, valid also when an end lies beyond the horizon) and how far the point lies beyond the
+    mapped segment's ends along it (0 between them; only when both ends are in front of the
+    camera), weighted ``sqrt(alpha)``; circles 1 per observed point, the distance to the mapped
+    arc as a dense polyline, weighted ``sqrt(alpha)``. When only one kind is present its weight is 1.
+    """
+
+    def __init__(self, obs: Observations, alpha: float = 0.6, model: FieldModel | None = None, *,
+                 use_keypoints: np.ndarray | None = None, lines: dict | None = None, circles: dict | None = None,
+                 circle_step: float = 0.25):
+        model = model or load_field_model()
+        self.alpha = alpha
+        self.Tn = np.diag([_FIELD_SCALE, _FIELD_SCALE, 1.0])
+        self.Tn_inv = np.diag([1 / _FIELD_SCALE, 1 / _FIELD_SCALE, 1.0])
+        mask = obs.ground if use_keypoints is None else (use_keypoints & obs.ground)
+        self.kp_ids = obs.kp_ids[mask]
+        self.kp_X = obs.kp_xyz[mask, :2]
+        self.kp_Xn = _hom(self.kp_X * _FIELD_SCALE)
+        self.kp_xy = obs.kp_xy[mask]
+        lines = obs.lines if lines is None else lines
+        circles = obs.circles if circles is None else circles
+        ends_a, ends_b, pts, self.line_slices = [], [], [], {}
+        n = 0
+        for name, p in lines.items():
+            seg = model.lines.get(name)
+            if seg is None or seg.plane != "ground" or len(p) == 0:
+                continue
+            p = np.asarray(p, float).reshape(-1, 2)
+            ends_a.append(np.repeat(seg.start[None, :2], len(p), 0))
+            ends_b.append(np.repeat(seg.end[None, :2], len(p), 0))
+            pts.append(p)
+            self.line_slices[name] = slice(n, n + len(p))
+            n += len(p)
+        self.line_a = _hom(np.vstack(ends_a) * _FIELD_SCALE) if ends_a else np.zeros((0, 3))
+        self.line_b = _hom(np.vstack(ends_b) * _FIELD_SCALE) if ends_b else np.zeros((0, 3))
+        self.line_q = np.vstack(pts) if pts else np.zeros((0, 2))
+        self.circle_items = []
+        for name, p in circles.items():
+            arc = model.circles.get(name)
+            if arc is None or abs(arc.center[2]) > 1e-9 or len(p) == 0:
+                continue
+            k = max(8, int(np.radians(arc.end_deg - arc.start_deg) * arc.radius / circle_step))
+            world = arc.point_at(np.linspace(np.radians(arc.start_deg), np.radians(arc.end_deg), k + 1))[:, :2]
+            self.circle_items.append((name, _hom(world * _FIELD_SCALE), np.asarray(p, float).reshape(-1, 2)))
+        n_circle = sum(len(p) for _, _, p in self.circle_items)
+        self.n_res = 2 * len(self.kp_xy) + 2 * len(self.line_q) + n_circle
+        has_curves = len(self.line_q) + n_circle > 0
+        self.w_pt = np.sqrt(1 - alpha) if has_curves else 1.0
+        self.w_ln = np.sqrt(alpha) if len(self.kp_xy) else 1.0
+
+    # ------------------------------------------------------------------ pieces
+    @staticmethod
+    def _dehom_jac(xh: np.ndarray) -> np.ndarray:
+        """d(x/w, y/w)/d(x, y, w), (N, 2, 3)."""
+        w = xh[:, 2]
+        D = np.zeros((len(xh), 2, 3))
+        D[:, 0, 0] = D[:, 1, 1] = 1 / w
+        D[:, 0, 2] = -xh[:, 0] / w**2
+        D[:, 1, 2] = -xh[:, 1] / w**2
+        return D
+
+    @staticmethod
+    def _dxh(A: np.ndarray, Xn: np.ndarray) -> np.ndarray:
+        """d(A (I + P) Xn)/dP, (N, 3, 8): column (i, j) is A[:, i] Xn[j], (2, 2) left out."""
+        d = np.einsum("ri,nj->nrij", A, Xn).reshape(len(Xn), 3, 9)
+        return d[:, :, :8]
+
+    def eval(self, A: np.ndarray, P: np.ndarray | None = None, jac: bool = False):
+        """Weighted residuals at ``H = A (I + P) Tn`` and, with ``jac``, d/d(P without P22) (n, 8)."""
+        M = A if P is None else A @ (np.eye(3) + P)
+        res, J = [], []
+        if len(self.kp_xy):
+            xh = self.kp_Xn @ M.T
+            uv = xh[:, :2] / xh[:, 2:]
+            res.append(self.w_pt * (uv - self.kp_xy).ravel())
+            if jac:
+                J.append(self.w_pt * (self._dehom_jac(xh) @ self._dxh(A, self.kp_Xn)).reshape(-1, 8))
+        if len(self.line_q):
+            pa_h, pb_h = self.line_a @ M.T, self.line_b @ M.T
+            l = _cross(pa_h, pb_h)
+            q = self.line_q
+            nrm = np.maximum(np.sqrt(l[:, 0] ** 2 + l[:, 1] ** 2), 1e-300)
+            lq = l[:, 0] * q[:, 0] + l[:, 1] * q[:, 1] + l[:, 2]
+            res.append(self.w_ln * lq / nrm)
+            front = (pa_h[:, 2] > 0) & (pb_h[:, 2] > 0)
+            wa, wb = np.where(front, pa_h[:, 2], 1.0), np.where(front, pb_h[:, 2], 1.0)
+            pa, pb = pa_h[:, :2] / wa[:, None], pb_h[:, :2] / wb[:, None]
+            v = pb - pa
+            L = np.maximum(np.sqrt(np.sum(v * v, axis=1)), 1e-12)
+            u = v / L[:, None]
+            s = np.sum((q - pa) * u, axis=1)
+            before, after = front & (s < 0), front & (s > L)
+            res.append(self.w_ln * np.where(before, -s, np.where(after, s - L, 0.0)))
+            if jac:
+                da, db = self._dxh(A, self.line_a), self._dxh(A, self.line_b)  # (N, 3, 8)
+                # d(pa x pb) = da x pb + pa x db, written with cross-product matrices
+                dl = _cross(da.transpose(0, 2, 1), pb_h[:, None, :]) + _cross(pa_h[:, None, :], db.transpose(0, 2, 1))
+                qh = np.hstack([q, np.ones((len(q), 1))])
+                dd_dl = qh / nrm[:, None] - (lq / nrm**3)[:, None] * np.stack([l[:, 0], l[:, 1], np.zeros(len(l))], 1)
+                J.append(self.w_ln * np.einsum("nk,njk->nj", dd_dl, dl))
+                # overshoot: s = (q - pa).u; ds/dpa = -u - Pw/L, ds/dpb = Pw/L with w = q - pa and
+                # P = I - u u^T; the L of (s - L) adds dL/dpb = u, dL/dpa = -u
+                w_ = q - pa
+                Pw = w_ - np.sum(w_ * u, axis=1)[:, None] * u
+                sign = np.where(before, -1.0, np.where(after, 1.0, 0.0))[:, None]
+                aft = after.astype(float)[:, None]
+                dr_pa = sign * (-u - Pw / L[:, None]) + aft * u
+                dr_pb = sign * (Pw / L[:, None]) - aft * u
+                Ja = np.einsum("nk,nkj->nj", dr_pa, self._dehom_jac(np.where(front[:, None], pa_h, 1.0)) @ da)
+                Jb = np.einsum("nk,nkj->nj", dr_pb, self._dehom_jac(np.where(front[:, None], pb_h, 1.0)) @ db)
+                J.append(self.w_ln * (Ja + Jb))
+        for _, world, pts in self.circle_items:
+            xh = world @ M.T
+            front = xh[:, 2] > 0
+            if front.sum() < 2:
+                res.append(np.full(len(pts), 1e3))
+                if jac:
+                    J.append(np.zeros((len(pts), 8)))
+                continue
+            xf = xh[front]
+            poly = xf[:, :2] / xf[:, 2:]
+            dist, j, t, d = _closest_on_polyline(pts, poly)
+            res.append(self.w_ln * dist)
+            if jac:
+                Jp = self._dehom_jac(xf) @ self._dxh(A, world[front])  # (S, 2, 8)
+                unit = d / np.maximum(dist, 1e-12)[:, None]
+                Jc = (1 - t)[:, None, None] * Jp[j] + t[:, None, None] * Jp[j + 1]
+                J.append(-self.w_ln * np.einsum("nk,nkj->nj", unit, Jc))
+        r = np.concatenate(res) if res else np.zeros(0)
+        if not jac:
+            return r
+        return r, (np.vstack(J) if J else np.zeros((0, 8)))
+
+    # ------------------------------------------------------------------ public helpers
+    def chart(self, H: np.ndarray) -> np.ndarray:
+        """``A`` of the chart around ``H`` (field metres -> pixels)."""
+        return np.asarray(H, float) @ self.Tn_inv
+
+    def homography(self, A: np.ndarray, P: np.ndarray | None = None) -> np.ndarray:
+        M = A if P is None else A @ (np.eye(3) + P)
+        return M @ self.Tn
+
+    def residuals(self, H: np.ndarray) -> np.ndarray:
+        return self.eval(self.chart(H))
+
+    def keypoint_distances(self, H: np.ndarray) -> np.ndarray:
+        """Pixel distance of each ground keypoint to its mapping (inf behind the camera)."""
+        xh = self.kp_X @ np.asarray(H, float)[:, :2].T + H[:, 2]
+        w = xh[:, 2] * np.sign(np.linalg.det(H))  # sign-free: in front <=> w det(H) > 0 for a non-mirrored H
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.linalg.norm(xh[:, :2] / xh[:, 2:] - self.kp_xy, axis=1)
+        return np.where(w > 0, d, np.inf)
+
+    def class_distances(self, H: np.ndarray) -> dict[str, np.ndarray]:
+        """Unweighted distances (px) of each line/circle class's observed points."""
+        saved = self.w_pt, self.w_ln
+        self.w_pt = self.w_ln = 1.0
+        try:
+            r = self.residuals(H)
+        finally:
+            self.w_pt, self.w_ln = saved
+        start = 2 * len(self.kp_xy)
+        n = len(self.line_q)
+        perp, over = r[start:start + n], r[start + n:start + 2 * n]
+        dist = np.sqrt(perp**2 + over**2)
+        out = {name: dist[s] for name, s in self.line_slices.items()}
+        start += 2 * n
+        for name, _, pts in self.circle_items:
+            out[name] = np.abs(r[start:start + len(pts)])
+            start += len(pts)
+        return out
+
+    def observation_distances(self, H: np.ndarray) -> np.ndarray:
+        """Every ground observation's pixel distance: keypoints, then line and circle points."""
+        cls = self.class_distances(H)
+        parts = [self.keypoint_distances(H)] + [cls[k] for k in cls]
+        d = np.concatenate(parts) if parts else np.zeros(0)
+        return np.where(np.isfinite(d), d, np.inf)
+
+
+# ------------------------------------------------------------------------------ candidates
+def _subset_mask(obs: Observations, subset: str) -> np.ndarray:
+    g = obs.ground
+    if subset == "full" or subset == "ground":
+        return g.copy()
+    if subset == "main":
+        return g & obs.kp_main
+    raise ValueError(f"unknown keypoint subset {subset!r}")
+
+
+def _problem_with(H: np.ndarray, X: np.ndarray, xy: np.ndarray) -> str | None:
+    """Why ``H`` (fitted to field points ``X`` -> pixels ``xy``) is unusable, or None."""
+    if H is None or H.shape != (3, 3) or not np.all(np.isfinite(H)):
+        return "no homography"
+    Hn = H / np.linalg.norm(H)
+    w = X @ Hn[2, :2] + Hn[2, 2]
+    if not (np.all(w > 0) or np.all(w < 0)):
+        return "inliers on both sides of the horizon"
+    if w[0] < 0:
+        Hn = -Hn
+    # conditioning in normalised coordinates (pixels / image scale, field / 50 m)
+    scale = max(float(np.ptp(xy, axis=0).max()), 1.0)
+    Hc = np.diag([1 / scale, 1 / scale, 1.0]) @ Hn @ np.diag([50.0, 50.0, 1.0])
+    sv = np.linalg.svd(Hc, compute_uv=False)
+    if not sv[-1] > 1e-9 * sv[0]:
+        return "singular homography"
+    if np.linalg.det(Hn) <= 0:
+        return "mirrored pitch (camera under the ground)"
+    return None
+
+
+@dataclass
+class _Candidate:
+    subset: str
+    threshold: float
+    H: np.ndarray
+    inliers: np.ndarray  # keypoint ids
+    rms: float
+    score: float = np.inf
+
+
+def _fit(X: np.ndarray, xy: np.ndarray, thr: float, params: HomographyParams) -> tuple[np.ndarray, np.ndarray] | None:
+    """RANSAC + least-squares refit on the inliers + one re-selection. (H, inlier mask) or None."""
+    X64, xy64 = X.astype(np.float64), xy.astype(np.float64)
+    if len(X) == 4:
+        H, _ = cv2.findHomography(X64, xy64, 0)
+        mask = np.ones(4, bool)
+    else:
+        H, m = cv2.findHomography(X64, xy64, cv2.RANSAC, thr, maxIters=params.ransac_iters,
+                                  confidence=params.ransac_confidence)
+        if H is None or m is None:
+            return None
+        mask = m.ravel().astype(bool)
+        if mask.sum() < 4:
+            return None
+        H, _ = cv2.findHomography(X64[mask], xy64[mask], 0)  # DLT + Levenberg-Marquardt on the inliers
+        if H is None:
+            return None
+        err = np.linalg.norm(_map(H, X) - xy, axis=1)
+        m2 = err < thr
+        if m2.sum() >= 4 and not np.array_equal(m2, mask):
+            H2, _ = cv2.findHomography(X64[m2], xy64[m2], 0)
+            if H2 is not None and _problem_with(H2, X[m2], xy[m2]) is None:
+                H, mask = H2, m2
+    if H is None or _problem_with(H, X[mask], xy[mask]):
+        return None
+    return normalize_visible(H, X[mask]), mask
+
+
+def _map(H: np.ndarray, X: np.ndarray) -> np.ndarray:
+    h = X @ H[:, :2].T + H[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return h[:, :2] / h[:, 2:]
+
+
+def _polish(H: np.ndarray, obs: Observations, inliers: np.ndarray, model: FieldModel) -> np.ndarray:
+    """Levenberg-Marquardt on the reprojection error of the inliers, in float64 (OpenCV's own
+    refinement in ``findHomography`` works on float32 points, ~1e-7 relative)."""
+    use = np.isin(obs.kp_ids, inliers)
+    prob = HomographyProblem(obs, 0.0, model, use_keypoints=use, lines={}, circles={})
+    if prob.n_res < 8:
+        return H
+    A = prob.chart(H)
+
+    def unpack(p):
+        return np.append(p, 0.0).reshape(3, 3)
+
+    sol = least_squares(lambda p: prob.eval(A, unpack(p)), np.zeros(8), jac=lambda p: prob.eval(A, unpack(p), jac=True)[1],
+                        method="lm", x_scale="jac", max_nfev=200)
+    H1 = prob.homography(A, unpack(sol.x))
+    if not np.all(np.isfinite(H1)) or _problem_with(H1, prob.kp_X, prob.kp_xy) or sol.cost > 0.5 * float(
+            np.sum(prob.eval(A) ** 2)):
+        return H
+    return normalize_visible(H1, prob.kp_X)
+
+
+def make_candidates(obs: Observations, params: HomographyParams) -> list[_Candidate]:
+    """Step 1: one homography per (subset, threshold) with a distinct inlier set."""
+    out, seen, masks = [], set(), []
+    for subset in params.subsets:
+        mask = _subset_mask(obs, subset)
+        if mask.sum() < params.min_points or any(np.array_equal(mask, m) for m in masks):
+            continue  # the same points as an earlier subset give the same (deterministic) RANSAC fits
+        masks.append(mask)
+        X, xy, ids = obs.kp_xyz[mask, :2], obs.kp_xy[mask], obs.kp_ids[mask]
+        for thr in params.ransac_thresholds:
+            fit = _fit(X, xy, params.px(thr, obs.width), params)
+            if fit is None:
+                continue
+            H, inl = fit
+            key = tuple(ids[inl])
+            if key in seen:
+                continue
+            seen.add(key)
+            err = np.linalg.norm(_map(H, X[inl]) - xy[inl], axis=1)
+            out.append(_Candidate(subset, float(thr), H, ids[inl], float(np.sqrt(np.mean(err**2)))))
+    return out
+
+
+def vote(cands: list[_Candidate], prob: HomographyProblem, tau: float) -> _Candidate | None:
+    """Step 2: truncated-quadratic score on every ground observation; lowest wins (``full`` on ties)."""
+    if not cands:
+        return None
+    rank = {s: i for i, s in enumerate(SUBSETS)}
+    for c in cands:
+        d = prob.observation_distances(c.H)
+        c.score = float(np.sum(np.minimum(d * d, tau * tau)))
+    return min(cands, key=lambda c: (round(c.score, 6), rank.get(c.subset, 9), c.threshold))
+
+
+# ------------------------------------------------------------------------------ PnL
+def refine_homography_pnl(H: np.ndarray, obs: Observations, alpha: float = 0.6, gate_px: float = 20.0, *,
+                          point_gate_px: float | None = None, circles: bool = True, scale_gates: bool = True,
+                          model: FieldModel | None = None, circle_step: float = 0.25,
+                          max_nfev: int | None = None) -> tuple[np.ndarray, list[str]]:
+    """The paper's PnL refinement for a ground homography: the 8 degrees of freedom of ``H``
+    (field metres -> pixels of ``obs``) against ``alpha * lines + (1 - alpha) * points``.
+
+    Gating by the starting ``H``: a ground line (or circle, with ``circles``) joins when every
+    observed point of it lies within ``gate_px`` of its mapped segment (arc); a ground keypoint
+    joins when within ``point_gate_px`` (default ``gate_px``) of its mapping. Gates are pixels at
+    960 px width scaled with ``obs.width`` (``scale_gates=False``: pixels of ``obs`` as given).
+    Solved with ``scipy.optimize.least_squares`` (Levenberg-Marquardt, analytic Jacobian) on the
+    chart of :class:`HomographyProblem`.
+
+    Returns ``(H, joined classes)``; the starting ``H`` (normalised) and ``[]`` when too few
+    residuals join or the solution is unusable (an observed point crossing the horizon, a
+    mirrored or singular H).
+    """
+    model = model or load_field_model()
+    k = obs.width / 960.0 if scale_gates else 1.0
+    gate_l = gate_px * k
+    gate_p = (gate_px if point_gate_px is None else point_gate_px) * k
+    H0 = np.asarray(H, float)
+    full = HomographyProblem(obs, alpha, model, circles=obs.circles if circles else {}, circle_step=circle_step)
+    H0 = normalize_visible(H0, full.kp_X if len(full.kp_X) else None)
+    per_class = full.class_distances(H0)
+    joined = {name for name, d in per_class.items() if len(d) and np.all(d < gate_l)}
+    kp_ok = np.zeros(obs.n_keypoints, bool)
+    kp_ok[np.flatnonzero(obs.ground)] = full.keypoint_distances(H0) < gate_p
+    prob = HomographyProblem(obs, alpha, model, use_keypoints=kp_ok,
+                             lines={k_: v for k_, v in obs.lines.items() if k_ in joined},
+                             circles={k_: v for k_, v in obs.circles.items() if k_ in joined and circles},
+                             circle_step=circle_step)
+    if prob.n_res < 9:
+        return H0, []
+    A = prob.chart(H0)
+
+    def unpack(p):
+        return np.append(p, 0.0).reshape(3, 3)
+
+    sol = least_squares(lambda p: prob.eval(A, unpack(p)), np.zeros(8), jac=lambda p: prob.eval(A, unpack(p), jac=True)[1],
+                        method="lm", x_scale="jac", max_nfev=max_nfev or 100 * 8)
+    if not np.all(np.isfinite(sol.x)):
+        return H0, []
+    # the chart starts at the sign-normalised H0 and moves continuously, so the sign carries over
+    H1 = prob.homography(A, unpack(sol.x))
+    H1 = H1 / np.linalg.norm(H1)
+    pts = np.vstack([prob.line_q] + [p for _, _, p in prob.circle_items])
+    if not np.all(np.isfinite(H1)) or np.linalg.det(H1) <= 0 or not _in_front(H1, prob.kp_X, pts):
+        return H0, []
+    if len(prob.kp_X) and _problem_with(H1, prob.kp_X, prob.kp_xy):
+        return H0, []
+    return H1, sorted(joined)
+
+
+def _in_front(H: np.ndarray, X: np.ndarray, q: np.ndarray) -> bool:
+    """True when the field points ``X`` and the ground seen at pixels ``q`` lie in front of the
+    camera of the sign-normalised ``H`` (third coordinate of ``H X`` > 0; for a pixel, the third
+    coordinate of ``H^-1 q`` > 0, i.e. the pixel lies below the horizon)."""
+    if len(X) and not np.all(X @ H[2, :2] + H[2, 2] > 0):
+        return False
+    if len(q):
+        try:
+            b = _hom(q) @ np.linalg.inv(H).T
+        except np.linalg.LinAlgError:
+            return False
+        if not np.all(b[:, 2] > 0):
+            return False
+    return True
+
+
+# ------------------------------------------------------------------------------ residual reports
+def _point_report(prob: HomographyProblem, H: np.ndarray) -> dict[int, float]:
+    return {int(i): float(d) for i, d in zip(prob.kp_ids, prob.keypoint_distances(H))}
+
+
+def _class_report(prob: HomographyProblem, H: np.ndarray) -> dict[str, float]:
+    return {name: float(np.max(d)) for name, d in prob.class_distances(H).items() if len(d)}
+
+
+# ------------------------------------------------------------------------------ the whole frame
+def estimate_homography(obs: Observations, params: HomographyParams | None = None, *,
+                        thresholds: tuple[float, ...] | None = None, subsets: tuple[str, ...] | None = None,
+                        pnl: bool | None = None, model: FieldModel | None = None, **overrides) -> HomographyResult:
+    """Ground homography of one frame (field metres -> pixels of ``obs``) from its ground
+    keypoints, voted over subsets x RANSAC thresholds, optionally PnL-refined (``pnl=True``).
+
+    ``thresholds`` (pixels at 960 px width), ``subsets``, ``pnl`` and any other
+    :class:`HomographyParams` field given as a keyword override ``params``. Never raises on bad
+    geometry: failures come back with a reason in ``failure``.
+    """
+    from dataclasses import replace
+
+    params = params or HomographyParams()
+    if thresholds is not None:
+        overrides["ransac_thresholds"] = tuple(thresholds)
+    if subsets is not None:
+        overrides["subsets"] = tuple(subsets)
+    if pnl is not None:
+        overrides["pnl"] = bool(pnl)
+    if overrides:
+        params = replace(params, **overrides)
+    model = model or load_field_model()
+    W, Hh = obs.width, obs.height
+    n_ground = int(obs.ground.sum())
+    if n_ground < params.min_points:
+        return HomographyResult(None, W, Hh, failure=f"too few ground keypoints ({n_ground} < {params.min_points})")
+    prob = HomographyProblem(obs, 0.5, model, circles=obs.circles if params.circles else {},
+                             circle_step=params.circle_step)
+    cands = make_candidates(obs, params)
+    best = vote(cands, prob, params.px(params.vote_tau, W))
+    table = [{"subset": c.subset, "threshold": c.threshold, "inliers": len(c.inliers), "rms": c.rms, "score": c.score}
+             for c in cands]
+    if best is None:
+        return HomographyResult(None, W, Hh, candidates=table,
+                                failure=f"degenerate geometry: no homography from {n_ground} ground keypoints "
+                                        "(collinear, or no 4 consistent ones)")
+    best.H = _polish(best.H, obs, best.inliers, model)
+    res = HomographyResult(best.H, W, Hh, initial_H=best.H, subset=best.subset, threshold=best.threshold,
+                           inliers=best.inliers, candidates=table)
+    res.point_residuals_initial = _point_report(prob, best.H)
+    res.line_residuals_initial = _class_report(prob, best.H)
+    H = best.H
+    if params.pnl and (obs.lines or obs.circles):
+        H, res.pnl_lines = refine_homography_pnl(H, obs, params.alpha, params.gate_px,
+                                                 point_gate_px=params.point_gate_px, circles=params.circles,
+                                                 model=model, circle_step=params.circle_step,
+                                                 max_nfev=params.max_iter * 8)
+    res.H = H
+    res.point_residuals = _point_report(prob, H)
+    res.line_residuals = _class_report(prob, H)
+    inl = np.array([res.point_residuals[int(i)] for i in best.inliers])
+    rms = float(np.sqrt(np.mean(inl**2))) if len(inl) else np.inf
+    if not rms <= params.px(params.max_rms, W):
+        res.H = None
+        res.failure = f"residual above the limit (inlier RMS {rms:.1f} px > {params.px(params.max_rms, W):.1f})"
+    return res
