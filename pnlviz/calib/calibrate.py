@@ -185,10 +185,12 @@ def make_candidates(obs: Observations, params: CalibParams, model: FieldModel) -
     seen: set[tuple] = set()
     out: list[Candidate] = []
     thresholds = {params.px(t, W): t for t in params.ransac_thresholds}
+    done: set[bytes] = set()
     for subset in params.subsets:
         mask = _subset_mask(obs, subset)
-        if mask.sum() < params.min_points:
-            continue
+        if mask.sum() < params.min_points or mask.tobytes() in done:
+            continue  # too small, or the same points as an earlier subset (e.g. no goal keypoints)
+        done.add(mask.tobytes())
         sub = obs.subset(mask)
         planes = plane_masks(sub.kp_xyz, model)
         # the ground plane; a goal plane only when the ground has too few points
@@ -307,8 +309,9 @@ def vote(cands: list[Candidate], obs: Observations, params: CalibParams, model: 
         return None
     tau = params.px(params.vote_tau, obs.width)
     rank = {s: i for i, s in enumerate(SUBSETS)}
+    problem = CameraProblem(cands[0].camera, obs, RefineParams(alpha=0.5), model)  # residuals at any camera
     for c in cands:
-        r = CameraProblem(c.camera, obs, RefineParams(alpha=0.5), model).residuals()
+        r = problem.residuals(c.camera)
         c.score = float(np.sum(np.minimum(r * r, tau * tau)))
     return min(cands, key=lambda c: (round(c.score, 6), rank.get(c.subset, 9), c.threshold))
 

@@ -22,9 +22,10 @@ Residuals, all in pixels:
 
 Line and circle terms are weighted by ``sqrt(alpha)`` and point terms by ``sqrt(1 - alpha)`` (the
 paper's cost, in squares). The solver is a small Levenberg-Marquardt loop written here because the
-pose Jacobian is analytic (rotation updates ``R <- exp([dw]x) R`` re-linearised at every step,
-which scipy's fixed parametrisation cannot express); the two intrinsic columns are finite
-differences. Robust losses are applied by iteratively reweighting rows.
+Jacobian is analytic, including the pose as rotation updates ``R <- exp([dw]x) R`` re-linearised
+at every step, which scipy's fixed parametrisation cannot express, and the focal length and k1
+(through the implicit undistortion of observed line points). Robust losses are applied by
+iteratively reweighting rows.
 """
 
 from __future__ import annotations
@@ -138,7 +139,7 @@ class CameraProblem:
 
     # ------------------------------------------------------------------ projection + Jacobian
     def _project(self, X, R, C, f, k1, jac: bool):
-        """Pixels (N, 2) of world points and, with ``jac``, d(uv)/d(dw, C) (N, 2, 6)."""
+        """Pixels (N, 2) of world points and, with ``jac``, d(uv)/d(dw, C, log f, k1) (N, 2, 8)."""
         c0 = self.cam0
         Xc = (X - C) @ R.T
         z = np.where(Xc[:, 2] > 1e-6, Xc[:, 2], 1e-6)  # points crossing the camera plane: huge residual
@@ -163,32 +164,49 @@ class CameraProblem:
         Dd[:, 1, 1] = fy * (g + 2 * k1 * yn * yn)
         Juv_Xc = Dd @ Dn  # (N, 2, 3)
         dXc = np.concatenate([-_skew(Xc), np.broadcast_to(-R, (len(X), 3, 3))], axis=2)  # (N, 3, 6)
-        return uv, Juv_Xc @ dXc
+        J = np.empty((len(X), 2, 8))
+        J[:, :, :6] = Juv_Xc @ dXc
+        J[:, :, 6] = uv - [c0.cx, c0.cy]  # d/d log f
+        J[:, 0, 7] = f * xn * r2  # d/d k1
+        J[:, 1, 7] = fy * yn * r2
+        return uv, J
 
-    def _undistort_norm(self, pts: np.ndarray, f: float, k1: float) -> np.ndarray:
+    def _undistort_norm(self, pts: np.ndarray, f: float, k1: float, jac: bool = False):
+        """Undistorted normalised points q (N, 2) of pixels and, with ``jac``, dq/d(log f, k1)
+        (N, 2, 2). ``q = x_d s`` with ``s (1 + k1 |x_d|^2 s^2) = 1`` (fixed point; k1 is small)."""
         c0 = self.cam0
         xd = np.stack([(pts[:, 0] - c0.cx) / f, (pts[:, 1] - c0.cy) / (f * self.aspect)], axis=1)
-        if k1 == 0.0:
-            return xd
         rd2 = np.sum(xd * xd, axis=1)
         s = np.ones_like(rd2)
-        for _ in range(8):  # fixed point of x_u = x_d / (1 + k1 r_u^2), r_u^2 = r_d^2 s^2
-            s = 1.0 / (1.0 + k1 * rd2 * s * s)
-        return xd * s[:, None]
+        if k1 != 0.0:
+            for _ in range(8):
+                s = 1.0 / (1.0 + k1 * rd2 * s * s)
+        q = xd * s[:, None]
+        if not jac:
+            return q
+        # implicit derivatives of s: F = s (1 + k1 rd2 s^2) - 1 = 0
+        dF_ds = 1 + 3 * k1 * rd2 * s * s
+        ds_drd2 = -k1 * s**3 / dF_ds
+        ds_dk1 = -rd2 * s**3 / dF_ds
+        Jq = np.empty((len(q), 2, 2))
+        Jq[:, :, 0] = -q - (2 * rd2 * ds_drd2)[:, None] * xd  # d x_d / d log f = -x_d, d rd2 = -2 rd2
+        Jq[:, :, 1] = xd * ds_dk1[:, None]
+        return q, Jq
 
     def _eval(self, R, C, f, k1, jac: bool = False):
-        """Weighted residuals and, with ``jac``, their Jacobian w.r.t. (dw, C) (n, 6)."""
+        """Weighted residuals and, with ``jac``, their Jacobian w.r.t. (dw, C, log f, k1) (n, 8)."""
         res, J = [], []
         if len(self.kp_xy):
             uv, Juv = self._project(self.kp_xyz, R, C, f, k1, jac)
             res.append(self.w_pt * (uv - self.kp_xy).ravel())
             if jac:
-                J.append(self.w_pt * Juv.reshape(-1, 6))
+                J.append(self.w_pt * Juv.reshape(-1, 8))
         if len(self.line_pts):
             a = (self.line_a - C) @ R.T
             b = (self.line_b - C) @ R.T
             l = np.cross(a, b)
-            q = self._undistort_norm(self.line_pts, f, k1)
+            q, Jq = self._undistort_norm(self.line_pts, f, k1, jac=True) if jac else (
+                self._undistort_norm(self.line_pts, f, k1), None)
             nrm = np.sqrt(l[:, 0] ** 2 + l[:, 1] ** 2)
             lq = l[:, 0] * q[:, 0] + l[:, 1] * q[:, 1] + l[:, 2]
             res.append(self.w_ln * f * lq / nrm)
@@ -213,7 +231,13 @@ class CameraProblem:
                 da = np.concatenate([-_skew(a), negR], axis=2)
                 db = np.concatenate([-_skew(b), negR], axis=2)
                 dl = -_skew(b) @ da + _skew(a) @ db  # d(a x b) = da x b + a x db
-                J.append(self.w_ln * np.einsum("nk,nkj->nj", dd_dl, dl))
+                Jperp = np.empty((len(q), 8))
+                Jperp[:, :6] = np.einsum("nk,nkj->nj", dd_dl, dl)
+                # intrinsics: perp = f (l . q) / |l_12|, q depends on f and k1
+                dperp_dq = f * l[:, :2] / nrm[:, None]
+                Jperp[:, 6:] = np.einsum("nk,nkj->nj", dperp_dq, Jq)
+                Jperp[:, 6] += f * lq / nrm
+                J.append(self.w_ln * Jperp)
                 # overshoot: s = (q - pa).u, d s/d pa = -u - P w / L, d s/d pb = P w / L with
                 # w = q - pa and P = I - u u^T
                 w_ = q - pa
@@ -232,16 +256,20 @@ class CameraProblem:
                     D[:, 1, 2] = -p3[:, 1] / z**2
                     return D
 
-                Ja = np.einsum("nk,nkj->nj", dr_pa, dproj(a, az) @ da)
-                Jb = np.einsum("nk,nkj->nj", dr_pb, dproj(b, bz) @ db)
-                J.append(self.w_ln * f * (Ja + Jb))
+                Jover = np.zeros((len(q), 8))
+                Jover[:, :6] = f * (np.einsum("nk,nkj->nj", dr_pa, dproj(a, az) @ da)
+                                    + np.einsum("nk,nkj->nj", dr_pb, dproj(b, bz) @ db))
+                # intrinsics: over = f * sign * (q - pa) . u (+ const): d/dq = f sign u
+                Jover[:, 6:] = np.einsum("nk,nkj->nj", f * sign[:, None] * u, Jq)
+                Jover[:, 6] += f * over
+                J.append(self.w_ln * Jover)
         for _, world, pts in self.circle_items:
             Xc2 = (world - C) @ R.T
             front = Xc2[:, 2] > 1e-3
             if front.sum() < 2:
                 res.append(np.full(len(pts), 1e3))
                 if jac:
-                    J.append(np.zeros((len(pts), 6)))
+                    J.append(np.zeros((len(pts), 8)))
                 continue
             poly, Jp = self._project(world[front], R, C, f, k1, jac)
             dist, j, t, d = _closest_on_polyline(pts, poly)
@@ -251,7 +279,7 @@ class CameraProblem:
                 Jc = (1 - t)[:, None, None] * Jp[j] + t[:, None, None] * Jp[j + 1]
                 J.append(-self.w_ln * np.einsum("nk,nkj->nj", unit, Jc))
         r = np.concatenate(res) if res else np.zeros(0)
-        return (r, np.vstack(J) if J else np.zeros((0, 6))) if jac else r
+        return (r, np.vstack(J) if J else np.zeros((0, 8))) if jac else r
 
     # ------------------------------------------------------------------ public helpers
     def residuals(self, cam: Camera | None = None) -> np.ndarray:
@@ -281,17 +309,11 @@ class CameraProblem:
         return Camera(f, f * self.aspect, c0.cx, c0.cy, R, C, c0.width, c0.height, radial, c0.tangential, c0.thin_prism)
 
     # ------------------------------------------------------------------ Levenberg-Marquardt
-    def _full_jacobian(self, R, C, f, k1, r):
-        r0, Jp = self._eval(R, C, f, k1, jac=True)
-        cols = [Jp]
+    def _full_jacobian(self, R, C, f, k1):
+        _, J = self._eval(R, C, f, k1, jac=True)
         p = self.params
-        if p.refine_focal:
-            h = 1e-6
-            cols.append(((self._eval(R, C, f * np.exp(h), k1) - r0) / h)[:, None])
-        if p.refine_k1:
-            h = 1e-7
-            cols.append(((self._eval(R, C, f, k1 + h) - r0) / h)[:, None])
-        return np.hstack(cols)
+        cols = list(range(6)) + ([6] if p.refine_focal else []) + ([7] if p.refine_k1 else [])
+        return J[:, cols]
 
     def solve(self) -> tuple[Camera, dict]:
         p = self.params
@@ -314,7 +336,7 @@ class CameraProblem:
         J = None
         for it in range(1, p.max_iter + 1):
             if J is None:
-                J = self._full_jacobian(R, C, f, k1, r)
+                J = self._full_jacobian(R, C, f, k1)
                 w = _robust_weights(r, p.loss, p.f_scale)
                 Jw, rw = J * w[:, None], r * w
                 A, g = Jw.T @ Jw, Jw.T @ rw
