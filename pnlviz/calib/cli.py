@@ -67,7 +67,11 @@ def calibrate_frame(ds, stem: str, prediction, size, params) -> tuple[str, dict 
     except DataError as exc:
         report["failure"] = f"skipped: {exc}"
         return stem, None, report
-    result = calibrate(obs, params)
+    try:
+        result = calibrate(obs, params)
+    except Exception as exc:  # a bug must not end a 23k-frame batch: report the frame and go on
+        report["failure"] = f"internal error: {type(exc).__name__}: {exc}"
+        return stem, None, report
     report.update({
         "ms": round(1e3 * (time.perf_counter() - t0), 2), "keypoints": int(obs.n_keypoints),
         "subset": result.subset, "threshold": result.threshold, "plane": result.plane,

@@ -1,0 +1,74 @@
+"""Batch commands: bad frames are reported in one line and skipped, the rest goes on."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from pnlviz import EXAMPLES_DIR
+from pnlviz.cli import main, parse_size
+
+
+@pytest.fixture()
+def small_dataset(tmp_path):
+    """Four sample frames plus one corrupt annotation, one unknown class and one broken image."""
+    src = EXAMPLES_DIR / "sample"
+    (tmp_path / "cameras").mkdir()
+    for stem in ("00000", "00001", "00002", "00003"):
+        shutil.copy(src / "cameras" / f"camera_{stem}.json", tmp_path / "cameras" / f"camera_{stem}.json")
+        shutil.copy(src / f"{stem}.jpg", tmp_path / f"{stem}.jpg")
+        shutil.copy(src / f"{stem}.json", tmp_path / f"{stem}.json")
+    (tmp_path / "00004.json").write_text('{"Side line top": [{"x": 0.1, "y": 0.2}, ')  # truncated
+    (tmp_path / "00005.json").write_text(json.dumps({"Big rect left mian": [{"x": 0.1, "y": 0.2}, {"x": 0.3, "y": 0.2}]}))
+    (tmp_path / "00006.jpg").write_bytes(b"not a jpeg at all")
+    return tmp_path
+
+
+def test_validate_reports_each_bad_file_in_one_line_and_fails(small_dataset, capsys):
+    assert main(["validate", "--data", str(small_dataset), "--images"]) == 1
+    out, err = capsys.readouterr()
+    assert "7 frames, 4 valid annotations, 5 images" in out
+    lines = [line.strip() for line in err.splitlines() if "0000" in line]
+    assert len(lines) == 3
+    assert any("00004.json" in line and "JSON" in line.upper() for line in lines)
+    assert any("00005.json" in line and "Big rect. left main" in line for line in lines)
+    assert any("00006.jpg" in line for line in lines)
+
+
+def test_validate_passes_on_the_bundled_sample(capsys):
+    assert main(["validate", "--data", str(EXAMPLES_DIR / "sample")]) == 0
+    assert "33 frames, 32 valid annotations" in capsys.readouterr().out
+
+
+def test_sheet_skips_bad_frames_and_draws_the_rest(small_dataset, tmp_path, capsys):
+    out = tmp_path / "sheet.png"
+    assert main(["sheet", "--data", str(small_dataset), "--out", str(out), "--columns", "3", "--tile-width", "200"]) == 0
+    img = cv2.imread(str(out))
+    assert img is not None and img.shape[1] == 3 * 200 + 4 * 4
+    err = capsys.readouterr().err
+    assert err.count("skipped:") == 3
+    # the ground-truth pitch is drawn in amber on the synthetic frames
+    amber = (np.abs(img.astype(int) - [60, 220, 255]).sum(axis=2) < 60).sum()
+    assert amber > 500
+
+
+def test_calibrate_goes_on_past_bad_frames(small_dataset, tmp_path, capsys):
+    out = tmp_path / "cams.zip"
+    assert main(["calibrate", "--data", str(small_dataset), "--out", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr()
+    assert "calibrated 4/6 frames" in text.out
+    assert "00004.json" in text.err and "00005.json" in text.err
+
+
+def test_missing_dataset_is_one_line_error(tmp_path, capsys):
+    assert main(["validate", "--data", str(tmp_path / "nope")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error:") and "nope" in err and "\n" not in err
+
+
+def test_parse_size():
+    assert parse_size("960x540") == (960, 540)
+    with pytest.raises(Exception, match="WIDTHxHEIGHT"):
+        parse_size("960")
