@@ -355,8 +355,9 @@ def pnl_refine(cam: Camera, obs: Observations, params: CalibParams, model: Field
 def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: FieldModel | None = None) -> CalibrationResult:
     """Calibrate one frame. Never raises on bad geometry: failures come back with a reason."""
     model = model or load_field_model()
-    if obs.n_keypoints < (2 if params.prior_search else params.min_points):
-        return CalibrationResult(None, failure=f"too few keypoints ({obs.n_keypoints} < {params.min_points})")
+    needed = 2 if params.prior_search and (obs.lines or obs.circles) else params.min_points
+    if obs.n_keypoints < needed:
+        return CalibrationResult(None, failure=f"too few keypoints ({obs.n_keypoints} < {needed})")
     raw = make_candidates(obs, params, model)
     # vote on the decomposed cameras, refine the best few, vote again among the refined ones
     vote(raw, obs, params, model)

@@ -1,0 +1,228 @@
+"""The app's state without any GUI: the dataset, per-frame calibrations (computed on demand and
+cached), review statuses and the edits store. The viser server (:mod:`pnlviz.app.server`) and the
+tests drive the same object.
+
+Edits never touch the source data: they live in an edits folder beside it
+(``<data>.edits/`` by default), one JSON file per frame written atomically, so a crash mid-write
+leaves the previous state intact and a restart restores everything.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pnlviz.calib.calibrate import CalibParams, CalibrationResult, calibrate
+from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions
+from pnlviz.calib.observations import Observations
+from pnlviz.data import DataError, atomic_write_text, open_dataset, read_predictions
+from pnlviz.data.annotations import annotation_to_json, parse_annotation
+from pnlviz.geometry.camera import Camera
+
+REVIEW_STATES = ("accepted", "corrected", "rejected")
+SOURCES = ("annotation", "detections", "both")
+EVAL_SIZE = (960, 540)
+
+
+def default_edits_dir(data: Path) -> Path:
+    """``<data>.edits`` beside a folder or zip: never inside or over the source."""
+    data = Path(data).resolve()
+    name = data.name[:-4] if data.suffix == ".zip" else data.name
+    return data.parent / f"{name}.edits"
+
+
+@dataclass
+class FrameView:
+    """Everything the app shows for one frame under the current settings."""
+
+    stem: str
+    index: int
+    image: np.ndarray | None  # BGR, None when the frame has no image
+    size: tuple[int, int]  # (W, H) of the image or of the --size fallback
+    annotation: dict[str, np.ndarray] | None
+    observations: Observations | None
+    result: CalibrationResult | None
+    jac: dict[int, float] = field(default_factory=dict)  # JaC@5/10/20 against the annotation
+    error: str | None = None  # a problem reading the frame
+    ms: float = 0.0
+    reference_camera: Camera | None = None  # a known camera (e.g. synthetic ground truth), scaled to the frame
+
+
+class EditsStore:
+    """One JSON file per frame in ``root/frames/``: review status and edited annotation."""
+
+    def __init__(self, root: Path):
+        self.root = Path(root)
+        self.frames = self.root / "frames"
+        self.frames.mkdir(parents=True, exist_ok=True)
+        self._lock = threading.Lock()
+        self._cache: dict[str, dict] = {}
+        for p in self.frames.glob("*.json"):
+            try:
+                self._cache[p.stem] = json.loads(p.read_text())
+            except (OSError, json.JSONDecodeError):
+                continue  # a damaged edit file is ignored, never fatal
+
+    def get(self, stem: str) -> dict:
+        return dict(self._cache.get(stem, {}))
+
+    def update(self, stem: str, **changes) -> dict:
+        with self._lock:
+            rec = dict(self._cache.get(stem, {}))
+            for k, v in changes.items():
+                if v is None:
+                    rec.pop(k, None)
+                else:
+                    rec[k] = v
+            rec["updated"] = time.time()
+            atomic_write_text(self.frames / f"{stem}.json", json.dumps(rec, indent=1))
+            self._cache[stem] = rec
+            return rec
+
+    def review(self, stem: str) -> str | None:
+        return self._cache.get(stem, {}).get("review")
+
+    def counts(self) -> dict[str, int]:
+        out = {s: 0 for s in REVIEW_STATES}
+        for rec in self._cache.values():
+            if rec.get("review") in out:
+                out[rec["review"]] += 1
+        return out
+
+
+class AppState:
+    """Dataset + settings + calibration cache + edits. Thread-safe for the server's callbacks."""
+
+    def __init__(self, data: Path, *, detections: Path | None = None, edits: Path | None = None,
+                 size: tuple[int, int] = EVAL_SIZE):
+        self.data = Path(data)
+        self.ds = open_dataset(self.data)
+        if not len(self.ds):
+            raise DataError(str(self.data), "no frames (expected <stem>.jpg / <stem>.json files)")
+        self.predictions = read_predictions(detections) if detections else None
+        self.edits = EditsStore(edits or default_edits_dir(self.data))
+        self.size = size
+        self.stems = list(self.ds.stems)
+        # start on the first frame with an image, the most telling one
+        self.index = next((i for i, s in enumerate(self.stems) if self.ds.frame(s).has_image), 0)
+        self.pnl = True
+        self.alpha = 0.6
+        self.source = "annotation" if self.predictions is None else "both"
+        self._cache: dict[tuple, FrameView] = {}
+        self._lock = threading.RLock()
+
+    # ------------------------------------------------------------------ settings
+    @property
+    def stem(self) -> str:
+        return self.stems[self.index]
+
+    def params(self) -> CalibParams:
+        p = CalibParams(alpha=self.alpha)
+        if not self.pnl:
+            p = CalibParams(pnl=False, refine_focal=False, refine_k1=False)
+        return p
+
+    def _key(self, stem: str) -> tuple:
+        edit = self.edits.get(stem).get("annotation")
+        return stem, self.pnl, round(self.alpha, 4), self.source, json.dumps(edit, sort_keys=True) if edit else None
+
+    def go(self, index: int) -> str:
+        self.index = int(np.clip(index, 0, len(self.stems) - 1))
+        return self.stem
+
+    def find(self, stem: str) -> int | None:
+        try:
+            return self.stems.index(stem.strip())
+        except ValueError:
+            return None
+
+    # ------------------------------------------------------------------ frames
+    def annotation(self, stem: str) -> dict[str, np.ndarray] | None:
+        """The edited annotation if any, else the source one."""
+        edit = self.edits.get(stem).get("annotation")
+        if edit is not None:
+            return parse_annotation(edit, f"{self.edits.frames / stem}.json")
+        return self.ds.annotation(stem)
+
+    def view(self, stem: str | None = None) -> FrameView:
+        """The frame's view under the current settings (cached). Never raises on bad data."""
+        stem = stem or self.stem
+        key = self._key(stem)
+        with self._lock:
+            if key in self._cache:
+                return self._cache[key]
+        view = self._compute(stem)
+        with self._lock:
+            self._cache[key] = view
+        return view
+
+    def _compute(self, stem: str) -> FrameView:
+        from pnlviz.metrics.soccernet import evaluate_frame
+
+        idx = self.stems.index(stem)
+        t0 = time.perf_counter()
+        try:
+            image = self.ds.image(stem) if self.ds.frame(stem).has_image else None
+            size = (image.shape[1], image.shape[0]) if image is not None else self.size
+            ann = self.annotation(stem)
+            ref = self.ds.camera_dict(stem)
+            ref = Camera.from_soccernet(ref).scaled(*size) if ref is not None else None
+        except DataError as exc:
+            return FrameView(stem, idx, None, self.size, None, None, None, error=str(exc))
+        obs = self._observations(stem, ann, size)
+        if obs is None:
+            return FrameView(stem, idx, image, size, ann, None, None, error="nothing to calibrate from",
+                             ms=1e3 * (time.perf_counter() - t0), reference_camera=ref)
+        try:
+            result = calibrate(obs, self.params())
+        except Exception as exc:  # shown in the panel; the rest of the dataset keeps working
+            return FrameView(stem, idx, image, size, ann, obs, None, error=f"internal error: {exc}", reference_camera=ref)
+        jac = {}
+        if result.ok and ann:
+            fr = evaluate_frame(result.camera.scaled(*EVAL_SIZE), ann)
+            jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
+        return FrameView(stem, idx, image, size, ann, obs, result, jac, ms=1e3 * (time.perf_counter() - t0),
+                         reference_camera=ref)
+
+    def _observations(self, stem: str, ann, size) -> Observations | None:
+        W, H = size
+        pred = self.predictions.get(stem) if self.predictions is not None else None
+        use_ann = ann is not None and self.source in ("annotation", "both")
+        use_det = pred is not None and self.source in ("detections", "both")
+        if use_ann and use_det:
+            obs, _ = observations_from_annotation(ann, W, H)
+            det = observations_from_predictions(pred, W, H)
+            keep = ~np.isin(det.kp_ids, obs.kp_ids)  # the annotation's labels win where both exist
+            return Observations(W, H, np.concatenate([obs.kp_ids, det.kp_ids[keep]]),
+                                np.vstack([obs.kp_xy, det.kp_xy[keep]]), np.vstack([obs.kp_xyz, det.kp_xyz[keep]]),
+                                np.concatenate([obs.kp_sets, det.kp_sets[keep]]),
+                                np.concatenate([obs.kp_main, det.kp_main[keep]]),
+                                {**det.lines, **obs.lines}, obs.circles)
+        if use_ann:
+            return observations_from_annotation(ann, W, H)[0]
+        if use_det:
+            return observations_from_predictions(pred, W, H)
+        return None
+
+    # ------------------------------------------------------------------ review and edits
+    def set_review(self, status: str | None, stem: str | None = None) -> None:
+        if status is not None and status not in REVIEW_STATES:
+            raise ValueError(f"review status must be one of {REVIEW_STATES}")
+        self.edits.update(stem or self.stem, review=status)
+
+    def set_annotation(self, annotation: dict[str, np.ndarray], stem: str | None = None) -> None:
+        """Store an edited annotation (autosaved at once) and mark the frame corrected."""
+        stem = stem or self.stem
+        self.edits.update(stem, annotation=annotation_to_json(annotation), review="corrected")
+
+    def review_progress(self) -> tuple[int, int]:
+        return sum(self.edits.counts().values()), len(self.stems)
+
+    def cached_views(self) -> list[FrameView]:
+        with self._lock:
+            return [v for k, v in self._cache.items() if k == self._key(k[0])]

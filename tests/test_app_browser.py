@@ -1,0 +1,112 @@
+"""End to end in real headless Chromium (Debian's, driven by playwright): the page loads, frame
+navigation works, PnL toggles, a review status is autosaved and survives a server restart."""
+
+import json
+import shutil
+import socket
+import time
+
+import pytest
+
+from pnlviz import EXAMPLES_DIR
+
+CHROMIUM = shutil.which("chromium")
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed "
+                                "(scripts/install_test_deps.sh installs it)")
+FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture()
+def data(tmp_path):
+    src = EXAMPLES_DIR / "sample"
+    dst = tmp_path / "set"
+    (dst / "cameras").mkdir(parents=True)
+    for stem in ("00000", "00001", "00002"):
+        for name in (f"{stem}.jpg", f"{stem}.json", f"cameras/camera_{stem}.json"):
+            shutil.copy(src / name, dst / name)
+    return dst
+
+
+@pytest.fixture(scope="module")
+def browser():
+    sync_playwright = pytest.importorskip("playwright.sync_api").sync_playwright
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+        yield b
+        b.close()
+
+
+def start(data):
+    from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.state import AppState
+
+    return PnlvizApp(AppState(data), port=_free_port())
+
+
+def wait_for_text(page, text, timeout=20.0):
+    page.get_by_text(text).first.wait_for(timeout=timeout * 1000)
+
+
+def test_navigate_toggle_pnl_review_and_restart(data, browser):
+    app = start(data)
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(app.url)
+        wait_for_text(page, "00000 (1/3)")
+        wait_for_text(page, "focal")
+        # navigation
+        page.get_by_role("button", name="next").click()
+        wait_for_text(page, "00001 (2/3)")
+        assert app.state.stem == "00001"
+        # PnL off: the card says so, the server recalibrated without it
+        page.get_by_text("PnL refinement").click()
+        wait_for_text(page, "PnL set: 0 lines")
+        assert app.state.pnl is False
+        # review status: autosaved at once in the edits folder beside the data
+        page.get_by_role("button", name="accepted").click()
+        wait_for_text(page, "1 of 3 reviewed")
+        saved = json.loads((app.state.edits.frames / "00001.json").read_text())
+        assert saved["review"] == "accepted"
+        page.close()
+    finally:
+        app.stop()
+    # a new server on the same data restores the review
+    app = start(data)
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(app.url)
+        wait_for_text(page, "1 of 3 reviewed")
+        page.get_by_role("button", name="next").click()
+        wait_for_text(page, "review: accepted")
+        page.close()
+    finally:
+        app.stop()
+
+
+def test_camera_view_puts_the_browser_camera_on_the_estimated_pose(data, browser):
+    import numpy as np
+
+    app = start(data)
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(app.url)
+        wait_for_text(page, "focal")
+        page.get_by_role("button", name="camera view").click()
+        cam = app.state.view().result.camera
+        deadline = time.time() + 10
+        while time.time() < deadline:
+            clients = list(app.server.get_clients().values())
+            if clients and np.allclose(clients[0].camera.position, cam.C, atol=1e-3):
+                break
+            time.sleep(0.2)
+        assert np.allclose(clients[0].camera.position, cam.C, atol=1e-3)
+        page.close()
+    finally:
+        app.stop()
