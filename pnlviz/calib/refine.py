@@ -82,7 +82,7 @@ class RefineParams:
     f_scale: float = 2.0  #: pixels where the robust loss bends
     max_iter: int = 50
     tol: float = 1e-8  #: stop when the cost drops by less than this fraction
-    k1_bound: float = 0.5
+    k1_bound: float = 1.0  #: |k1| limit (SN22 fits push k1 to +0.4..0.6 at 15-30 deg FOV; a 0.5 cap cost 0.8 FS)
     circle_step: float = 0.5  #: metres between samples of projected circles (chord error < 4 mm)
 
 
