@@ -124,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "synthetic data, labels, calibration and an inspection app.")
     parser.add_argument("--version", action="version", version=f"pnlviz {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    from pnlviz.app.cli import add_serve_parser
+    from pnlviz.app.cli import add_export_parser, add_serve_parser
     from pnlviz.calib.cli import add_calibrate_parser
     from pnlviz.labels.cli import add_labels_parser
     from pnlviz.metrics.cli import add_eval_parser
@@ -135,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_labels_parser(sub)
     add_calibrate_parser(sub)
     add_eval_parser(sub)
+    add_export_parser(sub)
     _add_validate(sub)
     _add_sheet(sub)
     return parser

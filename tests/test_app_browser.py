@@ -110,3 +110,69 @@ def test_camera_view_puts_the_browser_camera_on_the_estimated_pose(data, browser
         page.close()
     finally:
         app.stop()
+
+
+def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
+    import zipfile
+
+    import numpy as np
+
+    app = start(data)
+    stem = app.state.stem
+    before = app.state.view().result.camera.C.copy()
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(app.url)
+        wait_for_text(page, "focal")
+        obs = app.state.view().observations
+        # a keypoint in the left half of the frame (the panel covers the right), nudged by 6 px:
+        # still an inlier, so the calibration follows it
+        i = int(np.argmin(obs.kp_xy[:, 0]))
+        kid = str(int(obs.kp_ids[i]))
+        u, v = obs.kp_xy[i] + [6.0, 4.0]
+        app.kp_id.value = kid  # choose the id...
+        page.get_by_role("button", name="camera view").click()
+        time.sleep(2.0)
+        # ...and shift+click on the image. In camera view the canvas shows the frame with the
+        # frame's vertical field of view, centred: pixel (u, v) is at this canvas point.
+        box = page.locator("canvas").first.bounding_box()
+        W, H = app.state.view().size
+        s = box["height"] / H
+        page.keyboard.down("Shift")
+        page.mouse.click(box["x"] + box["width"] / 2 + (u - W / 2) * s, box["y"] + v * s)
+        page.keyboard.up("Shift")
+        deadline = time.time() + 10
+        while time.time() < deadline and "keypoints" not in app.state.edits.get(stem):
+            time.sleep(0.2)
+        placed = app.state.edits.get(stem)["keypoints"][kid]
+        np.testing.assert_allclose(placed, [u, v], atol=3.0)
+        moved = app.state.view().result.camera.C.copy()
+        assert not np.allclose(moved, before)
+        # undo restores the calibration, redo brings the edit back
+        page.get_by_role("button", name="undo").click()
+        deadline = time.time() + 10
+        while time.time() < deadline and app.state.edits.get(stem).get("keypoints"):
+            time.sleep(0.2)
+        np.testing.assert_allclose(app.state.view().result.camera.C, before)
+        page.get_by_role("button", name="redo").click()
+        deadline = time.time() + 10
+        while time.time() < deadline and not app.state.edits.get(stem).get("keypoints"):
+            time.sleep(0.2)
+        # export downloads a zip whose labels hold the edit
+        with page.expect_download(timeout=30000) as dl:
+            page.get_by_role("button", name="export labels (zip)").click()
+        path = tmp_path / "labels.zip"
+        dl.value.save_as(path)
+        with zipfile.ZipFile(path) as zf:
+            kps = json.loads(zf.read(f"keypoints/{stem}.json"))["keypoints"]
+        np.testing.assert_allclose([kps[kid]["x"], kps[kid]["y"]], placed)
+        page.close()
+    finally:
+        app.stop()
+    # a restarted server keeps the edit
+    app = start(data)
+    try:
+        np.testing.assert_allclose(app.state.edits.get(stem)["keypoints"][kid], placed)
+        np.testing.assert_allclose(app.state.view(stem).result.camera.C, moved)
+    finally:
+        app.stop()

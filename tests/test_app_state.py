@@ -32,7 +32,7 @@ def test_views_calibrate_on_demand_and_agree_with_the_annotation(data):
     assert v.result.ok and v.jac[5] > 0.9
     assert st.view("00000") is v  # cached
     w = st.view("sn22_00004")
-    assert w.image is None and w.size == (960, 540) and w.result.ok
+    assert not w.has_image and st.image("sn22_00004") is None and w.size == (960, 540) and w.result.ok
     bad = st.view("bad")
     assert bad.error and "bad.json" in bad.error and bad.result is None
     assert st.view("00001").result.ok  # the rest keeps working
@@ -81,13 +81,14 @@ def test_a_damaged_edit_file_is_ignored(data):
 def test_overlay_draws_keypoints_and_pitch(data):
     st = AppState(data)
     v = st.view("00000")
-    img = render(v, Layers())
+    img = render(v, st.image("00000"), Layers())
     assert img.shape == (540, 960, 3) and img.dtype == np.uint8
-    plain = render(v, Layers(annotation=False, keypoints=False, initial_pitch=False, refined_pitch=False, residuals=False))
+    plain = render(v, st.image("00000"), Layers(annotation=False, keypoints=False, initial_pitch=False,
+                                                refined_pitch=False, residuals=False, reference_pitch=False))
     changed = np.any(img != plain, axis=2)
     assert changed.mean() > 0.005  # overlays are drawn
-    assert np.array_equal(plain[:, :, ::-1], v.image)  # and nothing else
-    failed = render(st.view("bad"), Layers())
+    assert np.array_equal(plain[:, :, ::-1], st.image("00000"))  # and nothing else
+    failed = render(st.view("bad"), None, Layers())
     assert failed.shape == (540, 960, 3)
 
 
@@ -121,5 +122,98 @@ def test_server_panels_navigate_review_and_toggle_pnl(data):
         assert "PnL set: 0 lines" in app.card.content
         app.goto(st.find("bad"))
         assert "error" in app.card.content and app._frustum is None
+    finally:
+        app.stop()
+
+
+def test_keypoint_edits_recalibrate_undo_redo_and_persist(data):
+    st = AppState(data)
+    stem = "00002"
+    v0 = st.view(stem)
+    kid = int(v0.observations.kp_ids[0])
+    x, y = v0.observations.kp_xy[0]
+    st.move_keypoint(kid, x + 25, y - 10, stem)
+    v1 = st.view(stem)
+    i = list(v1.observations.kp_ids).index(kid)
+    np.testing.assert_allclose(v1.observations.kp_xy[i], [x + 25, y - 10])
+    assert not np.allclose(v1.result.camera.C, v0.result.camera.C)
+    assert st.edits.review(stem) == "corrected"
+    st.hide_keypoint(kid, stem)
+    assert kid not in st.view(stem).observations.kp_ids
+    assert st.undo(stem)  # back to the moved keypoint
+    assert kid in st.view(stem).observations.kp_ids
+    assert st.undo(stem) and not st.undo(stem)  # back to the original, nothing more to undo
+    np.testing.assert_allclose(st.view(stem).result.camera.C, v0.result.camera.C)
+    assert st.redo(stem)
+    restarted = AppState(data)
+    j = list(restarted.view(stem).observations.kp_ids).index(kid)
+    np.testing.assert_allclose(restarted.view(stem).observations.kp_xy[j], [x + 25, y - 10])
+
+
+def test_line_point_edit_goes_into_the_annotation(data):
+    st = AppState(data)
+    ann = st.annotation("00001")
+    name = next(iter(ann))
+    st.move_line_point(name, 0, 100.0, 200.0, "00001")
+    np.testing.assert_allclose(st.annotation("00001")[name][0], [100 / 959, 200 / 539])
+    assert st.undo("00001")
+    np.testing.assert_allclose(st.annotation("00001")[name][0], ann[name][0])
+
+
+def test_export_holds_the_edit_and_only_reviewed_frames(data, tmp_path):
+    import zipfile
+
+    from pnlviz.app.export import export_zip_bytes, write_export
+    from pnlviz.cli import main
+
+    st = AppState(data)
+    st.set_review("accepted", "00000")
+    kid = int(st.view("00002").observations.kp_ids[0])
+    st.move_keypoint(kid, 123.0, 234.0, "00002")
+    out = tmp_path / "export.zip"
+    out.write_bytes(export_zip_bytes(st))
+    with zipfile.ZipFile(out) as zf:
+        names = set(zf.namelist())
+        manifest = json.loads(zf.read("manifest.json"))
+        kps = json.loads(zf.read("keypoints/00002.json"))
+        coco = json.loads(zf.read("coco_keypoints.json"))
+    assert set(manifest["frames"]) == {"00000", "00002"}
+    assert manifest["frames"]["00002"]["keypoints_edited"] == [kid]
+    assert {"annotations/00000.json", "cameras/camera_00000.json", "cameras/camera_00002.json"} <= names
+    assert kps["keypoints"][str(kid)]["x"] == 123.0 and kps["keypoints"][str(kid)]["y"] == 234.0
+    image_id = next(im["id"] for im in coco["images"] if im["stem"] == "00002")
+    ann = next(a for a in coco["annotations"] if a["image_id"] == image_id)
+    assert ann["keypoints"][3 * (kid - 1):3 * kid] == [123.0, 234.0, 2]
+    # the command line writes the same into a folder, and --all takes every frame
+    folder = tmp_path / "folder"
+    assert main(["export", "--data", str(data), "--out", str(folder), "--all"]) == 0
+    assert len(json.loads((folder / "manifest.json").read_text())["frames"]) == len(st.stems)
+    assert write_export(st, tmp_path / "again") == 2
+    assert main(["export", "--data", str(data), "--out", str(data)]) == 2  # never over the source
+
+
+def test_drag_end_recalibrates_on_the_server(data):
+    from types import SimpleNamespace
+
+    from pnlviz.app.server import PnlvizApp, pixel_to_plane
+
+    st = AppState(data)
+    app = PnlvizApp(st, port=_free_port())
+    try:
+        app.goto(st.find("00002"))
+        app.handles_mode.value = "keypoints"
+        app.show()
+        assert len(app._handles) == st.view().observations.n_keypoints
+        cam = app._shown_camera
+        before = st.view().result.camera.C.copy()
+        kid = int(st.view().observations.kp_ids[0])
+        target = SimpleNamespace(position=pixel_to_plane(cam, (300.0, 200.0)))
+        app._on_drag(SimpleNamespace(phase="update", target=target), ("kp", kid), cam)
+        assert "keypoints" not in st.edits.get("00002")  # only the release counts
+        app._on_drag(SimpleNamespace(phase="end", target=target), ("kp", kid), cam)
+        saved = json.loads((st.edits.frames / "00002.json").read_text())
+        np.testing.assert_allclose(saved["keypoints"][str(kid)], [300.0, 200.0], atol=1e-6)
+        assert not np.allclose(st.view().result.camera.C, before)
+        assert app.last_recalibration_ms > 0
     finally:
         app.stop()

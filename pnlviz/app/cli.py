@@ -41,3 +41,35 @@ def run_serve(args) -> int:
     finally:
         app.stop()
     return 0
+
+
+def add_export_parser(sub) -> None:
+    from pnlviz.cli import parse_size
+
+    p = sub.add_parser("export", help="export corrected training labels (as the app's export button)",
+                       description="Write the corrected labels of a dataset and its edits: SoccerNet annotations, "
+                                   "keypoint labels, cameras, COCO keypoints and a manifest of what changed. "
+                                   "Only accepted and corrected frames unless --all.")
+    p.add_argument("--data", type=Path, help="dataset folder or zip (default: the bundled sample)")
+    p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
+    p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip, as given to pnlviz serve")
+    p.add_argument("--out", required=True, type=Path, help="output folder, or a .zip")
+    p.add_argument("--all", action="store_true", help="export every frame, reviewed or not")
+    p.add_argument("--size", type=parse_size, default=(960, 540), help="image size for frames without an image")
+    p.set_defaults(func=run_export)
+
+
+def run_export(args) -> int:
+    from pnlviz import EXAMPLES_DIR
+    from pnlviz.app.export import write_export
+    from pnlviz.app.state import AppState
+
+    data = args.data or EXAMPLES_DIR / "sample"
+    if args.out.resolve() == Path(data).resolve():
+        print(f"error: --out {args.out} is the dataset itself; export writes beside it, never over it", file=sys.stderr)
+        return 2
+    state = AppState(data, detections=args.detections, edits=args.edits, size=args.size)
+    n = write_export(state, args.out, include_all=args.all)
+    which = "frames" if args.all else "accepted/corrected frames"
+    print(f"exported {n} {which} of {len(state.stems)} to {args.out}")
+    return 0

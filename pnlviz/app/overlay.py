@@ -17,6 +17,7 @@ SET_BGR = {"Kp": (40, 40, 230), "Kpe": (0, 220, 255), "Kp1": (255, 120, 30), "Kp
 INITIAL_BGR = (255, 200, 0)  # cyan-blue: pitch through the voted camera, before PnL
 REFINED_BGR = (60, 220, 255)  # amber: pitch through the final camera
 RESIDUAL_BGR = (0, 0, 255)
+DETECTED_BGR = (255, 255, 255)  # white: detected line extremities
 REFERENCE_BGR = (255, 80, 255)  # magenta: pitch through a known camera (synthetic ground truth)
 
 
@@ -29,12 +30,14 @@ class Layers:
     refined_pitch: bool = True
     residuals: bool = True
     reference_pitch: bool = True
+    detected_lines: bool = True
 
 
-def render(view: FrameView, layers: Layers = Layers(), max_width: int = 1280) -> np.ndarray:
-    """The frame with overlays, RGB uint8 (for the browser), at most ``max_width`` wide."""
+def render(view: FrameView, image: np.ndarray | None, layers: Layers = Layers(), max_width: int = 1280) -> np.ndarray:
+    """The frame (``image``, BGR, or a neutral canvas when None) with overlays, RGB uint8 for the
+    browser, at most ``max_width`` wide."""
     W, H = view.size
-    img = view.image.copy() if view.image is not None else blank_canvas(W, H)
+    img = image.copy() if image is not None else blank_canvas(W, H)
     res = view.result
     if layers.reference_pitch and view.reference_camera is not None:
         draw_pitch(img, view.reference_camera, colour=REFERENCE_BGR, thickness=1)
@@ -46,6 +49,13 @@ def render(view: FrameView, layers: Layers = Layers(), max_width: int = 1280) ->
     if layers.annotation and view.annotation:
         draw_annotation(img, view.annotation, thickness=1, radius=2)
     obs = view.observations
+    if view.detections is not None and layers.detected_lines:
+        # the detector's line extremities (PnLCalib format: x_px = x W)
+        for x1, y1, p1, x2, y2, p2 in view.detections.lines_px(W, H).values():
+            a, b = (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2)))
+            cv2.line(img, a, b, DETECTED_BGR, 2, cv2.LINE_AA)
+            for p in (a, b):
+                cv2.drawMarker(img, p, DETECTED_BGR, cv2.MARKER_TILTED_CROSS, 10, 2, cv2.LINE_AA)
     if obs is not None and layers.keypoints and obs.n_keypoints:
         proj = None
         if res is not None and res.ok:

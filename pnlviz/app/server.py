@@ -30,6 +30,30 @@ def camera_wxyz(R: np.ndarray) -> np.ndarray:
     return np.array([w, x, y, z])
 
 
+def pixel_to_plane(cam, uv, depth: float = FRUSTUM_SCALE * 0.99) -> np.ndarray:
+    """World point on the frustum's image plane (``depth`` in front of the camera) under pixel uv."""
+    ray = np.array([(uv[0] - cam.cx) / cam.fx, (uv[1] - cam.cy) / cam.fy, 1.0])
+    return cam.C + cam.R.T @ (depth * ray)
+
+
+def plane_to_pixel(cam, point) -> np.ndarray:
+    x = cam.R @ (np.asarray(point, float) - cam.C)
+    return np.array([cam.fx * x[0] / x[2] + cam.cx, cam.fy * x[1] / x[2] + cam.cy])
+
+
+def ray_to_pixel(cam, origin, direction, depth: float = FRUSTUM_SCALE * 0.999) -> np.ndarray | None:
+    """Pixel where a click ray meets the frustum's image plane, or None."""
+    o = cam.R @ (np.asarray(origin, float) - cam.C)
+    d = cam.R @ np.asarray(direction, float)
+    if abs(d[2]) < 1e-12:
+        return None
+    t = (depth - o[2]) / d[2]
+    if t <= 0:
+        return None
+    p = o + t * d
+    return np.array([cam.fx * p[0] / p[2] + cam.cx, cam.fy * p[1] / p[2] + cam.cy])
+
+
 def calibration_card(view: FrameView, state: AppState) -> str:
     """Markdown of the calibration card."""
     lines = [f"**{view.stem}** ({view.index + 1}/{len(state.stems)}), {view.size[0]}x{view.size[1]}"]
@@ -77,6 +101,9 @@ class PnlvizApp:
         self.server.initial_camera.up = (0.0, 0.0, -1.0)
         self._lock = threading.RLock()
         self._frustum = self._rays = None
+        self._handles: list = []
+        self._shown_camera = None
+        self.last_recalibration_ms = 0.0
         self._add_pitch()
         self._build_gui()
         self.show()
@@ -112,7 +139,10 @@ class PnlvizApp:
                 if handle is not None:
                     handle.remove()
             self._frustum = self._rays = None
+            self._shown_camera = None
+            self._update_handles(view, None)
             return
+        self._shown_camera = cam
         W, H = view.size
         fov_y = 2 * math.atan((H / 2) / cam.fy)
         self._frustum = sc.add_camera_frustum(
@@ -124,6 +154,43 @@ class PnlvizApp:
             cols = np.array([SET_BGR.get(str(s), (255, 255, 255))[::-1] for s in obs.kp_sets], np.uint8)
             self._rays = sc.add_line_segments("/rays", seg, np.repeat(cols[:, None], 2, 1), thickness=1.5,
                                               thickness_units="screen")
+        self._update_handles(view, cam)
+
+    def _update_handles(self, view: FrameView, cam) -> None:
+        """Drag handles on the image plane for keypoints or annotated line points."""
+        for h in self._handles:
+            h.remove()
+        self._handles = []
+        mode = self.handles_mode.value
+        if cam is None or mode == "off":
+            return
+        targets = []  # (what, uv)
+        if mode == "keypoints" and view.observations is not None:
+            targets = [(("kp", int(k)), p) for k, p in zip(view.observations.kp_ids, view.observations.kp_xy)]
+        elif mode == "line points" and view.annotation:
+            W, H = view.size
+            targets = [(("line", name, i), p * [W - 1, H - 1]) for name, pts in view.annotation.items()
+                       for i, p in enumerate(pts)]
+        wxyz = camera_wxyz(cam.R)
+        for n, (what, uv) in enumerate(targets):
+            h = self.server.scene.add_transform_controls(
+                f"/handles/{n}", scale=FRUSTUM_SCALE * 0.05, disable_rotations=True, disable_sliders=True,
+                active_axes=(True, True, False), depth_test=False, wxyz=wxyz, position=pixel_to_plane(cam, uv))
+            h.on_update(lambda event, what=what, cam=cam: self._on_drag(event, what, cam))
+            self._handles.append(h)
+
+    def _on_drag(self, event, what, cam) -> None:
+        if event.phase != "end":
+            return
+        uv = plane_to_pixel(cam, event.target.position)
+        t0 = time.perf_counter()
+        if what[0] == "kp":
+            self.state.move_keypoint(what[1], *uv)
+        else:
+            self.state.move_line_point(what[1], what[2], *uv)
+        self.state.view()  # recalibrate now, to time it
+        self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
+        self.show()
 
     def camera_view(self, client: viser.ClientHandle) -> None:
         """Put the browser camera at the estimated pose: the overlays then sit on the image."""
@@ -158,7 +225,15 @@ class PnlvizApp:
             self.source = gui.add_dropdown("keypoint source", sources, initial_value=st.source)
             self.layer_boxes = {name: gui.add_checkbox(name.replace("_", " "), initial_value=getattr(self.layers, name))
                                 for name in ("annotation", "keypoints", "ids", "initial_pitch", "refined_pitch", "residuals",
-                                             "reference_pitch")}
+                                             "reference_pitch", "detected_lines")}
+        with gui.add_folder("Edit"):
+            self.handles_mode = gui.add_dropdown("drag handles", ("off", "keypoints", "line points"), initial_value="off",
+                                                 hint="drag a handle on the image plane; the frame recalibrates on release")
+            self.history = gui.add_button_group("history", ("undo", "redo"))
+            self.kp_id = gui.add_dropdown("keypoint", tuple(str(i) for i in range(1, 74)), initial_value="1",
+                                          hint="shift+click on the image places this keypoint")
+            self.kp_hide = gui.add_button("mark keypoint not visible")
+            self.export = gui.add_button("export labels (zip)")
         with gui.add_folder("Review"):
             self.review = gui.add_button_group("status", REVIEW_STATES + ("clear",))
             self.progress = gui.add_progress_bar(0.0)
@@ -213,6 +288,38 @@ class PnlvizApp:
                 self.show()
 
             box.on_update(on_layer)
+
+        @self.handles_mode.on_update
+        def _(_) -> None:
+            self.show()
+
+        @self.history.on_click
+        def _(event) -> None:
+            (st.undo if event.target.value == "undo" else st.redo)()
+            self.show()
+
+        @self.kp_hide.on_click
+        def _(_) -> None:
+            st.hide_keypoint(int(self.kp_id.value))
+            self.show()
+
+        @self.export.on_click
+        def _(event) -> None:
+            from pnlviz.app.export import export_zip_bytes
+
+            if event.client is not None:
+                event.client.send_file_download(f"{self.state.data.name}_labels.zip", export_zip_bytes(st),
+                                                save_immediately=True)
+
+        @self.server.scene.on_click(modifier="shift")
+        def _(event) -> None:
+            cam = self._shown_camera
+            if cam is None:
+                return
+            uv = ray_to_pixel(cam, event.ray_origin, event.ray_direction)
+            if uv is not None:
+                st.move_keypoint(int(self.kp_id.value), *uv)
+                self.show()
 
         @self.review.on_click
         def _(event) -> None:
@@ -272,7 +379,7 @@ class PnlvizApp:
         with self._lock:
             st = self.state
             view = st.view()
-            image = render(view, self.layers)
+            image = render(view, st.image(view.stem), self.layers)
             with self.server.atomic():
                 self.title.content = f"### {view.stem}"
                 self.image.image = image

@@ -42,7 +42,7 @@ class FrameView:
 
     stem: str
     index: int
-    image: np.ndarray | None  # BGR, None when the frame has no image
+    has_image: bool  # the pixels are not kept here (23k cached views must fit in memory): AppState.image()
     size: tuple[int, int]  # (W, H) of the image or of the --size fallback
     annotation: dict[str, np.ndarray] | None
     observations: Observations | None
@@ -51,6 +51,32 @@ class FrameView:
     error: str | None = None  # a problem reading the frame
     ms: float = 0.0
     reference_camera: Camera | None = None  # a known camera (e.g. synthetic ground truth), scaled to the frame
+    detections: object | None = None  # the frame's PnLCalib detections (pnlviz.data.Predictions), if any
+
+
+def apply_keypoint_edits(obs: Observations, overrides: dict) -> Observations:
+    """Observations with keypoint edits applied: ``{"id": [x, y]}`` moves or adds a keypoint (at
+    the catalogue position), ``{"id": null}`` removes it (not visible)."""
+    from pnlviz.field.model import load_field_model
+
+    model = load_field_model()
+    ids, xy = list(obs.kp_ids), [tuple(p) for p in obs.kp_xy]
+    sets, main = list(obs.kp_sets), list(obs.kp_main)
+    for key, value in overrides.items():
+        kid = int(key)
+        if kid in ids:
+            i = ids.index(kid)
+            for lst in (ids, xy, sets, main):
+                lst.pop(i)
+        if value is not None:
+            ids.append(kid)
+            xy.append((float(value[0]), float(value[1])))
+            group = model.keypoints[kid].group
+            sets.append(group)
+            main.append(group == "Kp")
+    ids_arr = np.array(ids, int)
+    return Observations(obs.width, obs.height, ids_arr, np.array(xy, float).reshape(-1, 2), model.keypoint_xyz(ids_arr),
+                        np.array(sets, dtype="<U3"), np.array(main, bool), obs.lines, obs.circles)
 
 
 class EditsStore:
@@ -115,6 +141,9 @@ class AppState:
         self.source = "annotation" if self.predictions is None else "both"
         self._cache: dict[tuple, FrameView] = {}
         self._lock = threading.RLock()
+        self._images: dict[str, np.ndarray | None] = {}
+        self._undo: dict[str, list[dict]] = {}
+        self._redo: dict[str, list[dict]] = {}
 
     # ------------------------------------------------------------------ settings
     @property
@@ -128,7 +157,8 @@ class AppState:
         return p
 
     def _key(self, stem: str) -> tuple:
-        edit = self.edits.get(stem).get("annotation")
+        rec = self.edits.get(stem)
+        edit = {k: rec[k] for k in ("annotation", "keypoints") if rec.get(k) is not None}
         return stem, self.pnl, round(self.alpha, 4), self.source, json.dumps(edit, sort_keys=True) if edit else None
 
     def go(self, index: int) -> str:
@@ -149,6 +179,22 @@ class AppState:
             return parse_annotation(edit, f"{self.edits.frames / stem}.json")
         return self.ds.annotation(stem)
 
+    def image(self, stem: str | None = None) -> np.ndarray | None:
+        """The frame's pixels (BGR), decoded on demand; a few recent ones are kept."""
+        stem = stem or self.stem
+        with self._lock:
+            if stem in self._images:
+                return self._images[stem]
+        try:
+            img = self.ds.image(stem) if self.ds.frame(stem).has_image else None
+        except DataError:
+            img = None
+        with self._lock:
+            self._images[stem] = img
+            while len(self._images) > 8:
+                self._images.pop(next(iter(self._images)))
+        return img
+
     def view(self, stem: str | None = None) -> FrameView:
         """The frame's view under the current settings (cached). Never raises on bad data."""
         stem = stem or self.stem
@@ -167,13 +213,13 @@ class AppState:
         idx = self.stems.index(stem)
         t0 = time.perf_counter()
         try:
-            image = self.ds.image(stem) if self.ds.frame(stem).has_image else None
-            size = (image.shape[1], image.shape[0]) if image is not None else self.size
+            image = self.ds.frame(stem).has_image
+            size = (self.ds.image_size(stem) or self.size) if image else self.size
             ann = self.annotation(stem)
             ref = self.ds.camera_dict(stem)
             ref = Camera.from_soccernet(ref).scaled(*size) if ref is not None else None
         except DataError as exc:
-            return FrameView(stem, idx, None, self.size, None, None, None, error=str(exc))
+            return FrameView(stem, idx, False, self.size, None, None, None, error=str(exc))
         obs = self._observations(stem, ann, size)
         if obs is None:
             return FrameView(stem, idx, image, size, ann, None, None, error="nothing to calibrate from",
@@ -186,10 +232,20 @@ class AppState:
         if result.ok and ann:
             fr = evaluate_frame(result.camera.scaled(*EVAL_SIZE), ann)
             jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
+        detections = self.predictions.get(stem) if self.predictions is not None else None
         return FrameView(stem, idx, image, size, ann, obs, result, jac, ms=1e3 * (time.perf_counter() - t0),
-                         reference_camera=ref)
+                         reference_camera=ref, detections=detections)
 
     def _observations(self, stem: str, ann, size) -> Observations | None:
+        obs = self._base_observations(stem, ann, size)
+        overrides = self.edits.get(stem).get("keypoints")
+        if not overrides:
+            return obs
+        if obs is None:
+            obs = Observations(*size)
+        return apply_keypoint_edits(obs, overrides)
+
+    def _base_observations(self, stem: str, ann, size) -> Observations | None:
         W, H = size
         pred = self.predictions.get(stem) if self.predictions is not None else None
         use_ann = ann is not None and self.source in ("annotation", "both")
@@ -218,7 +274,55 @@ class AppState:
     def set_annotation(self, annotation: dict[str, np.ndarray], stem: str | None = None) -> None:
         """Store an edited annotation (autosaved at once) and mark the frame corrected."""
         stem = stem or self.stem
-        self.edits.update(stem, annotation=annotation_to_json(annotation), review="corrected")
+        self._record(stem, annotation=annotation_to_json(annotation))
+
+    # one user action = one undo step; the edit record (annotation, keypoint overrides) is
+    # autosaved at once, the undo history lives as long as the server
+    def _record(self, stem: str, **changes) -> None:
+        rec = self.edits.get(stem)
+        before = {k: rec.get(k) for k in ("annotation", "keypoints")}
+        with self._lock:
+            self._undo.setdefault(stem, []).append(before)
+            self._redo.pop(stem, None)
+        self.edits.update(stem, review="corrected", **changes)
+
+    def move_keypoint(self, kid: int, x: float, y: float, stem: str | None = None) -> None:
+        """Put keypoint ``kid`` at pixel (x, y) of the frame (adds it if it was missing)."""
+        stem = stem or self.stem
+        kps = dict(self.edits.get(stem).get("keypoints") or {})
+        kps[str(int(kid))] = [float(x), float(y)]
+        self._record(stem, keypoints=kps)
+
+    def hide_keypoint(self, kid: int, stem: str | None = None) -> None:
+        """Mark keypoint ``kid`` not visible: it leaves the calibration and the labels."""
+        stem = stem or self.stem
+        kps = dict(self.edits.get(stem).get("keypoints") or {})
+        kps[str(int(kid))] = None
+        self._record(stem, keypoints=kps)
+
+    def move_line_point(self, name: str, index: int, x: float, y: float, stem: str | None = None) -> None:
+        """Move point ``index`` of annotated class ``name`` to pixel (x, y)."""
+        stem = stem or self.stem
+        ann = {k: v.copy() for k, v in (self.annotation(stem) or {}).items()}
+        W, H = self.view(stem).size
+        ann[name][index] = [x / (W - 1), y / (H - 1)]
+        self._record(stem, annotation=annotation_to_json(ann))
+
+    def undo(self, stem: str | None = None) -> bool:
+        return self._step(stem or self.stem, self._undo, self._redo)
+
+    def redo(self, stem: str | None = None) -> bool:
+        return self._step(stem or self.stem, self._redo, self._undo)
+
+    def _step(self, stem: str, source: dict, target: dict) -> bool:
+        with self._lock:
+            if not source.get(stem):
+                return False
+            state = source[stem].pop()
+            rec = self.edits.get(stem)
+            target.setdefault(stem, []).append({k: rec.get(k) for k in ("annotation", "keypoints")})
+        self.edits.update(stem, annotation=state["annotation"], keypoints=state["keypoints"])
+        return True
 
     def review_progress(self) -> tuple[int, int]:
         return sum(self.edits.counts().values()), len(self.stems)
