@@ -4,18 +4,19 @@ command starts fast (no torch, no viser unless a subcommand needs them)."""
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
 
 def parse_size(text: str) -> tuple[int, int]:
-    """``"960x540"`` -> (960, 540), with an argparse error on anything else."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 960x540, got {text!r}") from None
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise argparse.ArgumentTypeError(f"image size {w}x{h} out of range (16..8192)")
+    """``"960x540"`` -> (960, 540), with an argparse error on anything else (every command's --size)."""
+    m = re.match(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 960x540, got {text!r}")
+    w, h = int(m.group(1)), int(m.group(2))
+    if not (16 <= w <= 16384 and 16 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"image size {w}x{h} out of range (16..16384 per side)")
     return w, h
 
 

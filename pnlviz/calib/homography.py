@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from pnlviz.calib.observations import Observations
+from pnlviz.calib.refine import closest_on_polyline
 from pnlviz.field.model import FieldModel, load_field_model
 
 __all__ = ["SUBSETS", "HomographyParams", "HomographyResult", "estimate_homography", "refine_homography_pnl",
@@ -150,20 +151,6 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
-def _closest_on_polyline(pts: np.ndarray, poly: np.ndarray):
-    """For each point (M, 2), the closest point of the polyline (S, 2): distance, segment index
-    j, parameter t on segment j, and the offset point - closest (vectorised over M x S)."""
-    a, ab = poly[:-1], poly[1:] - poly[:-1]
-    L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-18)
-    ap = pts[:, None, :] - a[None]
-    t = np.clip(np.einsum("msk,sk->ms", ap, ab) / L2, 0.0, 1.0)
-    d = ap - t[..., None] * ab[None]
-    d2 = np.einsum("msk,msk->ms", d, d)
-    j = np.argmin(d2, axis=1)
-    m = np.arange(len(pts))
-    return np.sqrt(d2[m, j]), j, t[m, j], d[m, j]
 
 
 def _hom(xy: np.ndarray) -> np.ndarray:
@@ -303,7 +290,7 @@ class HomographyProblem:
                 continue
             xf = xh[front]
             poly = xf[:, :2] / xf[:, 2:]
-            dist, j, t, d = _closest_on_polyline(pts, poly)
+            dist, j, t, d = closest_on_polyline(pts, poly)
             res.append(self.w_ln * dist)
             if jac:
                 Jp = self._dehom_jac(xf) @ self._dxh(A, world[front])  # (S, 2, 8)

@@ -57,10 +57,10 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 def point_to_polyline_distance(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Euclidean distance of each point (M, 2) to the polyline (S, 2), vectorised over M x S."""
-    return _closest_on_polyline(pts, poly)[0]
+    return closest_on_polyline(pts, poly)[0]
 
 
-def _closest_on_polyline(pts: np.ndarray, poly: np.ndarray):
+def closest_on_polyline(pts: np.ndarray, poly: np.ndarray):
     a, b = poly[:-1], poly[1:]
     ab = b - a
     L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-18)
@@ -272,7 +272,7 @@ class CameraProblem:
                     J.append(np.zeros((len(pts), 8)))
                 continue
             poly, Jp = self._project(world[front], R, C, f, k1, jac)
-            dist, j, t, d = _closest_on_polyline(pts, poly)
+            dist, j, t, d = closest_on_polyline(pts, poly)
             res.append(self.w_ln * dist)
             if jac:
                 unit = d / np.maximum(dist, 1e-12)[:, None]  # d(dist)/d(closest point) = -unit

@@ -13,6 +13,8 @@ from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from pnlviz.cli import parse_size
+
 DEFAULT_SIZE = (960, 540)
 
 # --------------------------------------------------------------------------- per-frame work
@@ -52,16 +54,6 @@ def _label_one(stem: str) -> tuple[str, str, object]:
 
 
 # ------------------------------------------------------------------------------- argparse
-def _parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 960x540, got {text!r}") from None
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise argparse.ArgumentTypeError(f"image size {w}x{h} out of range (16..8192)")
-    return w, h
-
-
 def add_labels_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "labels", help="keypoint training labels (all sets) from SoccerNet line annotations",
@@ -71,7 +63,7 @@ def add_labels_parser(subparsers) -> argparse.ArgumentParser:
                     "(pixels; schema in pnlviz/labels/writer.py).")
     p.add_argument("--data", required=True, type=Path, help="dataset folder or zip")
     p.add_argument("--out", required=True, type=Path, help="output folder for <stem>.json label files")
-    p.add_argument("--size", type=_parse_size, default=DEFAULT_SIZE, metavar="WxH",
+    p.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, metavar="WxH",
                    help="image size for frames without an image (default 960x540)")
     p.add_argument("--kp3-all", action="store_true",
                    help="also complete every missing catalogue ground point through the homography")

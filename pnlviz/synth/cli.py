@@ -10,21 +10,11 @@ Wiring into the main command line::
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 
-_SIZE_RE = re.compile(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$")
+from pnlviz.cli import parse_size  # one WxH parser for every command
 
-
-def parse_size(text: str) -> tuple[int, int]:
-    """``"960x540"`` -> (960, 540); an ``argparse.ArgumentTypeError`` for anything else."""
-    m = _SIZE_RE.match(text)
-    if not m:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 960x540, got {text!r}")
-    w, h = int(m.group(1)), int(m.group(2))
-    if not (16 <= w <= 16384 and 16 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"image size {w}x{h} out of range (16..16384 per side)")
-    return w, h
+__all__ = ["add_synth_parser", "parse_size", "run_synth"]
 
 
 def _positive_int(text: str) -> int:
