@@ -70,7 +70,7 @@ class CalibParams:
         return value * width / 960.0
 
 
-@dataclass
+@dataclass(eq=False)  # compared by identity: fields hold arrays
 class Candidate:
     subset: str
     threshold: float
@@ -366,8 +366,10 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
     if not cands and params.prior_search:
         cands = prior_candidates(obs, params, model)
     best = vote(cands, obs, params, model)
-    table = [{"subset": c.subset, "threshold": c.threshold, "plane": c.plane, "inliers": len(c.inliers),
-              "rms": c.rms, "score": c.score, "refined": c in cands} for c in raw + [c for c in cands if c.subset == "prior"]]
+    # the evidence: every decomposed candidate (first vote), then the refined ones (second vote)
+    table = [{"stage": stage, "subset": c.subset, "threshold": c.threshold, "plane": c.plane,
+              "inliers": len(c.inliers), "rms": c.rms, "score": c.score, "won": c is best}
+             for stage, group in (("candidate", raw), ("refined", cands)) for c in group]
     if best is None:
         planes = plane_masks(obs.kp_xyz, model)
         counts = ", ".join(f"{p} {int(m.sum())}" for p, m in planes.items())
