@@ -217,3 +217,15 @@ def test_drag_end_recalibrates_on_the_server(data):
         assert app.last_recalibration_ms > 0
     finally:
         app.stop()
+
+
+def test_annotation_and_detections_merge_with_the_side_convention_resolved(shared_dir, tmp_path):
+    """PnLCalib's detections name the near goal 'left'; WC14 annotations name the true side.
+    Merged, they must not fight: 'both' scores at least as well as either alone."""
+    data = shared_dir / "data" / "wc14_test_half"
+    st = AppState(data / "annotations.zip", detections=data / "detections_pnlcalib.zip", edits=tmp_path / "e")
+    scores = {}
+    for source in ("annotation", "detections", "both"):
+        st.source = source
+        scores[source] = np.mean([st.view(s).jac.get(5, 0.0) for s in st.stems[:20]])
+    assert scores["both"] >= max(scores["annotation"], scores["detections"]) - 0.02

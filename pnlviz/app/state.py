@@ -9,7 +9,9 @@ leaves the previous state intact and a restart restores everything.
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -30,10 +32,15 @@ EVAL_SIZE = (960, 540)
 
 
 def default_edits_dir(data: Path) -> Path:
-    """``<data>.edits`` beside a folder or zip: never inside or over the source."""
+    """``<data>.edits`` beside a folder or zip: never inside or over the source. When that folder
+    cannot be written (read-only data), ``~/.pnlviz/edits/<name>-<hash of the path>``."""
     data = Path(data).resolve()
     name = data.name[:-4] if data.suffix == ".zip" else data.name
-    return data.parent / f"{name}.edits"
+    beside = data.parent / f"{name}.edits"
+    if beside.is_dir() and os.access(beside, os.W_OK) or not beside.exists() and os.access(data.parent, os.W_OK):
+        return beside
+    digest = hashlib.sha1(str(data).encode()).hexdigest()[:10]
+    return Path.home() / ".pnlviz" / "edits" / f"{name}-{digest}"
 
 
 @dataclass
@@ -52,6 +59,51 @@ class FrameView:
     ms: float = 0.0
     reference_camera: Camera | None = None  # a known camera (e.g. synthetic ground truth), scaled to the frame
     detections: object | None = None  # the frame's PnLCalib detections (pnlviz.data.Predictions), if any
+
+
+def _mirror_ids() -> dict[int, int]:
+    """Keypoint id -> the id at the point mirrored through the pitch centre ((x, y) -> (-x, -y))."""
+    from pnlviz.field.model import load_field_model
+
+    model = load_field_model()
+    ids = model.keypoint_ids
+    xyz = model.keypoint_xyz(ids)
+    out = {}
+    for i, p in zip(ids, xyz):
+        d = np.linalg.norm(xyz - p * [-1, -1, 1], axis=1)
+        j = int(np.argmin(d))
+        if d[j] < 1e-6:
+            out[int(i)] = int(ids[j])
+    return out
+
+
+def merge_observations(ann: Observations, det: Observations) -> Observations:
+    """Annotation and detections together. PnLCalib's networks name the sides so that the goal
+    nearest the camera is the left one, annotations name the true sides: when the detections
+    agree better with the annotation mirrored (keypoints with the same ids, median distance),
+    their ids and line classes are mirrored first. The annotation wins where both have a point."""
+    from pnlviz.field.names import MIRROR
+
+    mirror = _mirror_ids()
+    ann_xy = dict(zip(ann.kp_ids.tolist(), ann.kp_xy))
+    det_xy = dict(zip(det.kp_ids.tolist(), det.kp_xy))
+
+    def disagreement(mapping) -> float:
+        d = [np.linalg.norm(ann_xy[i] - det_xy[j]) for i, j in mapping.items() if i in ann_xy and j in det_xy]
+        return float(np.median(d)) if d else np.inf
+
+    if disagreement({i: mirror.get(i, -1) for i in ann_xy}) < disagreement({i: i for i in ann_xy}):
+        ids = np.array([mirror.get(int(i), int(i)) for i in det.kp_ids], int)
+        lines = {MIRROR[k]: v for k, v in det.lines.items()}
+        from pnlviz.field.model import load_field_model
+
+        det = Observations(det.width, det.height, ids, det.kp_xy, load_field_model().keypoint_xyz(ids, pnlcalib=True),
+                           det.kp_sets, det.kp_main, lines, det.circles)
+    keep = ~np.isin(det.kp_ids, ann.kp_ids)
+    return Observations(ann.width, ann.height, np.concatenate([ann.kp_ids, det.kp_ids[keep]]),
+                        np.vstack([ann.kp_xy, det.kp_xy[keep]]), np.vstack([ann.kp_xyz, det.kp_xyz[keep]]),
+                        np.concatenate([ann.kp_sets, det.kp_sets[keep]]), np.concatenate([ann.kp_main, det.kp_main[keep]]),
+                        {**det.lines, **ann.lines}, ann.circles)
 
 
 def apply_keypoint_edits(obs: Observations, overrides: dict) -> Observations:
@@ -251,14 +303,8 @@ class AppState:
         use_ann = ann is not None and self.source in ("annotation", "both")
         use_det = pred is not None and self.source in ("detections", "both")
         if use_ann and use_det:
-            obs, _ = observations_from_annotation(ann, W, H)
-            det = observations_from_predictions(pred, W, H)
-            keep = ~np.isin(det.kp_ids, obs.kp_ids)  # the annotation's labels win where both exist
-            return Observations(W, H, np.concatenate([obs.kp_ids, det.kp_ids[keep]]),
-                                np.vstack([obs.kp_xy, det.kp_xy[keep]]), np.vstack([obs.kp_xyz, det.kp_xyz[keep]]),
-                                np.concatenate([obs.kp_sets, det.kp_sets[keep]]),
-                                np.concatenate([obs.kp_main, det.kp_main[keep]]),
-                                {**det.lines, **obs.lines}, obs.circles)
+            return merge_observations(observations_from_annotation(ann, W, H)[0],
+                                      observations_from_predictions(pred, W, H))
         if use_ann:
             return observations_from_annotation(ann, W, H)[0]
         if use_det:
