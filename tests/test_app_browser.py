@@ -176,3 +176,45 @@ def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
         np.testing.assert_allclose(app.state.view(stem).result.camera.C, moved)
     finally:
         app.stop()
+
+
+def test_dragging_a_keypoint_handle_recalibrates_and_autosaves(data, browser):
+    import numpy as np
+
+    from pnlviz.app.server import HANDLE_SCALE
+
+    app = start(data)
+    stem = app.state.stem
+    before = app.state.view().result.camera.C.copy()
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(app.url)
+        wait_for_text(page, "focal")
+        app.handles_mode.value = "keypoints"
+        app.show()
+        page.get_by_role("button", name="camera view").click()
+        time.sleep(2.5)
+        view = app.state.view()
+        obs, cam = view.observations, view.result.camera
+        i = int(np.argmin(obs.kp_xy[:, 0]))  # left of the frame, away from the panel
+        kid, (u, v) = str(int(obs.kp_ids[i])), obs.kp_xy[i]
+        box = page.locator("canvas").first.bounding_box()
+        W, H = view.size
+        s = box["height"] / H
+        x0, y0 = box["x"] + box["width"] / 2 + (u - W / 2) * s, box["y"] + v * s
+        arrow = HANDLE_SCALE / (0.99 * 4.0) * cam.fx * s  # screen length of the handle's x arrow
+        # grab the x arrow half way along and pull it 20 screen px to the right
+        page.mouse.move(x0 + 0.5 * arrow, y0)
+        page.mouse.down()
+        page.mouse.move(x0 + 0.5 * arrow + 10, y0, steps=5)
+        page.mouse.move(x0 + 0.5 * arrow + 20, y0, steps=5)
+        page.mouse.up()
+        deadline = time.time() + 10
+        while time.time() < deadline and not app.state.edits.get(stem).get("keypoints"):
+            time.sleep(0.2)
+        moved = app.state.edits.get(stem)["keypoints"][kid]
+        np.testing.assert_allclose(moved, [u + 20 / s, v], atol=2.0)  # along x only, by the pulled amount
+        assert not np.allclose(app.state.view().result.camera.C, before)
+        page.close()
+    finally:
+        app.stop()

@@ -22,6 +22,7 @@ from pnlviz.field.meshes import goals_mesh, grass_mesh, markings_mesh, nets_mesh
 FILTERS = ("all", "failed", "unreviewed", "accepted", "corrected", "rejected")
 SORTS = ("index", "JaC@5 (worst first)", "residual (worst first)")
 FRUSTUM_SCALE = 4.0  # metres: size of the image plane in the 3D view
+HANDLE_SCALE = FRUSTUM_SCALE * 0.035  # arrows of the drag handles, metres on the image plane
 
 
 def camera_wxyz(R: np.ndarray) -> np.ndarray:
@@ -174,7 +175,7 @@ class PnlvizApp:
         wxyz = camera_wxyz(cam.R)
         for n, (what, uv) in enumerate(targets):
             h = self.server.scene.add_transform_controls(
-                f"/handles/{n}", scale=FRUSTUM_SCALE * 0.05, disable_rotations=True, disable_sliders=True,
+                f"/handles/{n}", scale=HANDLE_SCALE, disable_rotations=True, disable_sliders=True,
                 active_axes=(True, True, False), depth_test=False, wxyz=wxyz, position=pixel_to_plane(cam, uv))
             h.on_update(lambda event, what=what, cam=cam: self._on_drag(event, what, cam))
             self._handles.append(h)
