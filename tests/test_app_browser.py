@@ -218,3 +218,25 @@ def test_dragging_a_keypoint_handle_recalibrates_and_autosaves(data, browser):
         page.close()
     finally:
         app.stop()
+
+
+def test_keyboard_shortcuts_n_p_and_ctrl_z(data, browser):
+    app = start(data)
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(app.url)
+        wait_for_text(page, "00000 (1/3)")
+        page.mouse.click(300, 300)  # focus the scene, not a text box
+        page.keyboard.press("n")
+        wait_for_text(page, "00001 (2/3)")
+        page.keyboard.press("p")
+        wait_for_text(page, "00000 (1/3)")
+        app.state.hide_keypoint(int(app.state.view().observations.kp_ids[0]))
+        page.keyboard.press("Control+z")
+        deadline = time.time() + 10
+        while time.time() < deadline and app.state.edits.get("00000").get("keypoints"):
+            time.sleep(0.2)
+        assert not app.state.edits.get("00000").get("keypoints")
+        page.close()
+    finally:
+        app.stop()

@@ -241,6 +241,18 @@ class PnlvizApp:
             self.progress_text = gui.add_markdown("")
             self.background = gui.add_markdown("")
 
+        # keyboard shortcuts (viser's command palette; none clashes with its camera keys)
+        commands = gui.add_command("next frame", hotkey="N", description="N"), \
+            gui.add_command("previous frame", hotkey="P", description="P"), \
+            gui.add_command("undo edit", hotkey="Z", modifier="cmd/ctrl", description="Ctrl+Z"), \
+            gui.add_command("redo edit", hotkey="Z", modifier="cmd/ctrl+shift", description="Ctrl+Shift+Z"), \
+            gui.add_command("camera view", hotkey="V", description="V")
+        actions = (lambda e: self.step(1), lambda e: self.step(-1),
+                   lambda e: (st.undo(), self.show()), lambda e: (st.redo(), self.show()),
+                   lambda e: self.camera_view(e.client) if e.client is not None else None)
+        for command, action in zip(commands, actions):
+            command.on_trigger(action)
+
         @self.slider.on_update
         def _(_) -> None:
             self.goto(self.order[int(self.slider.value)] if self.order else 0, from_slider=True)
