@@ -127,6 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     from pnlviz.app.cli import add_export_parser, add_serve_parser
     from pnlviz.calib.cli import add_calibrate_parser
+    from pnlviz.detect.cli import add_detect_parser
     from pnlviz.labels.cli import add_labels_parser
     from pnlviz.metrics.cli import add_eval_parser
     from pnlviz.synth.cli import add_synth_parser
@@ -134,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_serve_parser(sub)
     add_synth_parser(sub)
     add_labels_parser(sub)
+    add_detect_parser(sub)
     add_calibrate_parser(sub)
     add_eval_parser(sub)
     add_export_parser(sub)

@@ -1,0 +1,75 @@
+"""``pnlviz detect``: keypoint and line-extremity detection over a dataset, written as a PnLCalib
+2D prediction zip that ``pnlviz calibrate --detections`` (and PnLCalib's own code) reads."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+
+def add_detect_parser(sub) -> None:
+    from pnlviz.cli import parse_size
+
+    p = sub.add_parser("detect", help="keypoint + line-extremity detection (torch, CPU) -> prediction zip",
+                       description="Run PnLCalib-compatible networks on every image of a dataset and write a "
+                                   "PnLCalib 2D prediction zip. The published architecture takes 16-21 s per frame "
+                                   "per network at 960x540 on a 2-core CPU.")
+    p.add_argument("--data", required=True, type=Path, help="dataset folder or zip with images")
+    p.add_argument("--out", required=True, type=Path, help="output prediction zip")
+    p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint (e.g. PnLCalib's SV_kp)")
+    p.add_argument("--weights-lines", type=Path, help="line network checkpoint (e.g. PnLCalib's SV_lines)")
+    p.add_argument("--input-size", type=parse_size, default=(960, 540), help="network input size (default 960x540)")
+    p.add_argument("--kp-threshold", type=float, default=0.1, help="keypoint heatmap threshold (default 0.1)")
+    p.add_argument("--line-threshold", type=float, default=0.1, help="line heatmap threshold (default 0.1)")
+    p.add_argument("--batch", type=int, default=1, help="frames per forward pass")
+    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: all cores)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=run_detect)
+
+
+def run_detect(args) -> int:
+    import os
+
+    import torch
+    from tqdm import tqdm
+
+    from pnlviz.data import DataError, open_dataset, write_predictions
+    from pnlviz.detect.checkpoint import CheckpointError
+    from pnlviz.detect.run import Detector, NoModelError
+
+    torch.set_num_threads(args.threads or os.cpu_count() or 1)
+    try:
+        det = Detector.from_weights(args.weights_kp, args.weights_lines, input_size=args.input_size,
+                                    kp_threshold=args.kp_threshold, line_threshold=args.line_threshold)
+    except (NoModelError, CheckpointError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    ds = open_dataset(args.data)
+    stems = [s for s in ds.stems if ds.frame(s).has_image]
+    if not stems:
+        print(f"{args.data}: no images to detect on", file=sys.stderr)
+        return 1
+    preds, skipped = {}, []
+    t0 = time.perf_counter()
+    bar = tqdm(total=len(stems), desc="detect", unit="frame", disable=args.no_progress or None)
+    for i in range(0, len(stems), max(1, args.batch)):
+        batch, images = [], []
+        for stem in stems[i:i + max(1, args.batch)]:
+            try:
+                images.append(ds.image(stem))
+                batch.append(stem)
+            except DataError as exc:
+                skipped.append(str(exc))
+        if images:
+            for stem, p in zip(batch, det.detect(images)):
+                preds[stem] = p
+        bar.update(len(stems[i:i + max(1, args.batch)]))
+    bar.close()
+    write_predictions(args.out, preds)
+    dt = time.perf_counter() - t0
+    print(f"detected {len(preds)}/{len(stems)} frames in {dt:.1f} s ({1e3 * dt / max(1, len(stems)):.0f} ms/frame) "
+          f"-> {args.out}")
+    for line in skipped:
+        print(f"  skipped: {line}", file=sys.stderr)
+    return 0

@@ -1,0 +1,74 @@
+"""Inference: frames -> PnLCalib networks -> heatmaps -> detections (PnLCalib 2D prediction format).
+
+The published networks take RGB in [0, 1] at 960x540 and answer at half resolution; frames of
+another size are resized to ``input_size`` first (detections are normalised, so they do not
+depend on it). torch is imported here only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from pnlviz.data.predictions import Predictions
+from pnlviz.detect.checkpoint import load_checkpoint
+from pnlviz.detect.hrnet import PnLCalibNet, keypoint_net, line_net
+from pnlviz.detect.peaks import extract_predictions
+
+DEFAULT_INPUT_SIZE = (960, 540)
+
+
+class NoModelError(ValueError):
+    """No weights were given and no default model is installed."""
+
+
+@dataclass
+class Detector:
+    """The keypoint and line networks (either may be absent) and the peak extraction settings."""
+
+    kp_net: PnLCalibNet | None
+    line_net: PnLCalibNet | None
+    input_size: tuple[int, int] = DEFAULT_INPUT_SIZE
+    kp_threshold: float = 0.1
+    line_threshold: float = 0.1
+
+    @classmethod
+    def from_weights(cls, weights_kp: Path | None, weights_lines: Path | None, **kw) -> "Detector":
+        if weights_kp is None and weights_lines is None:
+            raise NoModelError("no detector weights: pass --weights-kp and/or --weights-lines (PnLCalib's SV_kp / "
+                               "SV_lines checkpoints load as they are); the light default model of issue #5 is not "
+                               "trained yet")
+        kp = line = None
+        if weights_kp is not None:
+            kp = load_checkpoint(keypoint_net(), weights_kp).eval()
+        if weights_lines is not None:
+            line = load_checkpoint(line_net(), weights_lines).eval()
+        return cls(kp, line, **kw)
+
+    def _tensor(self, images_bgr: list[np.ndarray]) -> torch.Tensor:
+        W, H = self.input_size
+        batch = [cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA if img.shape[1] > W else cv2.INTER_LINEAR)
+                 [:, :, ::-1].astype(np.float32) / 255.0 for img in images_bgr]
+        return torch.from_numpy(np.stack(batch)).permute(0, 3, 1, 2).contiguous()
+
+    @torch.inference_mode()
+    def heatmaps(self, images_bgr: list[np.ndarray]) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(B, 58, H/2, W/2) keypoint and (B, 24, H/2, W/2) line heatmaps of a batch."""
+        x = self._tensor(images_bgr)
+        kp = self.kp_net(x).numpy() if self.kp_net is not None else None
+        lines = self.line_net(x).numpy() if self.line_net is not None else None
+        return kp, lines
+
+    def detect(self, images_bgr: list[np.ndarray]) -> list[Predictions]:
+        """Detections of a batch of BGR frames, normalised (x_px = x W) for each frame's own size."""
+        kp, lines = self.heatmaps(images_bgr)
+        out = []
+        for b, img in enumerate(images_bgr):
+            out.append(extract_predictions(None if kp is None else kp[b], None if lines is None else lines[b],
+                                           self.input_size, kp_threshold=self.kp_threshold,
+                                           line_threshold=self.line_threshold))
+        return out
