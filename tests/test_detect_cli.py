@@ -56,3 +56,21 @@ def test_no_weights_and_wrong_weights_are_clear_errors(frames, tmp_path, capsys)
                  str(tmp_path / "lines.pt"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "head.0.3.weight" in err and "Traceback" not in err
+
+
+def test_the_app_runs_the_detector_on_demand(frames, tmp_path):
+    from pnlviz.app.state import AppState
+    from pnlviz.detect.hrnet import keypoint_net, line_net
+    from pnlviz.detect.run import Detector
+
+    torch.manual_seed(0)
+    det = Detector(keypoint_net().eval(), line_net().eval(), input_size=(224, 128), kp_threshold=0.0)
+    st = AppState(frames, edits=tmp_path / "edits", detector=det)
+    assert st.source == "both" and st.needs_detection("00000")
+    before = st.view("00000")
+    assert before.detections is None
+    st.run_detector("00000")
+    assert not st.needs_detection("00000")
+    after = st.view("00000")
+    assert after.detections is not None and len(after.detections.keypoints) == 57
+    assert after.observations is not None and after.observations.n_keypoints > 0

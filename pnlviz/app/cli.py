@@ -17,6 +17,8 @@ def add_serve_parser(sub) -> None:
     p.add_argument("--data", type=Path, help="dataset folder or zip (default: the bundled sample)")
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip")
     p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
+    p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint: detect in the app (background)")
+    p.add_argument("--weights-lines", type=Path, help="line network checkpoint: detect in the app (background)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=int, default=8080)
     p.add_argument("--size", type=parse_size, default=(960, 540), help="image size for frames without an image")
@@ -29,7 +31,17 @@ def run_serve(args) -> int:
     from pnlviz.app.state import AppState
 
     data = args.data or EXAMPLES_DIR / "sample"
-    state = AppState(data, detections=args.detections, edits=args.edits, size=args.size)
+    detector = None
+    if args.weights_kp or args.weights_lines:
+        from pnlviz.detect.checkpoint import CheckpointError
+        from pnlviz.detect.run import Detector
+
+        try:
+            detector = Detector.from_weights(args.weights_kp, args.weights_lines)
+        except CheckpointError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    state = AppState(data, detections=args.detections, edits=args.edits, size=args.size, detector=detector)
     app = PnlvizApp(state, host=args.host, port=args.port)
     print(f"pnlviz: {data} ({len(state.stems)} frames), edits in {state.edits.root}")
     print(f"pnlviz: open {app.url}", flush=True)

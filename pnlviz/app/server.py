@@ -103,6 +103,7 @@ class PnlvizApp:
         self._lock = threading.RLock()
         self._frustum = self._rays = None
         self._handles: list = []
+        self._detecting: set[str] = set()
         self._shown_camera = None
         self.last_recalibration_ms = 0.0
         self._add_pitch()
@@ -387,10 +388,32 @@ class PnlvizApp:
                 self.slider.value = self.order.index(index)
             self.show()
 
+    def _detect_in_background(self, stem: str) -> None:
+        """Run the detector on a frame off the GUI thread, then refresh if it is still shown."""
+        if stem in self._detecting:
+            return
+        self._detecting.add(stem)
+
+        def work():
+            try:
+                self.background.content = f"detecting on {stem} (published networks: ~20 s on 2 cores)..."
+                self.state.run_detector(stem)
+                self.background.content = f"detections ready for {stem}"
+                if self.state.stem == stem:
+                    self.show()
+            except Exception as exc:  # shown, never fatal
+                self.background.content = f"detection failed on {stem}: {exc}"
+            finally:
+                self._detecting.discard(stem)
+
+        threading.Thread(target=work, daemon=True).start()
+
     def show(self) -> FrameView:
         """Recompute (or fetch from the cache) the current frame and push it to every client."""
         with self._lock:
             st = self.state
+            if st.needs_detection(st.stem):
+                self._detect_in_background(st.stem)
             view = st.view()
             image = render(view, st.image(view.stem), self.layers)
             with self.server.atomic():

@@ -177,12 +177,18 @@ class AppState:
     """Dataset + settings + calibration cache + edits. Thread-safe for the server's callbacks."""
 
     def __init__(self, data: Path, *, detections: Path | None = None, edits: Path | None = None,
-                 size: tuple[int, int] = EVAL_SIZE):
+                 size: tuple[int, int] = EVAL_SIZE, detector=None):
         self.data = Path(data)
         self.ds = open_dataset(self.data)
         if not len(self.ds):
             raise DataError(str(self.data), "no frames (expected <stem>.jpg / <stem>.json files)")
         self.predictions = read_predictions(detections) if detections else None
+        #: a pnlviz.detect.run.Detector run on demand (in the background by the server) for frames
+        #: without detections in the zip; its results join ``detected``
+        self.detector = detector
+        self.detected: dict[str, object] = {}
+        if detector is not None and self.predictions is None:
+            self.predictions = {}
         self.edits = EditsStore(edits or default_edits_dir(self.data))
         self.size = size
         self.stems = list(self.ds.stems)
@@ -230,6 +236,28 @@ class AppState:
         if edit is not None:
             return parse_annotation(edit, f"{self.edits.frames / stem}.json")
         return self.ds.annotation(stem)
+
+    def detections_for(self, stem: str):
+        """The frame's detections: from the prediction zip, else from the detector if it ran."""
+        if self.predictions is None:
+            return None
+        return self.predictions.get(stem) or self.detected.get(stem)
+
+    def needs_detection(self, stem: str) -> bool:
+        return (self.detector is not None and self.ds.frame(stem).has_image and stem not in self.detected
+                and stem not in (self.predictions or {}))
+
+    def run_detector(self, stem: str) -> None:
+        """Detect on one frame (slow with the published networks: seconds); cached."""
+        img = self.image(stem)
+        if img is None:
+            return
+        pred = self.detector.detect([img])[0]
+        with self._lock:
+            self.detected[stem] = pred
+            # views computed before the detections existed are stale
+            for key in [k for k in self._cache if k[0] == stem]:
+                del self._cache[key]
 
     def image(self, stem: str | None = None) -> np.ndarray | None:
         """The frame's pixels (BGR), decoded on demand; a few recent ones are kept."""
@@ -284,7 +312,7 @@ class AppState:
         if result.ok and ann:
             fr = evaluate_frame(result.camera.scaled(*EVAL_SIZE), ann)
             jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
-        detections = self.predictions.get(stem) if self.predictions is not None else None
+        detections = self.detections_for(stem)
         return FrameView(stem, idx, image, size, ann, obs, result, jac, ms=1e3 * (time.perf_counter() - t0),
                          reference_camera=ref, detections=detections)
 
@@ -299,7 +327,7 @@ class AppState:
 
     def _base_observations(self, stem: str, ann, size) -> Observations | None:
         W, H = size
-        pred = self.predictions.get(stem) if self.predictions is not None else None
+        pred = self.detections_for(stem)
         use_ann = ann is not None and self.source in ("annotation", "both")
         use_det = pred is not None and self.source in ("detections", "both")
         if use_ann and use_det:

@@ -354,12 +354,13 @@ class CameraProblem:
                 i = 6
                 f2, k12 = f, k1
                 if p.refine_focal:
-                    f2 = f * np.exp(delta[i])
+                    f2 = f * np.exp(np.clip(delta[i], -1.0, 1.0))  # at most a factor e per step
                     i += 1
                 if p.refine_k1:
                     k12 = float(np.clip(k1 + delta[i], -p.k1_bound, p.k1_bound))
-                r2 = self._eval(R2, C2, f2, k12)
-                cost2 = robust_cost(r2)
+                with np.errstate(all="ignore"):  # a wild trial step is simply rejected below
+                    r2 = self._eval(R2, C2, f2, k12)
+                    cost2 = robust_cost(r2)
                 if np.isfinite(cost2) and cost2 <= cost:
                     break
                 lam *= 4
