@@ -156,6 +156,9 @@ class PnlvizApp:
             cols = np.array([SET_BGR.get(str(s), (255, 255, 255))[::-1] for s in obs.kp_sets], np.uint8)
             self._rays = sc.add_line_segments("/rays", seg, np.repeat(cols[:, None], 2, 1), thickness=1.5,
                                               thickness_units="screen")
+        elif self._rays is not None:  # no keypoints on this frame: no rays from the previous one
+            self._rays.remove()
+            self._rays = None
         self._update_handles(view, cam)
 
     def _update_handles(self, view: FrameView, cam) -> None:
