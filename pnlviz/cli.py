@@ -128,6 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     from pnlviz.app.cli import add_export_parser, add_serve_parser
     from pnlviz.calib.cli import add_calibrate_parser
     from pnlviz.detect.cli import add_detect_parser
+    from pnlviz.detect.train_cli import add_train_parser
     from pnlviz.labels.cli import add_labels_parser
     from pnlviz.metrics.cli import add_eval_parser
     from pnlviz.synth.cli import add_synth_parser
@@ -136,6 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_synth_parser(sub)
     add_labels_parser(sub)
     add_detect_parser(sub)
+    add_train_parser(sub)
     add_calibrate_parser(sub)
     add_eval_parser(sub)
     add_export_parser(sub)
