@@ -67,7 +67,7 @@ def test_training_smoke_loss_drops_and_detector_loads(tiny_cache, tmp_path):
     cfg = TrainConfig(frames=8, size=SMOKE_SIZE, input_size=SMOKE_SIZE, epochs=25, batch_size=4, lr=3e-3,
                       lr_final=1e-3, seed=1)
     out = tmp_path / "light.pt"
-    res = train(cfg, out, progress=False, log=None, cache=tiny_cache, minutes=0.75)
+    res = train(cfg, out, progress=False, log=None, cache=tiny_cache)  # 50 steps, no time bound: load-independent
     assert len(res.history) >= 5
     first, last = res.history[0], res.history[-1]
     assert last < 0.5 * first, res.history
