@@ -45,10 +45,12 @@ def test_round_trip_save_detect_same_predictions(frames, tmp_path):
         assert got[stem].lines.keys() == exp.lines.keys()
 
 
-def test_no_weights_and_wrong_weights_are_clear_errors(frames, tmp_path, capsys):
+def test_no_weights_and_wrong_weights_are_clear_errors(frames, tmp_path, capsys, monkeypatch):
+    import pnlviz.detect.run as run
     from pnlviz.detect.checkpoint import save_checkpoint
     from pnlviz.detect.hrnet import line_net
 
+    monkeypatch.setattr(run, "DEFAULT_MODEL", tmp_path / "missing.pt")  # no default model installed
     assert main(["detect", "--data", str(frames), "--out", str(tmp_path / "p.zip"), "--no-progress"]) == 2
     assert "no detector weights" in capsys.readouterr().err
     save_checkpoint(line_net(), tmp_path / "lines.pt")

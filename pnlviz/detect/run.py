@@ -20,6 +20,8 @@ from pnlviz.detect.hrnet import PnLCalibNet, keypoint_net, line_net
 from pnlviz.detect.peaks import extract_predictions
 
 DEFAULT_INPUT_SIZE = (960, 540)
+#: The light default model (``pnlviz train``), used when no weights are given.
+DEFAULT_MODEL = Path(__file__).resolve().parents[2] / "assets" / "models" / "light.pt"
 
 
 class NoModelError(ValueError):
@@ -38,10 +40,17 @@ class Detector:
 
     @classmethod
     def from_weights(cls, weights_kp: Path | None, weights_lines: Path | None, **kw) -> "Detector":
+        """The published networks from their checkpoints, or with no weights the light default
+        model shipped in ``assets/models/light.pt`` (one file, both heads)."""
         if weights_kp is None and weights_lines is None:
-            raise NoModelError("no detector weights: pass --weights-kp and/or --weights-lines (PnLCalib's SV_kp / "
-                               "SV_lines checkpoints load as they are); the light default model of issue #5 is not "
-                               "trained yet")
+            if not DEFAULT_MODEL.exists():
+                raise NoModelError(f"no detector weights: pass --weights-kp and/or --weights-lines (PnLCalib's "
+                                   f"SV_kp / SV_lines load as they are), or train the default model with "
+                                   f"`pnlviz train` ({DEFAULT_MODEL} is missing)")
+            from pnlviz.detect.light import light_detector
+
+            kw.pop("input_size", None)  # the light model runs at the size it was trained at
+            return light_detector(DEFAULT_MODEL, **kw)
         kp = line = None
         if weights_kp is not None:
             kp = load_checkpoint(keypoint_net(), weights_kp).eval()

@@ -1,0 +1,110 @@
+"""The light default model on held-out synthetic frames and on the two real frames.
+
+    python benchmarks/eval_light.py [--frames 60] [--seed 777] [--out docs/detections_real.jpg]
+
+1. ``pnlviz synth`` frames with a seed not used in training (the training recipe uses data seed 5);
+2. detections with the default model -> PCK@5 / PCK@10 px (keypoints 1-57 of the label generator
+   that lie in the image, at 960x540) and line-extremity accuracy;
+3. ``pnlviz calibrate --detections`` -> JaC / CR / FS under the official metric against the
+   synthetic annotations (required: FS@5 >= 0.70);
+4. a picture of what it finds on ../shared/data/frames (messi_sample.png, wc14_trainval_16.jpg).
+Prints the figures and the peak memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from pnlviz.calib.calibrate import calibrate
+from pnlviz.calib.inputs import observations_from_predictions
+from pnlviz.data import open_dataset
+from pnlviz.detect.run import DEFAULT_MODEL, Detector
+from pnlviz.labels import keypoints_from_annotation
+from pnlviz.metrics.soccernet import evaluate_dataset
+from pnlviz.synth import generate
+from pnlviz.viz import caption, contact_sheet
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def draw_detections(img: np.ndarray, pred) -> np.ndarray:
+    from pnlviz.app.overlay import SET_BGR
+    from pnlviz.field import load_field_model
+
+    model = load_field_model()
+    H, W = img.shape[:2]
+    out = img.copy()
+    for x1, y1, p1, x2, y2, p2 in pred.lines_px(W, H).values():
+        cv2.line(out, (int(x1), int(y1)), (int(x2), int(y2)), (255, 255, 255), 2, cv2.LINE_AA)
+    for kid, (x, y, p) in pred.keypoints_px(W, H).items():
+        col = SET_BGR.get(model.keypoints[kid].group, (255, 255, 255))
+        cv2.circle(out, (int(x), int(y)), 6, (0, 0, 0), 2, cv2.LINE_AA)
+        cv2.circle(out, (int(x), int(y)), 5, col, -1, cv2.LINE_AA)
+        cv2.putText(out, str(kid), (int(x) + 7, int(y) - 7), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(out, str(kid), (int(x) + 7, int(y) - 7), cv2.FONT_HERSHEY_SIMPLEX, 0.5, col, 1, cv2.LINE_AA)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--seed", type=int, default=777)
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "detections_real.jpg")
+    ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
+    args = ap.parse_args()
+    det = Detector.from_weights(None, None)
+    print(f"model: {DEFAULT_MODEL} (input {det.input_size[0]}x{det.input_size[1]})")
+    tmp = Path(tempfile.mkdtemp())
+    data = tmp / "heldout"
+    generate(data, args.frames, args.seed, progress=False)
+    ds = open_dataset(data)
+    hits5 = hits10 = total = 0
+    cams, times = {}, []
+    for stem in ds.stems:
+        img = ds.image(stem)
+        t0 = time.perf_counter()
+        pred = det.detect([img])[0]
+        times.append(time.perf_counter() - t0)
+        H, W = img.shape[:2]
+        labels = keypoints_from_annotation(ds.annotation(stem), W, H)
+        found = pred.keypoints_px(W, H)
+        for kid, lab in labels.keypoints.items():
+            if kid > 57 or not lab.visible:
+                continue
+            total += 1
+            if kid in found:
+                d = np.hypot(found[kid][0] - lab.x, found[kid][1] - lab.y)
+                hits5 += d <= 5
+                hits10 += d <= 10
+        res = calibrate(observations_from_predictions(pred, 960, 540))
+        if res.ok:
+            cams[stem] = res.camera
+    s = evaluate_dataset(data, cams, progress=False)
+    print(f"held-out synthetic frames: {len(ds.stems)} (seed {args.seed}), detection {1e3 * np.median(times):.0f} ms/frame")
+    print(f"PCK@5 {hits5 / max(total, 1):.3f}  PCK@10 {hits10 / max(total, 1):.3f}  ({total} visible keypoints)")
+    print(f"calibration from detections: JaC@5 {s.jac(5):.3f} @10 {s.jac(10):.3f} @20 {s.jac(20):.3f} "
+          f"CR {s.completeness:.3f} FS@5 {s.final_score:.3f}")
+    tiles = []
+    for name in ("messi_sample.png", "wc14_trainval_16.jpg"):
+        img = cv2.imread(str(args.shared / "data" / "frames" / name))
+        if img is None:
+            continue
+        pred = det.detect([img])[0]
+        tiles.append(caption(draw_detections(img, pred), f"{name}: {len(pred.keypoints)} keypoints, "
+                                                          f"{len(pred.lines)} lines"))
+    if tiles:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(args.out), contact_sheet(tiles, columns=2, tile_width=800), [cv2.IMWRITE_JPEG_QUALITY, 85])
+        print(f"wrote {args.out}")
+    print(f"peak memory (ru_maxrss): {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+
+
+if __name__ == "__main__":
+    main()
