@@ -12,7 +12,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-DEFAULT_OUT = Path("assets/models/light.pt")
+#: where ``pnlviz detect`` and the app look for the default model (the repository's assets)
+DEFAULT_OUT = Path(__file__).resolve().parents[2] / "assets" / "models" / "light.pt"
 
 
 def add_train_parser(subparsers) -> None:
