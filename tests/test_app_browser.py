@@ -54,6 +54,13 @@ def wait_for_text(page, text, timeout=20.0):
     page.get_by_text(text).first.wait_for(timeout=timeout * 1000)
 
 
+def wait_until(condition, timeout=10.0):
+    """Poll the server-side state until ``condition()`` holds (or time runs out)."""
+    deadline = time.time() + timeout
+    while time.time() < deadline and not condition():
+        time.sleep(0.2)
+
+
 def test_navigate_toggle_pnl_review_and_restart(data, browser):
     app = start(data)
     try:
@@ -141,23 +148,17 @@ def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
         page.keyboard.down("Shift")
         page.mouse.click(box["x"] + box["width"] / 2 + (u - W / 2) * s, box["y"] + v * s)
         page.keyboard.up("Shift")
-        deadline = time.time() + 10
-        while time.time() < deadline and "keypoints" not in app.state.edits.get(stem):
-            time.sleep(0.2)
+        wait_until(lambda: "keypoints" in app.state.edits.get(stem))
         placed = app.state.edits.get(stem)["keypoints"][kid]
         np.testing.assert_allclose(placed, [u, v], atol=3.0)
         moved = app.state.view().result.camera.C.copy()
         assert not np.allclose(moved, before)
         # undo restores the calibration, redo brings the edit back
         page.get_by_role("button", name="undo").click()
-        deadline = time.time() + 10
-        while time.time() < deadline and app.state.edits.get(stem).get("keypoints"):
-            time.sleep(0.2)
+        wait_until(lambda: not app.state.edits.get(stem).get("keypoints"))
         np.testing.assert_allclose(app.state.view().result.camera.C, before)
         page.get_by_role("button", name="redo").click()
-        deadline = time.time() + 10
-        while time.time() < deadline and not app.state.edits.get(stem).get("keypoints"):
-            time.sleep(0.2)
+        wait_until(lambda: bool(app.state.edits.get(stem).get("keypoints")))
         # export downloads a zip whose labels hold the edit
         with page.expect_download(timeout=30000) as dl:
             page.get_by_role("button", name="export labels (zip)").click()
@@ -209,9 +210,7 @@ def test_dragging_a_keypoint_handle_recalibrates_and_autosaves(data, browser):
         page.mouse.move(x0 + 0.5 * arrow + 10, y0, steps=5)
         page.mouse.move(x0 + 0.5 * arrow + 20, y0, steps=5)
         page.mouse.up()
-        deadline = time.time() + 10
-        while time.time() < deadline and not app.state.edits.get(stem).get("keypoints"):
-            time.sleep(0.2)
+        wait_until(lambda: bool(app.state.edits.get(stem).get("keypoints")))
         moved = app.state.edits.get(stem)["keypoints"][kid]
         np.testing.assert_allclose(moved, [u + 20 / s, v], atol=2.0)  # along x only, by the pulled amount
         assert not np.allclose(app.state.view().result.camera.C, before)
@@ -233,9 +232,7 @@ def test_keyboard_shortcuts_n_p_and_ctrl_z(data, browser):
         wait_for_text(page, "00000 (1/3)")
         app.state.hide_keypoint(int(app.state.view().observations.kp_ids[0]))
         page.keyboard.press("Control+z")
-        deadline = time.time() + 10
-        while time.time() < deadline and app.state.edits.get("00000").get("keypoints"):
-            time.sleep(0.2)
+        wait_until(lambda: not app.state.edits.get("00000").get("keypoints"))
         assert not app.state.edits.get("00000").get("keypoints")
         page.close()
     finally:
