@@ -54,6 +54,14 @@ def wait_for_text(page, text, timeout=20.0):
     page.get_by_text(text).first.wait_for(timeout=timeout * 1000)
 
 
+def open_page(browser, app, text):
+    """A page on the app, once ``text`` shows in the panels."""
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    page.goto(app.url)
+    wait_for_text(page, text)
+    return page
+
+
 def wait_until(condition, timeout=10.0):
     """Poll the server-side state until ``condition()`` holds (or time runs out)."""
     deadline = time.time() + timeout
@@ -64,9 +72,7 @@ def wait_until(condition, timeout=10.0):
 def test_navigate_toggle_pnl_review_and_restart(data, browser):
     app = start(data)
     try:
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.goto(app.url)
-        wait_for_text(page, "00000 (1/3)")
+        page = open_page(browser, app, "00000 (1/3)")
         wait_for_text(page, "focal")
         # navigation
         page.get_by_role("button", name="next").click()
@@ -87,9 +93,7 @@ def test_navigate_toggle_pnl_review_and_restart(data, browser):
     # a new server on the same data restores the review
     app = start(data)
     try:
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.goto(app.url)
-        wait_for_text(page, "1 of 3 reviewed")
+        page = open_page(browser, app, "1 of 3 reviewed")
         page.get_by_role("button", name="next").click()
         wait_for_text(page, "review: accepted")
         page.close()
@@ -102,9 +106,7 @@ def test_camera_view_puts_the_browser_camera_on_the_estimated_pose(data, browser
 
     app = start(data)
     try:
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.goto(app.url)
-        wait_for_text(page, "focal")
+        page = open_page(browser, app, "focal")
         page.get_by_role("button", name="camera view").click()
         cam = app.state.view().result.camera
         deadline = time.time() + 10
@@ -128,9 +130,7 @@ def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
     stem = app.state.stem
     before = app.state.view().result.camera.C.copy()
     try:
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.goto(app.url)
-        wait_for_text(page, "focal")
+        page = open_page(browser, app, "focal")
         obs = app.state.view().observations
         # a keypoint in the left half of the frame (the panel covers the right), nudged by 6 px:
         # still an inlier, so the calibration follows it
@@ -188,9 +188,7 @@ def test_dragging_a_keypoint_handle_recalibrates_and_autosaves(data, browser):
     stem = app.state.stem
     before = app.state.view().result.camera.C.copy()
     try:
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.goto(app.url)
-        wait_for_text(page, "focal")
+        page = open_page(browser, app, "focal")
         app.handles_mode.value = "keypoints"
         app.show()
         page.get_by_role("button", name="camera view").click()
@@ -222,9 +220,7 @@ def test_dragging_a_keypoint_handle_recalibrates_and_autosaves(data, browser):
 def test_keyboard_shortcuts_n_p_and_ctrl_z(data, browser):
     app = start(data)
     try:
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.goto(app.url)
-        wait_for_text(page, "00000 (1/3)")
+        page = open_page(browser, app, "00000 (1/3)")
         page.mouse.click(300, 300)  # focus the scene, not a text box
         page.keyboard.press("n")
         wait_for_text(page, "00001 (2/3)")

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .atomic import atomic_open, atomic_write_text
-from .errors import DataError, member_source
+from .errors import DataError, member_source, read_zip_member
 from .jsonio import as_number, describe, dumps, parse_json_bytes, read_file_bytes, to_jsonable
 from .layout import is_junk, sort_stems, split_member
 
@@ -146,10 +146,7 @@ def read_camera_zip(path: str | os.PathLike) -> dict[str, dict]:
         for stem in sort_stems(found):
             member = found[stem]
             source = member_source(zpath, member)
-            try:
-                data = zf.read(member)
-            except (OSError, zipfile.BadZipFile, EOFError) as e:
-                raise DataError(source, f"cannot read zip member: {e}") from None
+            data = read_zip_member(zf, member, source)
             out[stem] = parse_camera_bytes(data, source)
     return out
 

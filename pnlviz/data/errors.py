@@ -39,3 +39,13 @@ class DataError(ValueError):
 def member_source(zip_path: str | os.PathLike, member: str) -> str:
     """The ``<file>`` part of an error message for ``member`` inside ``zip_path``."""
     return f"{os.fspath(zip_path)}:{member}"
+
+
+def read_zip_member(zf, member: str, source: str) -> bytes:
+    """The bytes of a zip member; a damaged member is a :class:`DataError` naming ``source``."""
+    import zipfile
+
+    try:
+        return zf.read(member)
+    except (OSError, zipfile.BadZipFile, EOFError) as e:
+        raise DataError(source, f"cannot read zip member: {e}") from None

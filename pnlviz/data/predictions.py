@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_open
-from .errors import DataError, member_source
+from .errors import DataError, member_source, read_zip_member
 from .jsonio import as_number, describe, dumps, parse_json_bytes, read_file_bytes
 from .layout import find_root, is_junk, natural_key, sort_stems, split_member
 
@@ -189,10 +189,7 @@ def read_predictions(path: str | os.PathLike) -> dict[str, Predictions]:
                 members[base[:-5]] = n
         for stem in sort_stems(members):
             source = member_source(zpath, members[stem])
-            try:
-                data = zf.read(members[stem])
-            except (OSError, zipfile.BadZipFile, EOFError) as e:
-                raise DataError(source, f"cannot read zip member: {e}") from None
+            data = read_zip_member(zf, members[stem], source)
             out[stem] = parse_predictions_bytes(data, source)
     return out
 
