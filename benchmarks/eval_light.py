@@ -1,6 +1,6 @@
 """The light default model on held-out synthetic frames and on the two real frames.
 
-    python benchmarks/eval_light.py [--frames 60] [--seed 777] [--out docs/detections_real.jpg]
+    python benchmarks/eval_light.py [--frames 60] [--seed 777] [--out docs/detections_real.jpg] [--weights F]
 
 1. ``pnlviz synth`` frames with a seed not used in training (the training recipe uses data seed 5);
 2. detections with the default model -> PCK@5 / PCK@10 px (keypoints 1-57 of the label generator
@@ -25,6 +25,7 @@ import numpy as np
 from pnlviz.calib.calibrate import calibrate
 from pnlviz.calib.inputs import observations_from_predictions
 from pnlviz.data import open_dataset
+from pnlviz.detect.light import light_detector
 from pnlviz.detect.run import DEFAULT_MODEL, Detector
 from pnlviz.labels import keypoints_from_annotation
 from pnlviz.metrics.soccernet import evaluate_dataset
@@ -58,9 +59,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=777)
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "detections_real.jpg")
     ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
+    ap.add_argument("--weights", type=Path, default=None, help=f"a LightNet checkpoint (default {DEFAULT_MODEL})")
     args = ap.parse_args()
-    det = Detector.from_weights(None, None)
-    print(f"model: {DEFAULT_MODEL} (input {det.input_size[0]}x{det.input_size[1]})")
+    det = light_detector(args.weights) if args.weights else Detector.from_weights(None, None)
+    print(f"model: {args.weights or DEFAULT_MODEL} (input {det.input_size[0]}x{det.input_size[1]})")
     tmp = Path(tempfile.mkdtemp())
     data = tmp / "heldout"
     generate(data, args.frames, args.seed, progress=False)

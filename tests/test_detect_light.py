@@ -9,7 +9,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from pnlviz.detect.light import LightNet, light_detector, load_light, read_sidecar  # noqa: E402
-from pnlviz.detect.train import FrameCache, TrainConfig, load_config, masked_mse, train  # noqa: E402
+from pnlviz.detect.train import (FrameCache, TrainConfig, focal_heatmap_loss, load_config, loss_fn,  # noqa: E402
+                                 masked_mse, peak_pixels, train)
 
 SMOKE_SIZE = (160, 96)
 
@@ -49,6 +50,51 @@ def test_masked_mse_ignores_masked_channels():
     target[0, 1] = 5.0
     assert float(masked_mse(pred, target, torch.tensor([[1.0, 0.0, 1.0]]))) == 0.0
     assert float(masked_mse(pred, target, torch.tensor([[1.0, 1.0, 1.0]]))) == pytest.approx(25.0 / 3)
+
+
+def _gaussian(h, w, cx, cy, sigma=2.0):
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32),
+                            indexing="ij")
+    return torch.exp(-((xs - cx) ** 2 + (ys - cy) ** 2) / (2 * sigma ** 2))
+
+
+def test_peak_pixels_one_per_gaussian_nearest_the_centre():
+    t = torch.zeros(1, 2, 20, 30)
+    t[0, 0] = _gaussian(20, 30, 7.3, 5.6)
+    t[0, 1] = torch.maximum(_gaussian(20, 30, 3.0, 4.0), _gaussian(20, 30, 25.8, 14.2))  # a line: two ends
+    pos = peak_pixels(t)
+    assert torch.nonzero(pos[0, 0]).tolist() == [[6, 7]]
+    assert torch.nonzero(pos[0, 1]).tolist() == [[4, 3], [14, 26]]
+    assert not peak_pixels(t * 0.4).any()  # a Gaussian cut off by the border below the floor: no positive
+
+
+def test_focal_loss_prefers_peaks_to_an_empty_map_unlike_the_mse():
+    """The reason for the focal loss: with the MSE an empty map is nearly optimal (the first full
+    training collapsed to it); the focal loss ranks the empty map far below the right peaks."""
+    t = torch.zeros(1, 1, 40, 60)
+    t[0, 0] = _gaussian(40, 60, 20.0, 15.0)
+    mask, pos = torch.ones(1, 1), peak_pixels(t)
+
+    def focal(p):
+        p = p.clamp(1e-6, 1 - 1e-6)
+        return float(focal_heatmap_loss(p, p.log(), (1 - p).log(), t, mask, pos))
+
+    empty, peaked, wrong = torch.full_like(t, 0.01), t.clone(), torch.roll(t, 10, dims=3)
+    assert focal(peaked) < 0.1 * focal(empty)  # 0.31 vs 4.5
+    assert focal(wrong) > focal(empty)  # a peak in the wrong place is worse than none
+    assert float(masked_mse(empty, t, mask)) < 0.01  # the MSE barely sees the difference
+    # masked channels contribute nothing
+    assert focal_heatmap_loss(t * 0 + 0.5, torch.full_like(t, np.log(0.5)), torch.full_like(t, np.log(0.5)), t,
+                              torch.zeros(1, 1), pos) == 0
+
+
+def test_loss_fn_kinds(tiny_cache):
+    net = LightNet()
+    x, kp, kpm, ln, lnm = (torch.from_numpy(np.stack(c)) for c in zip(*[tiny_cache.sample(0, SMOKE_SIZE)]))
+    focal, mse = loss_fn(net, x, kp, kpm, ln, lnm), loss_fn(net, x, kp, kpm, ln, lnm, "mse")
+    assert torch.isfinite(focal) and focal > 1.0 and 0 < mse < 0.1  # untrained: p ~ 0.01 everywhere
+    with pytest.raises(ValueError, match="unknown loss"):
+        loss_fn(net, x, kp, kpm, ln, lnm, "l1")
 
 
 def test_targets_have_the_network_output_size(tiny_cache):
@@ -152,3 +198,36 @@ def test_training_is_deterministic_and_cache_folder_round_trips(tmp_path):
     assert ra.history == rb.history
     sa, sb = torch.load(tmp_path / "a.pt", weights_only=True), torch.load(tmp_path / "b.pt", weights_only=True)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
+
+
+def test_shipped_default_model_on_unseen_synthetic_frames():
+    """assets/models/light.pt (what `pnlviz detect` and the app use without weights) on frames of a
+    data seed it was not trained on (training: seed 5): keypoints land within 5 px of the truth and
+    the cameras calibrated from its detections pass the official metric. The full figures (60
+    frames) come from benchmarks/eval_light.py; this checks that the shipped file still works."""
+    from pnlviz.calib.calibrate import calibrate
+    from pnlviz.calib.inputs import observations_from_predictions
+    from pnlviz.detect.run import DEFAULT_MODEL, Detector
+    from pnlviz.detect.train import _annotation_arrays
+    from pnlviz.labels import keypoints_from_annotation
+    from pnlviz.metrics.soccernet import evaluate_frame
+    from pnlviz.synth import make_frame
+
+    assert DEFAULT_MODEL.is_file() and read_sidecar(DEFAULT_MODEL)["config"]["data"]["seed"] != 777
+    det = Detector.from_weights(None, None)
+    assert det.input_size == (480, 272) and det.kp_threshold == 0.3 and det.line_threshold == 0.6
+    hits = total = 0
+    accuracies = []
+    for i in range(6):
+        f = make_frame(i, 777, (960, 540))
+        pred = det.detect([f["image"]])[0]
+        ann = _annotation_arrays(f["annotation"])
+        truth = {k: (lab.x, lab.y) for k, lab in keypoints_from_annotation(ann, 960, 540).keypoints.items()
+                 if k <= 57 and lab.visible}
+        found = pred.keypoints_px(960, 540)
+        total += len(truth)
+        hits += sum(k in found and np.hypot(found[k][0] - x, found[k][1] - y) <= 5 for k, (x, y) in truth.items())
+        res = calibrate(observations_from_predictions(pred, 960, 540))
+        accuracies.append(evaluate_frame(res.camera, ann, (5,)).accuracy(5) if res.ok else 0.0)
+    assert total > 50 and hits / total >= 0.4, (hits, total)
+    assert np.mean(accuracies) >= 0.5 and sum(a > 0 for a in accuracies) >= 5, accuracies  # measured 0.71, 6 of 6

@@ -35,6 +35,7 @@ cached result when it is called with the same tensor (as ``Detector.heatmaps`` d
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import torch
@@ -111,6 +112,12 @@ class LightNet(nn.Module):
         self.decoder = nn.ModuleList(_Up(ins[i], skips[i], d[i], DECODER_BLOCKS[i]) for i in range(len(d)))
         self.kp_head = _head(d[-1], KEYPOINT_CHANNELS)
         self.line_head = _head(d[-1], LINE_CHANNELS)
+        # Start from "nothing here" (each keypoint and line channel at p ~ 0.01), as focal-loss
+        # detectors do: the loss then spends its first steps finding peaks, not emptying the maps.
+        with torch.no_grad():
+            self.kp_head[-1].bias.zero_()
+            self.kp_head[-1].bias[-1] = math.log(100.0 - (KEYPOINT_CHANNELS - 1))  # softmax: 1 / (43 + 57)
+            self.line_head[-1].bias.fill_(-math.log(99.0))
         self._cache: tuple | None = None
 
     # -- forward -----------------------------------------------------------------------------
@@ -206,9 +213,16 @@ def load_light(weights: str | Path) -> LightNet:
 
 
 def light_detector(weights: str | Path, input_size: tuple[int, int] | None = None, **kw):
-    """A ``Detector`` on a light checkpoint; ``input_size`` defaults to the size it was trained at
-    (from the sidecar), else 960x540."""
+    """A ``Detector`` on a light checkpoint. ``input_size`` defaults to the size it was trained at
+    and the peak thresholds (``kp_threshold``, ``line_threshold``) to the ones tuned for it, both
+    from the sidecar (else 960x540 and the Detector's defaults)."""
+    side = read_sidecar(weights)
     if input_size is None:
-        size = read_sidecar(weights).get("input_size")
+        size = side.get("input_size")
         input_size = tuple(int(v) for v in size) if size else (960, 540)
+    for name in ("kp_threshold", "line_threshold"):
+        if kw.get(name) is None:
+            kw.pop(name, None)
+            if name in side:
+                kw[name] = float(side[name])
     return load_light(weights).detector(input_size, **kw)
