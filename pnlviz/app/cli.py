@@ -19,6 +19,8 @@ def add_serve_parser(sub) -> None:
     p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint: detect in the app (background)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint: detect in the app (background)")
+    p.add_argument("--no-detect", action="store_true",
+                   help="do not run the light default detector (assets/models/light.pt) on frames without detections")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=int, default=8080)
     p.add_argument("--size", type=parse_size, default=(960, 540), help="image size for frames without an image")
@@ -31,7 +33,7 @@ def run_serve(args) -> int:
     from pnlviz.app.state import AppState
 
     data = args.data or EXAMPLES_DIR / "sample"
-    detector = None
+    detector, source = None, None
     if args.weights_kp or args.weights_lines:
         from pnlviz.detect.checkpoint import CheckpointError
         from pnlviz.detect.run import Detector
@@ -41,7 +43,13 @@ def run_serve(args) -> int:
         except CheckpointError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
-    state = AppState(data, detections=args.detections, edits=args.edits, size=args.size, detector=detector)
+    elif not args.no_detect and not args.detections:
+        from pnlviz.detect.run import DEFAULT_MODEL, Detector
+
+        if DEFAULT_MODEL.is_file():  # the light default model: detections to look at, annotations still lead
+            detector, source = Detector.from_weights(None, None), "annotation"
+    state = AppState(data, detections=args.detections, edits=args.edits, size=args.size, detector=detector,
+                     source=source)
     app = PnlvizApp(state, host=args.host, port=args.port)
     print(f"pnlviz: {data} ({len(state.stems)} frames), edits in {state.edits.root}")
     print(f"pnlviz: open {app.url}", flush=True)

@@ -177,7 +177,7 @@ class AppState:
     """Dataset + settings + calibration cache + edits. Thread-safe for the server's callbacks."""
 
     def __init__(self, data: Path, *, detections: Path | None = None, edits: Path | None = None,
-                 size: tuple[int, int] = EVAL_SIZE, detector=None):
+                 size: tuple[int, int] = EVAL_SIZE, detector=None, source: str | None = None):
         self.data = Path(data)
         self.ds = open_dataset(self.data)
         if not len(self.ds):
@@ -196,7 +196,8 @@ class AppState:
         self.index = next((i for i, s in enumerate(self.stems) if self.ds.frame(s).has_image), 0)
         self.pnl = True
         self.alpha = 0.6
-        self.source = "annotation" if self.predictions is None else "both"
+        # the keypoint source: "both" once there are detections, unless the caller says otherwise
+        self.source = source or ("annotation" if self.predictions is None else "both")
         self._cache: dict[tuple, FrameView] = {}
         self._lock = threading.RLock()
         self._images: dict[str, np.ndarray | None] = {}

@@ -20,8 +20,10 @@ def add_detect_parser(sub) -> None:
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint (e.g. PnLCalib's SV_kp)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint (e.g. PnLCalib's SV_lines)")
     p.add_argument("--input-size", type=parse_size, default=(960, 540), help="network input size (default 960x540)")
-    p.add_argument("--kp-threshold", type=float, default=0.1, help="keypoint heatmap threshold (default 0.1)")
-    p.add_argument("--line-threshold", type=float, default=0.1, help="line heatmap threshold (default 0.1)")
+    p.add_argument("--kp-threshold", type=float, default=None,
+                   help="keypoint heatmap threshold (default 0.1; the light default model: its own, 0.3)")
+    p.add_argument("--line-threshold", type=float, default=None,
+                   help="line heatmap threshold (default 0.1; the light default model: its own, 0.6)")
     p.add_argument("--batch", type=int, default=1, help="frames per forward pass")
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: all cores)")
     p.add_argument("--no-progress", action="store_true")
@@ -40,8 +42,9 @@ def run_detect(args) -> int:
 
     torch.set_num_threads(args.threads or os.cpu_count() or 1)
     try:
-        det = Detector.from_weights(args.weights_kp, args.weights_lines, input_size=args.input_size,
-                                    kp_threshold=args.kp_threshold, line_threshold=args.line_threshold)
+        thresholds = {k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
+                      if v is not None}
+        det = Detector.from_weights(args.weights_kp, args.weights_lines, input_size=args.input_size, **thresholds)
     except (NoModelError, CheckpointError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
