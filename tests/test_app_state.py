@@ -229,3 +229,33 @@ def test_annotation_and_detections_merge_with_the_side_convention_resolved(share
         st.source = source
         scores[source] = np.mean([st.view(s).jac.get(5, 0.0) for s in st.stems[:20]])
     assert scores["both"] >= max(scores["annotation"], scores["detections"]) - 0.02
+
+
+def test_light_default_detector_calibrates_frames_without_annotation(tmp_path):
+    """`pnlviz serve` with no weights runs the shipped light model: annotated frames keep the
+    annotation as their source; a frame with only an image is calibrated from its detections."""
+    import cv2
+
+    from pnlviz.detect.run import Detector
+    from pnlviz.synth import make_frame
+
+    data = tmp_path / "set"
+    data.mkdir()
+    f = make_frame(2, 777, (960, 540))  # a seed the model was not trained on
+    cv2.imwrite(str(data / "solo.jpg"), f["image"])
+    shutil.copy(EXAMPLES_DIR / "sample" / "00000.jpg", data / "00000.jpg")
+    shutil.copy(EXAMPLES_DIR / "sample" / "00000.json", data / "00000.json")
+    st = AppState(data, detector=Detector.from_weights(None, None), source="annotation", edits=tmp_path / "e")
+    assert st.source == "annotation" and st.needs_detection("solo")
+    before = st.view("solo")
+    assert before.result is None or not before.result.ok  # nothing to calibrate from yet
+    annotated = st.view("00000").observations
+    for stem in ("solo", "00000"):
+        st.run_detector(stem)
+    assert not st.needs_detection("solo") and len(st.detections_for("solo").keypoints) >= 4
+    view = st.view("solo")
+    assert view.result is not None and view.result.ok and view.annotation is None
+    # the annotated frame's observations are still the annotation's alone
+    again = st.view("00000").observations
+    assert np.array_equal(again.kp_ids, annotated.kp_ids) and np.array_equal(again.kp_xy, annotated.kp_xy)
+    assert again.lines.keys() == annotated.lines.keys()

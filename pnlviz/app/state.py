@@ -330,7 +330,8 @@ class AppState:
         W, H = size
         pred = self.detections_for(stem)
         use_ann = ann is not None and self.source in ("annotation", "both")
-        use_det = pred is not None and self.source in ("detections", "both")
+        # a frame with no annotation falls back to its detections under "annotation"
+        use_det = pred is not None and (self.source in ("detections", "both") or not use_ann)
         if use_ann and use_det:
             return merge_observations(observations_from_annotation(ann, W, H)[0],
                                       observations_from_predictions(pred, W, H))
