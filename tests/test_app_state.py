@@ -259,3 +259,22 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path):
     again = st.view("00000").observations
     assert np.array_equal(again.kp_ids, annotated.kp_ids) and np.array_equal(again.kp_xy, annotated.kp_xy)
     assert again.lines.keys() == annotated.lines.keys()
+
+
+def test_serve_start_up_defers_torch_to_the_first_detection():
+    """`pnlviz serve` hands the app a DeferredDetector: torch and the weights load on the first
+    detection (in the app's background thread), not before the URL is printed."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np\n"
+        "from pnlviz.detect.default import DEFAULT_MODEL, DeferredDetector\n"
+        "d = DeferredDetector()\n"
+        "assert DEFAULT_MODEL.is_file() and 'torch' not in sys.modules and not d.loaded\n"
+        "pred = d.detect([np.zeros((96, 160, 3), np.uint8)])[0]\n"
+        "assert d.loaded and 'torch' in sys.modules and len(pred.keypoints) < 57\n"
+        "print('ok')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr

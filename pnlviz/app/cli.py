@@ -44,10 +44,10 @@ def run_serve(args) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return 2
     elif not args.no_detect and not args.detections:
-        from pnlviz.detect.run import DEFAULT_MODEL, Detector
+        from pnlviz.detect.default import DEFAULT_MODEL, DeferredDetector
 
         if DEFAULT_MODEL.is_file():  # the light default model: detections to look at, annotations still lead
-            detector, source = Detector.from_weights(None, None), "annotation"
+            detector, source = DeferredDetector(), "annotation"
     state = AppState(data, detections=args.detections, edits=args.edits, size=args.size, detector=detector,
                      source=source)
     app = PnlvizApp(state, host=args.host, port=args.port)

@@ -16,12 +16,11 @@ import torch
 
 from pnlviz.data.predictions import Predictions
 from pnlviz.detect.checkpoint import load_checkpoint
+from pnlviz.detect.default import DEFAULT_MODEL  # noqa: F401 (re-exported; from_weights reads it here)
 from pnlviz.detect.hrnet import PnLCalibNet, keypoint_net, line_net
 from pnlviz.detect.peaks import extract_predictions
 
 DEFAULT_INPUT_SIZE = (960, 540)
-#: The light default model (``pnlviz train``), used when no weights are given.
-DEFAULT_MODEL = Path(__file__).resolve().parents[2] / "assets" / "models" / "light.pt"
 
 
 class NoModelError(ValueError):
