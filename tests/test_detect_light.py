@@ -231,3 +231,26 @@ def test_shipped_default_model_on_unseen_synthetic_frames():
         accuracies.append(evaluate_frame(res.camera, ann, (5,)).accuracy(5) if res.ok else 0.0)
     assert total > 50 and hits / total >= 0.4, (hits, total)
     assert np.mean(accuracies) >= 0.5 and sum(a > 0 for a in accuracies) >= 5, accuracies  # measured 0.71, 6 of 6
+
+
+def test_flipped_sample_mirrors_image_and_targets(tiny_cache):
+    """A flipped training sample is the mirrored image with targets whose peaks sit at the
+    mirrored places under the reflected ids (e.g. 'left' side-line ends become 'right')."""
+    from pnlviz.field.names import CLASS_TO_LINE_ID, FLIP_X, LINE_ID_TO_CLASS
+
+    x, kp, kpm, ln, lnm = tiny_cache.sample(1, SMOKE_SIZE)
+    xf, kpf, kpmf, lnf, lnmf = tiny_cache.sample(1, SMOKE_SIZE, flip=True)
+    assert np.array_equal(xf, x[:, :, ::-1])
+    w = kp.shape[2]
+    line_map = {i - 1: CLASS_TO_LINE_ID[FLIP_X[c]] - 1 for i, c in LINE_ID_TO_CLASS.items()}
+    peaks = 0
+    for c in range(23):
+        if ln[c].max() < 0.9:
+            continue
+        mirrored = ln[c][:, ::-1]
+        g = lnf[line_map[c]]
+        # the extremity Gaussians land on the mirrored pixels (within the half-resolution rounding)
+        ys, xs = np.nonzero(mirrored >= 0.9)
+        assert all(g[max(0, y - 1):y + 2, max(0, x - 1):x + 2].max() >= 0.6 for y, x in zip(ys, xs))
+        peaks += 1
+    assert peaks >= 1 and kpmf.sum() == kpm.sum() and w == kpf.shape[2]

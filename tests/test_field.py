@@ -165,3 +165,17 @@ def test_meshes_sit_where_the_model_says():
     assert g.bounds[0, 2] == pytest.approx(-2.44 - 0.06, abs=1e-3)  # crossbar top (z down)
     n = nets_mesh()
     assert n.bounds[0, 0] == pytest.approx(-54.5) and n.bounds[1, 0] == pytest.approx(54.5)
+
+
+def test_flip_table_is_the_reflection_in_the_halfway_line():
+    """FLIP_X renames every class to the one at its place after x -> -x (checked on the model's
+    sampled geometry), is its own inverse, and covers every class the evaluator knows."""
+    from pnlviz.field.names import ALL_CLASSES, FLIP_X
+
+    assert set(FLIP_X) == set(ALL_CLASSES) and all(FLIP_X[FLIP_X[c]] == c for c in FLIP_X)
+    samples = MODEL.sample_polylines()
+    for name in MODEL_CLASSES:
+        reflected = samples[name] * np.array([-1.0, 1.0, 1.0])
+        target = samples[FLIP_X[name]]
+        gaps = np.linalg.norm(reflected[:, None, :] - target[None, :, :], axis=2).min(axis=1)
+        assert gaps.max() < 0.15, name  # within the sampling step: the same curve

@@ -515,3 +515,28 @@ def test_cli_size_option_and_refuses_to_overwrite_annotations(tmp_path, capsys):
     assert run_labels(_cli_args(["--data", str(data), "--out", str(data)])) == 2
     with pytest.raises(SystemExit):
         _cli_args(["--data", str(data), "--out", "x", "--size", "big"])
+
+
+def test_flipped_annotation_gives_the_reflected_labels(exact_frames):
+    """The labels of a horizontally flipped image (flip_annotation) are the labels of the original
+    at x -> W - 1 - x, each under the id of the keypoint reflected in the halfway line."""
+    from pnlviz.labels import flip_annotation
+
+    ids = MODEL.keypoint_ids
+    xyz = MODEL.keypoint_xyz(ids)
+    reflected = {}
+    for k, p in zip(ids, xyz):
+        d = np.linalg.norm(xyz - p * np.array([-1.0, 1.0, 1.0]), axis=1)
+        reflected[int(k)] = int(ids[np.argmin(d)])
+        assert d.min() < 1e-6
+    compared = 0
+    for cam, ann, labels in exact_frames[:12]:
+        flipped = keypoints_from_annotation(flip_annotation(ann), W, H)
+        assert set(flipped.keypoints) == {reflected[k] for k in labels.keypoints}
+        for k, lab in labels.keypoints.items():
+            f = flipped.keypoints[reflected[k]]
+            assert f.xy == pytest.approx([W - 1 - lab.x, lab.y], abs=0.05)
+            compared += 1
+    assert compared > 100
+    as_dicts = flip_annotation({"Goal left post left": [{"x": 0.25, "y": 0.5}]})
+    assert as_dicts == {"Goal right post right": [{"x": 0.75, "y": 0.5}]}

@@ -16,8 +16,10 @@ network it collapsed to empty maps (peaks <= 0.035 after a full 58-minute run), 
 map is already within 1e-3 of its optimum.
 
 Optimiser: Adam with a cosine learning-rate decay over the planned steps. Augmentations: colour
-jitter (brightness, contrast, saturation, per-channel gain) and Gaussian noise; no geometric
-augmentation (a horizontal flip would need the left/right keypoint ids swapped).
+jitter (brightness, contrast, saturation, per-channel gain) and Gaussian noise; optionally a
+horizontal flip (``augment.flip``: its probability), whose targets come from the flipped
+annotation (:func:`pnlviz.labels.flip_annotation`: x -> 1 - x and left/right class names swapped,
+so the keypoint and line ids follow).
 
 Everything is seeded (``seed`` for the weights, the shuffling and the augmentations;
 ``data.seed`` for the frames). The checkpoint is a plain state dict written with
@@ -158,17 +160,21 @@ class FrameCache:
     def __len__(self) -> int:
         return len(self.images)
 
-    def sample(self, i: int, input_size: tuple[int, int], sigma: float = 2.0):
+    def sample(self, i: int, input_size: tuple[int, int], sigma: float = 2.0, flip: bool = False):
         """(RGB float32 (3, H, W) in [0, 1], keypoints (58, h, w), kp mask (58,), lines (24, h, w),
-        line mask (24,)) at ``input_size``."""
-        from pnlviz.labels import training_targets
+        line mask (24,)) at ``input_size``; ``flip``: of the horizontally flipped frame."""
+        from pnlviz.labels import flip_annotation, training_targets
 
         W, H = input_size
         img = self.images[i]
+        annotation = self.annotations[i]
         if (img.shape[1], img.shape[0]) != (W, H):
             img = cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA if img.shape[1] > W else cv2.INTER_LINEAR)
+        if flip:
+            img = img[:, ::-1]
+            annotation = flip_annotation(annotation)
         x = np.ascontiguousarray(img[:, :, ::-1].transpose(2, 0, 1), dtype=np.float32) / 255.0
-        _, _, t = training_targets(self.annotations[i], W, H, sigma=sigma)
+        _, _, t = training_targets(annotation, W, H, sigma=sigma)
         # The network answers at ceil(H/2) x ceil(W/2); the targets are floor: pad odd sizes.
         h, w = (H + 1) // 2, (W + 1) // 2
         kp, lines = t.keypoints, t.lines
@@ -180,8 +186,9 @@ class FrameCache:
         return x, kp, t.keypoint_mask, lines, t.line_mask
 
 
-def _batch(cache: FrameCache, idx, input_size, sigma):
-    items = [cache.sample(int(i), input_size, sigma) for i in idx]
+def _batch(cache: FrameCache, idx, input_size, sigma, flips=None):
+    flips = np.zeros(len(idx), bool) if flips is None else flips
+    items = [cache.sample(int(i), input_size, sigma, bool(f)) for i, f in zip(idx, flips)]
     return [torch.from_numpy(np.stack(col)) for col in zip(*items)]
 
 
@@ -253,12 +260,15 @@ def loss_fn(net: LightNet, x, kp_t, kp_m, ln_t, ln_m, kind: str = "focal") -> to
     log_1mp = torch.log1p(-p.clamp(max=1 - 1e-6))
     kp_t, kp_m = kp_t[:, :-1], kp_m[:, :-1]
     kp_loss = focal_heatmap_loss(p, log_sm, log_1mp, kp_t, kp_m, peak_pixels(kp_t))
-    # lines: the 23 extremity channels (two peaks each) and the line-body ridge channel
-    z = ln_logits
-    pos = peak_pixels(ln_t)
-    pos[:, -1] = ln_t[:, -1] >= 0.8  # the body channel: a ridge, every pixel near its crest counts
-    ln_loss = focal_heatmap_loss(torch.sigmoid(z), torch.nn.functional.logsigmoid(z),
-                                 torch.nn.functional.logsigmoid(-z), ln_t, ln_m, pos)
+    # lines: the 23 extremity channels (two peaks each), and the line-body ridge channel as its own
+    # term. Normalised together, the body's hundreds of ridge pixels per frame outnumbered the ~2
+    # positives per extremity channel and starved those channels (issue #5: line-end peaks reached
+    # 0.29 on average, 4 % above the 0.6 threshold).
+    sig = torch.nn.functional.logsigmoid
+    z, t, m = ln_logits[:, :-1], ln_t[:, :-1], ln_m[:, :-1]
+    ln_loss = focal_heatmap_loss(torch.sigmoid(z), sig(z), sig(-z), t, m, peak_pixels(t))
+    z, t, m = ln_logits[:, -1:], ln_t[:, -1:], ln_m[:, -1:]
+    ln_loss = ln_loss + focal_heatmap_loss(torch.sigmoid(z), sig(z), sig(-z), t, m, t >= 0.8)
     return kp_loss + ln_loss
 
 
@@ -311,6 +321,7 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
     rng = np.random.default_rng(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
     budget = None if minutes is None else float(minutes) * 60.0
+    flip_p = float((config.augment or {}).get("flip", 0.0))
     history: list[float] = []
     step_times: list[float] = []
     step, stopped = 0, False
@@ -323,7 +334,9 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
         for b in range(steps_per_epoch):
             t_step = time.perf_counter()
             idx = order[b * bs:(b + 1) * bs]
-            x, kp_t, kp_m, ln_t, ln_m = _batch(cache, idx, tuple(config.input_size), config.sigma)
+            # drawn only when flipping is on, so a run without it keeps its exact shuffling
+            flips = rng.random(len(idx)) < flip_p if flip_p > 0 else None
+            x, kp_t, kp_m, ln_t, ln_m = _batch(cache, idx, tuple(config.input_size), config.sigma, flips)
             x = augment(x, config.augment or {}, gen)
             for g in opt.param_groups:
                 g["lr"] = lr_at(step)

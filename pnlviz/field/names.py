@@ -78,6 +78,41 @@ MIRROR: dict[str, str] = {
     "Line unknown": "Line unknown",
 }
 
+#: Names after the pitch is reflected in its halfway line (x -> -x): what a horizontally flipped
+#: image shows, seen by a camera on the same touchline. Left and right swap; top and bottom stay;
+#: a left goal's post at y = +3.66 ("post left") becomes the right goal's post at y = +3.66
+#: ("post right"). Unlike :data:`MIRROR` (a rotation of the pitch) this is a reflection.
+FLIP_X: dict[str, str] = {
+    "Side line top": "Side line top",
+    "Side line bottom": "Side line bottom",
+    "Side line left": "Side line right",
+    "Side line right": "Side line left",
+    "Middle line": "Middle line",
+    "Circle left": "Circle right",
+    "Circle central": "Circle central",
+    "Circle right": "Circle left",
+    "Big rect. left top": "Big rect. right top",
+    "Big rect. left bottom": "Big rect. right bottom",
+    "Big rect. left main": "Big rect. right main",
+    "Big rect. right top": "Big rect. left top",
+    "Big rect. right bottom": "Big rect. left bottom",
+    "Big rect. right main": "Big rect. left main",
+    "Small rect. left top": "Small rect. right top",
+    "Small rect. left bottom": "Small rect. right bottom",
+    "Small rect. left main": "Small rect. right main",
+    "Small rect. right top": "Small rect. left top",
+    "Small rect. right bottom": "Small rect. left bottom",
+    "Small rect. right main": "Small rect. left main",
+    "Goal left crossbar": "Goal right crossbar",
+    "Goal right crossbar": "Goal left crossbar",
+    "Goal unknown": "Goal unknown",
+    "Line unknown": "Line unknown",
+    "Goal left post left ": "Goal right post right",
+    "Goal left post right": "Goal right post left",
+    "Goal right post left": "Goal left post right",
+    "Goal right post right": "Goal left post left ",
+}
+
 _BY_STRIPPED = {name.strip(): name for name in ALL_CLASSES}
 
 

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pnlviz.field.names import MIRROR, canonical_class_name
+from pnlviz.field.names import FLIP_X, MIRROR, canonical_class_name
 
 #: A view is longitudinal when its ground viewing direction is within this angle of the long axis.
 LONGITUDINAL_MAX_DEG = 35.0
@@ -58,6 +58,23 @@ def mirror_annotation(annotation: dict) -> dict:
         out[MIRROR.get(canon, canon)] = pts
     return out
 
+
+
+def flip_annotation(annotation: dict) -> dict:
+    """The annotation of the horizontally flipped image: normalised x -> 1 - x (pixel x ->
+    W - 1 - x, the evaluator's x * (W - 1) scaling) and every class renamed by
+    :data:`pnlviz.field.FLIP_X` (the pitch reflected in its halfway line). Points are arrays
+    (N, 2) or lists of ``{"x", "y"}`` dicts, as given."""
+    out = {}
+    for name, pts in annotation.items():
+        canon = canonical_class_name(name) or name
+        if isinstance(pts, np.ndarray):
+            flipped = np.array(pts, dtype=float, copy=True)
+            flipped[:, 0] = 1.0 - flipped[:, 0]
+        else:
+            flipped = [{**p, "x": 1.0 - float(p["x"])} for p in pts]
+        out[FLIP_X.get(canon, canon)] = flipped
+    return out
 
 def viewing_azimuth_deg(homography: np.ndarray, at: np.ndarray, step: float = 10.0) -> float | None:
     """Angle (degrees, 0..180) between +x and the direction on the pitch that points "up the
