@@ -4,8 +4,10 @@
 
 1. ``pnlviz synth`` frames with a seed not used in training (the training recipe uses data seed 5);
 2. detections with the default model -> PCK@5 / PCK@10 px (keypoints 1-57 of the label generator
-   that lie in the image, at 960x540) and line-extremity accuracy;
-3. ``pnlviz calibrate --detections`` -> JaC / CR / FS under the official metric against the
+   that lie in the image, at 960x540, with the left-right disambiguation the network is trained
+   with) and line extremities: recall (a true line whose detected ends are both within 10 px of
+   its annotated extremities, either order) and precision (detected lines that are such hits);
+3. ``pnlviz calibrate --detections`` (the detection settings) -> JaC / CR / FS under the official metric against the
    synthetic annotations (required: FS@5 >= 0.70);
 4. a picture of what it finds on ../shared/data/frames (messi_sample.png, wc14_trainval_16.jpg).
 Prints the figures and the peak memory.
@@ -22,12 +24,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pnlviz.calib.calibrate import calibrate
+from pnlviz.calib.calibrate import CalibParams, calibrate
 from pnlviz.calib.inputs import observations_from_predictions
 from pnlviz.data import open_dataset
 from pnlviz.detect.light import light_detector
 from pnlviz.detect.run import DEFAULT_MODEL, Detector
-from pnlviz.labels import keypoints_from_annotation
+from pnlviz.labels import LabelParams, keypoints_from_annotation, line_extremities
 from pnlviz.metrics.soccernet import evaluate_dataset
 from pnlviz.synth import generate
 from pnlviz.viz import caption, contact_sheet
@@ -68,6 +70,7 @@ def main() -> None:
     generate(data, args.frames, args.seed, progress=False)
     ds = open_dataset(data)
     hits5 = hits10 = total = 0
+    line_hits = line_total = line_found = 0
     cams, times = {}, []
     for stem in ds.stems:
         img = ds.image(stem)
@@ -75,8 +78,18 @@ def main() -> None:
         pred = det.detect([img])[0]
         times.append(time.perf_counter() - t0)
         H, W = img.shape[:2]
-        labels = keypoints_from_annotation(ds.annotation(stem), W, H)
+        ann = ds.annotation(stem)
+        labels = keypoints_from_annotation(ann, W, H, LabelParams(lr_disambiguation=True))
         found = pred.keypoints_px(W, H)
+        lines = pred.lines_px(W, H)
+        line_found += len(lines)
+        for lid, ext in line_extremities(ann, W, H, mirror=labels.mirrored).items():
+            line_total += 1
+            if lid in lines:
+                a, b = np.array(lines[lid][0:2]), np.array(lines[lid][3:5])
+                err = min(max(np.linalg.norm(a - ext.p1), np.linalg.norm(b - ext.p2)),
+                          max(np.linalg.norm(a - ext.p2), np.linalg.norm(b - ext.p1)))
+                line_hits += err <= 10
         for kid, lab in labels.keypoints.items():
             if kid > 57 or not lab.visible:
                 continue
@@ -85,12 +98,14 @@ def main() -> None:
                 d = np.hypot(found[kid][0] - lab.x, found[kid][1] - lab.y)
                 hits5 += d <= 5
                 hits10 += d <= 10
-        res = calibrate(observations_from_predictions(pred, 960, 540))
+        res = calibrate(observations_from_predictions(pred, 960, 540), CalibParams().for_detections())
         if res.ok:
             cams[stem] = res.camera
     s = evaluate_dataset(data, cams, progress=False)
     print(f"held-out synthetic frames: {len(ds.stems)} (seed {args.seed}), detection {1e3 * np.median(times):.0f} ms/frame")
     print(f"PCK@5 {hits5 / max(total, 1):.3f}  PCK@10 {hits10 / max(total, 1):.3f}  ({total} visible keypoints)")
+    print(f"line extremities within 10 px: recall {line_hits / max(line_total, 1):.3f} ({line_total} true lines), "
+          f"precision {line_hits / max(line_found, 1):.3f} ({line_found} detected)")
     print(f"calibration from detections: JaC@5 {s.jac(5):.3f} @10 {s.jac(10):.3f} @20 {s.jac(20):.3f} "
           f"CR {s.completeness:.3f} FS@5 {s.final_score:.3f}")
     tiles = []

@@ -10,6 +10,7 @@ import pytest
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app.overlay import Layers, render
 from pnlviz.app.state import AppState, default_edits_dir
+from pnlviz.calib.calibrate import CalibParams
 
 
 @pytest.fixture()
@@ -253,8 +254,26 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path):
     for stem in ("solo", "00000"):
         st.run_detector(stem)
     assert not st.needs_detection("solo") and len(st.detections_for("solo").keypoints) >= 4
+    import pnlviz.app.state as state_module
+
+    used = {}
+    real = state_module.calibrate
+
+    def recording(obs, params):
+        used[st.stem] = params
+        return real(obs, params)
+
+    state_module.calibrate = recording
+    try:
+        for stem in ("solo", "00000"):
+            st.go(st.stems.index(stem))
+            view = st.view(stem)
+    finally:
+        state_module.calibrate = real
     view = st.view("solo")
     assert view.result is not None and view.result.ok and view.annotation is None
+    # detections get the detection settings (no k1, robust final loss), annotations the default
+    assert used["solo"] == CalibParams().updated(st.detector.calibration) and used["00000"] == CalibParams()
     # the annotated frame's observations are still the annotation's alone
     again = st.view("00000").observations
     assert np.array_equal(again.kp_ids, annotated.kp_ids) and np.array_equal(again.kp_xy, annotated.kp_xy)

@@ -74,3 +74,24 @@ def test_parse_size():
     assert parse_size("960x540") == (960, 540)
     with pytest.raises(Exception, match="WIDTHxHEIGHT"):
         parse_size("960")
+
+
+def test_calibration_settings_defaults_then_detector_then_flags():
+    """frame_params: the defaults; the settings recorded with the detections on top; the command
+    line flags last (--no-k1, --no-pnl win)."""
+    import argparse
+
+    from pnlviz.calib.calibrate import CalibParams
+    from pnlviz.calib.cli import add_calibrate_parser, frame_params
+
+    ap = argparse.ArgumentParser()
+    add_calibrate_parser(ap.add_subparsers())
+    base = ["calibrate", "--data", "d", "--out", "c.zip"]
+    assert frame_params(ap.parse_args(base)) == CalibParams()
+    settings = {"final_loss": "soft_l1", "ransac_thresholds": [5, 10]}
+    got = frame_params(ap.parse_args(base + ["--alpha", "0.3"]), settings)
+    assert got == CalibParams(alpha=0.3, final_loss="soft_l1", ransac_thresholds=(5, 10)) and got.refine_k1
+    assert not frame_params(ap.parse_args(base + ["--no-k1"]), settings).refine_k1
+    assert not frame_params(ap.parse_args(base + ["--no-pnl"]), {"pnl": True}).pnl
+    with pytest.raises(ValueError, match="unknown calibration setting"):
+        frame_params(ap.parse_args(base), {"k_one": 0.1})

@@ -1,5 +1,6 @@
 """pnlviz detect: weights saved -> command line -> the same detections as in process; clear errors."""
 
+import json
 import shutil
 
 import pytest
@@ -8,7 +9,7 @@ torch = pytest.importorskip("torch")
 
 from pnlviz import EXAMPLES_DIR  # noqa: E402
 from pnlviz.cli import main  # noqa: E402
-from pnlviz.data import open_dataset, read_predictions  # noqa: E402
+from pnlviz.data import open_dataset, predictions_info_path, read_predictions, read_predictions_info  # noqa: E402
 
 
 @pytest.fixture()
@@ -43,6 +44,9 @@ def test_round_trip_save_detect_same_predictions(frames, tmp_path):
         for k, v in exp.keypoints.items():
             assert got[stem].keypoints[k] == pytest.approx(v, abs=1e-4)  # torch thread counts reorder sums
         assert got[stem].lines.keys() == exp.lines.keys()
+    info = read_predictions_info(out)  # the provenance beside the zip: published networks, no overrides
+    assert info["detector"] == "PnLCalib networks" and info["calibration"] == {} and info["frames"] == 2
+    assert info["weights"] == {"kp": str(tmp_path / "kp.pt"), "lines": str(tmp_path / "lines.pt")}
 
 
 def test_no_weights_and_wrong_weights_are_clear_errors(frames, tmp_path, capsys, monkeypatch):
@@ -76,3 +80,27 @@ def test_the_app_runs_the_detector_on_demand(frames, tmp_path):
     after = st.view("00000")
     assert after.detections is not None and len(after.detections.keypoints) == 57
     assert after.observations is not None and after.observations.n_keypoints > 0
+
+
+def test_detections_carry_the_detectors_calibration_settings(frames, tmp_path, capsys):
+    """`pnlviz detect` with the light model records its calibration settings beside the zip
+    (preds.json); `pnlviz calibrate --detections` applies them and says so; a bad file is a
+    one-line error."""
+    from pnlviz.detect.light import read_sidecar
+    from pnlviz.detect.run import DEFAULT_MODEL
+
+    out = tmp_path / "preds.zip"
+    assert main(["detect", "--data", str(frames), "--out", str(out), "--no-progress"]) == 0
+    info = read_predictions_info(out)
+    settings = read_sidecar(DEFAULT_MODEL)["calibration"]
+    assert info["detector"] == "light default model" and info["calibration"] == settings and settings
+    capsys.readouterr()
+    calibrate = ["calibrate", "--data", str(frames), "--detections", str(out), "--out", str(tmp_path / "c.zip"),
+                 "--no-progress"]
+    assert main(calibrate) == 0
+    said = capsys.readouterr().out
+    assert "preds.json" in said and all(f"{k}={v}" in said for k, v in settings.items())
+    predictions_info_path(out).write_text(json.dumps({"calibration": {"k_one": 0.1}}))
+    assert main(calibrate) == 2
+    err = capsys.readouterr().err
+    assert "unknown calibration setting" in err and "Traceback" not in err

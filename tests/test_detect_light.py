@@ -3,6 +3,7 @@
 
 import json
 
+import cv2
 import numpy as np
 import pytest
 
@@ -125,6 +126,8 @@ def test_training_smoke_loss_drops_and_detector_loads(tiny_cache, tmp_path):
     assert all(isinstance(v, torch.Tensor) for v in torch.load(out, weights_only=True).values())
     det = light_detector(out, kp_threshold=0.0)
     assert det.input_size == SMOKE_SIZE
+    assert det.refine == side["peak_refine"] == cfg.peak_refine and det.centre_aligned_resize
+    assert light_detector(out, refine="raw").refine == "raw"
     preds = det.detect([tiny_cache.images[0], tiny_cache.images[1]])
     assert len(preds) == 2 and len(preds[0].keypoints) > 0
     with torch.inference_mode():
@@ -205,7 +208,7 @@ def test_shipped_default_model_on_unseen_synthetic_frames():
     data seed it was not trained on (training: seed 5): keypoints land within 5 px of the truth and
     the cameras calibrated from its detections pass the official metric. The full figures (60
     frames) come from benchmarks/eval_light.py; this checks that the shipped file still works."""
-    from pnlviz.calib.calibrate import calibrate
+    from pnlviz.calib.calibrate import CalibParams, calibrate
     from pnlviz.calib.inputs import observations_from_predictions
     from pnlviz.detect.run import DEFAULT_MODEL, Detector
     from pnlviz.detect.train import _annotation_arrays
@@ -215,7 +218,8 @@ def test_shipped_default_model_on_unseen_synthetic_frames():
 
     assert DEFAULT_MODEL.is_file() and read_sidecar(DEFAULT_MODEL)["config"]["data"]["seed"] != 777
     det = Detector.from_weights(None, None)
-    assert det.input_size == (480, 272) and det.kp_threshold == 0.3 and det.line_threshold == 0.6
+    assert det.input_size == (480, 272) and det.kp_threshold == 0.3 and det.line_threshold == 0.4
+    assert det.refine == "raw" and det.centre_aligned_resize
     hits = total = 0
     accuracies = []
     for i in range(6):
@@ -227,7 +231,7 @@ def test_shipped_default_model_on_unseen_synthetic_frames():
         found = pred.keypoints_px(960, 540)
         total += len(truth)
         hits += sum(k in found and np.hypot(found[k][0] - x, found[k][1] - y) <= 5 for k, (x, y) in truth.items())
-        res = calibrate(observations_from_predictions(pred, 960, 540))
+        res = calibrate(observations_from_predictions(pred, 960, 540), CalibParams().updated(det.calibration))
         accuracies.append(evaluate_frame(res.camera, ann, (5,)).accuracy(5) if res.ok else 0.0)
     assert total > 50 and hits / total >= 0.4, (hits, total)
     assert np.mean(accuracies) >= 0.5 and sum(a > 0 for a in accuracies) >= 5, accuracies  # measured 0.71, 6 of 6
@@ -254,3 +258,28 @@ def test_flipped_sample_mirrors_image_and_targets(tiny_cache):
         assert all(g[max(0, y - 1):y + 2, max(0, x - 1):x + 2].max() >= 0.6 for y, x in zip(ys, xs))
         peaks += 1
     assert peaks >= 1 and kpmf.sum() == kpm.sum() and w == kpf.shape[2]
+
+
+def test_detections_map_back_through_cv2_resize_exactly():
+    """A blob drawn at a sub-pixel frame position, resized like the Detector does (cv2.resize,
+    pixel centres aligned), found on the input grid and mapped back by
+    undo_centre_aligned_resize lands where it was drawn; PnLCalib's plain x / s misses by
+    (1/s - 1) / 2 px (0.5 px at 960 -> 480)."""
+    from pnlviz.data.predictions import Predictions
+    from pnlviz.detect.run import undo_centre_aligned_resize
+
+    Wf, Hf, Wi, Hi = 960, 540, 480, 272
+    yy, xx = np.mgrid[0:Hf, 0:Wf].astype(np.float64)
+    for X, Y in ((123.3, 77.8), (700.6, 401.2), (480.0, 270.0)):
+        frame = np.exp(-((xx - X) ** 2 + (yy - Y) ** 2) / (2 * 3.0 ** 2))
+        small = cv2.resize(frame, (Wi, Hi), interpolation=cv2.INTER_AREA)
+        w = small * (small > 1e-3)
+        ys, xs = np.mgrid[0:Hi, 0:Wi]
+        cx, cy = (w * xs).sum() / w.sum(), (w * ys).sum() / w.sum()  # centroid on the input grid
+        pred = Predictions(keypoints={1: (cx / Wi, cy / Hi, 1.0)}, lines={2: (cx / Wi, cy / Hi, 1.0, 0.5, 0.5, 1.0)})
+        back = undo_centre_aligned_resize(pred, (Wi, Hi), (Wf, Hf))
+        x, y, _ = back.keypoints_px(Wf, Hf)[1]
+        assert (x, y) == pytest.approx((X, Y), abs=0.02)
+        assert back.lines_px(Wf, Hf)[2][:2] == pytest.approx((X, Y), abs=0.02)
+        assert abs(cx / Wi * Wf - X) > 0.4  # the plain scaling is off by ~0.5 px
+    assert undo_centre_aligned_resize(pred, (Wi, Hi), (Wi, Hi)) is pred

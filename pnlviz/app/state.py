@@ -22,7 +22,7 @@ import numpy as np
 from pnlviz.calib.calibrate import CalibParams, CalibrationResult, calibrate
 from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions
 from pnlviz.calib.observations import Observations
-from pnlviz.data import DataError, atomic_write_text, open_dataset, read_predictions
+from pnlviz.data import DataError, atomic_write_text, open_dataset, read_predictions, read_predictions_info
 from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.geometry.camera import Camera
 
@@ -189,6 +189,11 @@ class AppState:
         self.detected: dict[str, object] = {}
         if detector is not None and self.predictions is None:
             self.predictions = {}
+        #: calibration settings for frames calibrated from detections alone: recorded beside the
+        #: prediction zip by ``pnlviz detect``, else the detector's own (the light model's sidecar)
+        self.detection_settings = dict((read_predictions_info(detections).get("calibration") if detections else None)
+                                       or getattr(detector, "calibration", None) or {})
+        CalibParams().updated(self.detection_settings)  # unknown names fail here, not on the first frame
         self.edits = EditsStore(edits or default_edits_dir(self.data))
         self.size = size
         self.stems = list(self.ds.stems)
@@ -209,8 +214,11 @@ class AppState:
     def stem(self) -> str:
         return self.stems[self.index]
 
-    def params(self) -> CalibParams:
+    def params(self, detections_only: bool = False) -> CalibParams:
+        """The calibration settings; ``detections_only``: the keypoints all come from a detector."""
         p = CalibParams(alpha=self.alpha)
+        if detections_only:
+            p = p.updated(self.detection_settings)
         if not self.pnl:
             p = CalibParams(pnl=False, refine_focal=False, refine_k1=False)
         return p
@@ -301,12 +309,12 @@ class AppState:
             ref = Camera.from_soccernet(ref).scaled(*size) if ref is not None else None
         except DataError as exc:
             return FrameView(stem, idx, False, self.size, None, None, None, error=str(exc))
-        obs = self._observations(stem, ann, size)
+        obs, origin = self._observations(stem, ann, size)
         if obs is None:
             return FrameView(stem, idx, image, size, ann, None, None, error="nothing to calibrate from",
                              ms=1e3 * (time.perf_counter() - t0), reference_camera=ref)
         try:
-            result = calibrate(obs, self.params())
+            result = calibrate(obs, self.params(detections_only=origin == "detections"))
         except Exception as exc:  # shown in the panel; the rest of the dataset keeps working
             return FrameView(stem, idx, image, size, ann, obs, None, error=f"internal error: {exc}", reference_camera=ref)
         jac = {}
@@ -317,16 +325,18 @@ class AppState:
         return FrameView(stem, idx, image, size, ann, obs, result, jac, ms=1e3 * (time.perf_counter() - t0),
                          reference_camera=ref, detections=detections)
 
-    def _observations(self, stem: str, ann, size) -> Observations | None:
-        obs = self._base_observations(stem, ann, size)
+    def _observations(self, stem: str, ann, size) -> tuple[Observations | None, str | None]:
+        """The observations to calibrate from and where they came from ("annotation",
+        "detections", "both", "edits" when only dragged keypoints exist, or None)."""
+        obs, origin = self._base_observations(stem, ann, size)
         overrides = self.edits.get(stem).get("keypoints")
         if not overrides:
-            return obs
+            return obs, origin
         if obs is None:
-            obs = Observations(*size)
-        return apply_keypoint_edits(obs, overrides)
+            obs, origin = Observations(*size), "edits"
+        return apply_keypoint_edits(obs, overrides), origin
 
-    def _base_observations(self, stem: str, ann, size) -> Observations | None:
+    def _base_observations(self, stem: str, ann, size) -> tuple[Observations | None, str | None]:
         W, H = size
         pred = self.detections_for(stem)
         use_ann = ann is not None and self.source in ("annotation", "both")
@@ -334,12 +344,12 @@ class AppState:
         use_det = pred is not None and (self.source in ("detections", "both") or not use_ann)
         if use_ann and use_det:
             return merge_observations(observations_from_annotation(ann, W, H)[0],
-                                      observations_from_predictions(pred, W, H))
+                                      observations_from_predictions(pred, W, H)), "both"
         if use_ann:
-            return observations_from_annotation(ann, W, H)[0]
+            return observations_from_annotation(ann, W, H)[0], "annotation"
         if use_det:
-            return observations_from_predictions(pred, W, H)
-        return None
+            return observations_from_predictions(pred, W, H), "detections"
+        return None, None
 
     # ------------------------------------------------------------------ review and edits
     def set_review(self, status: str | None, stem: str | None = None) -> None:

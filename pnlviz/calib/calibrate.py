@@ -28,7 +28,8 @@ image width.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -68,6 +69,19 @@ class CalibParams:
 
     def px(self, value: float, width: float) -> float:
         return value * width / 960.0
+
+    def updated(self, overrides: Mapping[str, object] | None) -> "CalibParams":
+        """These settings with ``overrides`` (field name -> value) applied; unknown names are a
+        ValueError naming the known ones. A detector states the settings its detections calibrate
+        best with this way (the light model: no k1, a soft-L1 final loss; see
+        ``assets/models/light.json``), and they travel with its predictions."""
+        if not overrides:
+            return self
+        known = set(self.__dataclass_fields__)
+        unknown = sorted(set(overrides) - known)
+        if unknown:
+            raise ValueError(f"unknown calibration setting(s) {unknown}; known: {sorted(known)}")
+        return replace(self, **{k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()})  # JSON lists
 
 
 @dataclass(eq=False)  # compared by identity: fields hold arrays
@@ -389,8 +403,12 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
     result.camera = cam
     result.point_residuals = point_residuals(cam, obs)
     result.line_residuals = line_residuals(cam, obs, model)
-    inl = np.isin(obs.kp_ids, best.inliers)
-    rms = float(np.sqrt(np.mean(np.array([result.point_residuals[int(i)] for i in obs.kp_ids[inl]]) ** 2)))
+    inlier_residuals = [result.point_residuals[int(i)] for i in obs.kp_ids[np.isin(obs.kp_ids, best.inliers)]]
+    if not inlier_residuals:
+        result.camera = None
+        result.failure = "no keypoint agrees with the camera (no inliers)"
+        return result
+    rms = float(np.sqrt(np.mean(np.square(inlier_residuals))))
     if not rms <= params.px(params.max_rms, obs.width):
         result.camera = None
         result.failure = f"residual above the limit (inlier RMS {rms:.1f} px > {params.px(params.max_rms, obs.width):.1f})"

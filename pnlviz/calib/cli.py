@@ -24,7 +24,9 @@ def add_calibrate_parser(sub) -> None:
                                    "(960x540, SoccerNet format) into a flat zip. Without --detections the "
                                    "cameras come from the frames' line annotations.")
     p.add_argument("--data", required=True, type=Path, help="dataset folder or zip")
-    p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip (default: use the annotations)")
+    p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip (default: use the annotations); "
+                                                   "the calibration settings recorded beside it by pnlviz detect "
+                                                   "(preds.json) apply")
     p.add_argument("--out", required=True, type=Path, help="output camera zip")
     p.add_argument("--no-pnl", action="store_true", help="skip the PnL refinement (and the focal/k1 refinement)")
     p.add_argument("--alpha", type=float, default=0.6, help="PnL weight of lines vs points (default 0.6)")
@@ -37,10 +39,14 @@ def add_calibrate_parser(sub) -> None:
     p.set_defaults(func=run_calibrate)
 
 
-def frame_params(args):
+def frame_params(args, detection_settings: dict | None = None):
+    """The calibration settings: the defaults, then the settings recorded with the detections
+    (``detection_settings``, from ``preds.json``), then the command-line flags."""
     from pnlviz.calib.calibrate import CalibParams
 
-    params = CalibParams(alpha=args.alpha, refine_k1=not args.no_k1)
+    params = CalibParams(alpha=args.alpha).updated(detection_settings)
+    if args.no_k1:
+        params = replace(params, refine_k1=False)
     if args.no_pnl:
         params = replace(params, pnl=False, refine_focal=False, refine_k1=False)
     return params
@@ -101,7 +107,8 @@ class _Worker:
 def run_calibrate(args) -> int:
     from tqdm import tqdm
 
-    from pnlviz.data import open_dataset, read_predictions, sort_stems, write_camera_zip
+    from pnlviz.data import (DataError, open_dataset, predictions_info_path, read_predictions, read_predictions_info,
+                             sort_stems, write_camera_zip)
 
     ds = open_dataset(args.data)
     predictions = read_predictions(args.detections) if args.detections else None
@@ -113,7 +120,19 @@ def run_calibrate(args) -> int:
     if not stems:
         print(f"{args.data}: no frame to calibrate", file=sys.stderr)
         return 1
-    params = frame_params(args)
+    settings = {}
+    if args.detections is not None:
+        try:
+            settings = read_predictions_info(args.detections).get("calibration") or {}
+            params = frame_params(args, settings)
+        except (DataError, ValueError) as exc:
+            print(f"error: {predictions_info_path(args.detections)}: {exc}", file=sys.stderr)
+            return 2
+        if settings:
+            print(f"calibration settings of the detector ({predictions_info_path(args.detections).name}): "
+                  + ", ".join(f"{k}={v}" for k, v in settings.items()))
+    else:
+        params = frame_params(args)
     job = _Worker(ds, predictions, args.size, params)
     workers = (os.cpu_count() or 1) if args.workers == 0 else max(1, args.workers)
     cameras, reports = {}, []

@@ -36,9 +36,12 @@ from .predictions import (
     Predictions,
     parse_predictions,
     parse_predictions_bytes,
+    predictions_info_path,
     predictions_to_json,
     read_predictions,
+    read_predictions_info,
     write_predictions,
+    write_predictions_info,
 )
 
 __all__ = [
@@ -66,12 +69,14 @@ __all__ = [
     "parse_homographies",
     "parse_predictions",
     "parse_predictions_bytes",
+    "predictions_info_path",
     "predictions_to_json",
     "read_annotation",
     "read_camera_json",
     "read_camera_zip",
     "read_homographies",
     "read_predictions",
+    "read_predictions_info",
     "sort_stems",
     "to_pixels",
     "validate_camera_dict",
@@ -80,4 +85,5 @@ __all__ = [
     "write_camera_zip",
     "write_homographies",
     "write_predictions",
+    "write_predictions_info",
 ]

@@ -34,9 +34,12 @@ __all__ = [
     "Predictions",
     "parse_predictions",
     "parse_predictions_bytes",
+    "predictions_info_path",
     "predictions_to_json",
     "read_predictions",
+    "read_predictions_info",
     "write_predictions",
+    "write_predictions_info",
 ]
 
 #: Valid PnLCalib keypoint ids (1..73) and line ids (1..23).
@@ -206,3 +209,30 @@ def write_predictions(path: str | os.PathLike, predictions: Mapping[str, Predict
     with atomic_open(zpath, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name in sorted(texts, key=lambda n: natural_key(n[:-5])):
             zf.writestr(name, texts[name])
+
+
+# -- provenance next to a prediction zip ---------------------------------------------------------
+def predictions_info_path(path: str | os.PathLike) -> Path:
+    """``preds.zip`` -> ``preds.json``: what ``pnlviz detect`` records about the detections (the
+    detector, its thresholds, the calibration settings they calibrate best with). Kept beside the
+    zip, not in it, so the zip stays exactly PnLCalib's format."""
+    return Path(path).with_suffix(".json")
+
+
+def write_predictions_info(path: str | os.PathLike, info: Mapping[str, Any]) -> Path:
+    out = predictions_info_path(path)
+    with atomic_open(out, "w") as f:
+        f.write(dumps(dict(info), indent=2) + "\n")
+    return out
+
+
+def read_predictions_info(path: str | os.PathLike) -> dict:
+    """The info written next to prediction zip ``path`` ({} when there is none: a zip from
+    PnLCalib or elsewhere). A file that is there but unreadable is a DataError."""
+    info = predictions_info_path(path)
+    if not info.is_file():
+        return {}
+    obj = parse_json_bytes(read_file_bytes(info), str(info))
+    if not isinstance(obj, dict):
+        raise DataError(str(info), f"expected a JSON object, got {describe(obj)}")
+    return obj

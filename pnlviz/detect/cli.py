@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 import time
+from datetime import datetime, timezone
 from pathlib import Path
 
 
@@ -37,8 +38,9 @@ def run_detect(args) -> int:
     import torch
     from tqdm import tqdm
 
-    from pnlviz.data import DataError, open_dataset, write_predictions
+    from pnlviz.data import DataError, open_dataset, write_predictions, write_predictions_info
     from pnlviz.detect.checkpoint import CheckpointError
+    from pnlviz.detect.default import DEFAULT_MODEL
     from pnlviz.detect.run import Detector, NoModelError
 
     torch.set_num_threads(args.threads or os.cpu_count() or 1)
@@ -72,6 +74,15 @@ def run_detect(args) -> int:
     bar.close()
     write_predictions(args.out, preds)
     dt = time.perf_counter() - t0
+    weights = {"kp": args.weights_kp, "lines": args.weights_lines}
+    write_predictions_info(args.out, {
+        "detector": "light default model" if not any(weights.values()) else "PnLCalib networks",
+        "weights": {k: str(v) for k, v in weights.items() if v} or str(DEFAULT_MODEL),
+        "input_size": list(det.input_size), "kp_threshold": det.kp_threshold,
+        "line_threshold": det.line_threshold, "peak_refine": det.refine,
+        "calibration": det.calibration, "frames": len(preds),
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    })
     print(f"detected {len(preds)}/{len(stems)} frames in {dt:.1f} s ({1e3 * dt / max(1, len(stems)):.0f} ms/frame) "
           f"-> {args.out}")
     for line in skipped:

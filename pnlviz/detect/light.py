@@ -34,7 +34,6 @@ cached result when it is called with the same tensor (as ``Detector.heatmaps`` d
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -42,6 +41,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from pnlviz.detect.default import read_sidecar, sidecar_path  # noqa: F401 (torch-free; re-exported)
 from pnlviz.detect.hrnet import KEYPOINT_CHANNELS, LINE_CHANNELS
 
 __all__ = ["LightNet", "HeadView", "light_detector", "load_light", "read_sidecar", "sidecar_path"]
@@ -173,6 +173,7 @@ class LightNet(nn.Module):
         from pnlviz.detect.run import Detector
 
         self.eval()
+        kw.setdefault("centre_aligned_resize", True)  # trained on frames rendered at its input size
         return Detector(self.kp_head_module(), self.line_head_module(), input_size=tuple(input_size), **kw)
 
 
@@ -191,20 +192,6 @@ class HeadView(nn.Module):
 
 
 # -- files ---------------------------------------------------------------------------------------
-def sidecar_path(weights: str | Path) -> Path:
-    """``light.pt`` -> ``light.json`` (the provenance written next to the weights)."""
-    return Path(weights).with_suffix(".json")
-
-
-def read_sidecar(weights: str | Path) -> dict:
-    """The provenance JSON next to ``weights`` ({} when absent or unreadable)."""
-    path = sidecar_path(weights)
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-
-
 def load_light(weights: str | Path) -> LightNet:
     """A :class:`LightNet` with the weights of ``weights`` (strict), in eval mode."""
     from pnlviz.detect.checkpoint import load_checkpoint
@@ -213,9 +200,10 @@ def load_light(weights: str | Path) -> LightNet:
 
 
 def light_detector(weights: str | Path, input_size: tuple[int, int] | None = None, **kw):
-    """A ``Detector`` on a light checkpoint. ``input_size`` defaults to the size it was trained at
-    and the peak thresholds (``kp_threshold``, ``line_threshold``) to the ones tuned for it, both
-    from the sidecar (else 960x540 and the Detector's defaults)."""
+    """A ``Detector`` on a light checkpoint. ``input_size`` defaults to the size it was trained at,
+    the peak thresholds (``kp_threshold``, ``line_threshold``), the sub-pixel refinement
+    (``refine``) and the calibration settings for its detections (``calibration``) to the ones
+    tuned for it, all from the sidecar (else 960x540 and the Detector's defaults)."""
     side = read_sidecar(weights)
     if input_size is None:
         size = side.get("input_size")
@@ -225,4 +213,8 @@ def light_detector(weights: str | Path, input_size: tuple[int, int] | None = Non
             kw.pop(name, None)
             if name in side:
                 kw[name] = float(side[name])
+    if kw.get("refine") is None:
+        kw["refine"] = str(side.get("peak_refine", "log"))
+    if kw.get("calibration") is None:
+        kw["calibration"] = dict(side.get("calibration") or {})
     return load_light(weights).detector(input_size, **kw)

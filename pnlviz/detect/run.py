@@ -7,7 +7,7 @@ depend on it). torch is imported here only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -36,6 +36,20 @@ class Detector:
     input_size: tuple[int, int] = DEFAULT_INPUT_SIZE
     kp_threshold: float = 0.1
     line_threshold: float = 0.1
+    #: How input pixels map back to the frame when the frame was resized. False: ``X = x / s``
+    #: (``s`` = input / frame size), PnLCalib's own scaling, kept for its published networks.
+    #: True: ``X = (x + 0.5) / s - 0.5``, the exact inverse of ``cv2.resize`` (which aligns pixel
+    #: centres), for a network that localises what it sees on its input grid: the light model,
+    #: trained on frames rendered at its input size (issue #5: without it its keypoints sat
+    #: 0.5 px up-left of the truth at 960x540).
+    centre_aligned_resize: bool = False
+    #: sub-pixel refinement of the heatmap peaks (see :func:`pnlviz.detect.peaks.refine_peaks`):
+    #: "log" suits Gaussian-shaped peaks (networks trained on the paper's MSE), "raw" the sharper
+    #: peaks of a focal-loss network such as the light model.
+    refine: str = "log"
+    #: :class:`pnlviz.calib.calibrate.CalibParams` overrides for calibrating from these detections
+    #: (``pnlviz detect`` writes them next to its prediction zip; the app applies them).
+    calibration: dict = field(default_factory=dict)
 
     @classmethod
     def from_weights(cls, weights_kp: Path | None, weights_lines: Path | None, **kw) -> "Detector":
@@ -76,7 +90,26 @@ class Detector:
         kp, lines = self.heatmaps(images_bgr)
         out = []
         for b, img in enumerate(images_bgr):
-            out.append(extract_predictions(None if kp is None else kp[b], None if lines is None else lines[b],
-                                           self.input_size, kp_threshold=self.kp_threshold,
-                                           line_threshold=self.line_threshold))
+            pred = extract_predictions(None if kp is None else kp[b], None if lines is None else lines[b],
+                                       self.input_size, kp_threshold=self.kp_threshold,
+                                       line_threshold=self.line_threshold, refine=self.refine)
+            if self.centre_aligned_resize:
+                pred = undo_centre_aligned_resize(pred, self.input_size, (img.shape[1], img.shape[0]))
+            out.append(pred)
         return out
+
+
+def undo_centre_aligned_resize(pred: Predictions, input_size, frame_size) -> Predictions:
+    """Detections normalised by the input size (``x_in / W_in``) -> normalised for the frame it
+    was resized from with pixel centres aligned: ``X = (x_in + 0.5) W_f / W_in - 0.5`` (then
+    ``X / W_f``), per axis. The identity when the sizes agree."""
+    (wi, hi), (wf, hf) = input_size, frame_size
+    if (wi, hi) == (wf, hf):
+        return pred
+
+    def f(x, y):
+        return ((x * wi + 0.5) * wf / wi - 0.5) / wf, ((y * hi + 0.5) * hf / hi - 0.5) / hf
+
+    keypoints = {k: (*f(x, y), p) for k, (x, y, p) in pred.keypoints.items()}
+    lines = {k: (*f(x1, y1), p1, *f(x2, y2), p2) for k, (x1, y1, p1, x2, y2, p2) in pred.lines.items()}
+    return Predictions(keypoints=keypoints, lines=lines)

@@ -66,6 +66,8 @@ class TrainConfig:
     loss: str = "focal"  # or "mse" (the paper's loss; collapses to empty maps for this network)
     kp_threshold: float = 0.1  # peak thresholds the detector uses with this model (kept in the sidecar)
     line_threshold: float = 0.1
+    peak_refine: str = "log"  # sub-pixel peak refinement the detector uses with this model (sidecar)
+    calibration: dict = field(default_factory=dict)  # CalibParams overrides for its detections (sidecar)
     seed: int = 0
     threads: int = 2
     augment: dict = field(default_factory=lambda: {"brightness": 0.3, "contrast": 0.3, "saturation": 0.3,
@@ -369,6 +371,8 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
         "input_size": list(config.input_size),
         "kp_threshold": float(config.kp_threshold),
         "line_threshold": float(config.line_threshold),
+        "peak_refine": str(config.peak_refine),
+        "calibration": dict(config.calibration),
         "config": config.to_dict(),
         "seed": config.seed,
         "data": {"generator": "pnlviz.synth.make_frame", "seed": config.data_seed, "frames": len(cache),
