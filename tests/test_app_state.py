@@ -274,6 +274,11 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path):
     assert view.result is not None and view.result.ok and view.annotation is None
     # detections get the detection settings (no k1, robust final loss), annotations the default
     assert used["solo"] == CalibParams().updated(st.detector.calibration) and used["00000"] == CalibParams()
+    from pnlviz.app.server import calibration_card
+
+    card = calibration_card(view, st)
+    assert view.origin == "detections" and "calibrated from: **detections**" in card and "refine_k1=False" in card
+    assert "calibrated from: **annotation**" in calibration_card(st.view("00000"), st)
     # the annotated frame's observations are still the annotation's alone
     again = st.view("00000").observations
     assert np.array_equal(again.kp_ids, annotated.kp_ids) and np.array_equal(again.kp_xy, annotated.kp_xy)

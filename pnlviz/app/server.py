@@ -63,6 +63,10 @@ def calibration_card(view: FrameView, state: AppState) -> str:
     if view.error:
         lines.append(f"**error**: {view.error}")
     res = view.result
+    if view.origin is not None:
+        settings = state.detection_settings if view.origin == "detections" and state.pnl else {}
+        lines.append(f"calibrated from: **{view.origin}**" + (
+            " (the detector's settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()) + ")" if settings else ""))
     if view.reference_camera is not None:
         lines.append("reference camera (magenta): known for this frame")
     if res is None:

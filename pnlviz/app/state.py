@@ -59,6 +59,7 @@ class FrameView:
     ms: float = 0.0
     reference_camera: Camera | None = None  # a known camera (e.g. synthetic ground truth), scaled to the frame
     detections: object | None = None  # the frame's PnLCalib detections (pnlviz.data.Predictions), if any
+    origin: str | None = None  # where the observations came from: annotation, detections, both or edits
 
 
 def _mirror_ids() -> dict[int, int]:
@@ -316,14 +317,15 @@ class AppState:
         try:
             result = calibrate(obs, self.params(detections_only=origin == "detections"))
         except Exception as exc:  # shown in the panel; the rest of the dataset keeps working
-            return FrameView(stem, idx, image, size, ann, obs, None, error=f"internal error: {exc}", reference_camera=ref)
+            return FrameView(stem, idx, image, size, ann, obs, None, error=f"internal error: {exc}", reference_camera=ref,
+                             origin=origin)
         jac = {}
         if result.ok and ann:
             fr = evaluate_frame(result.camera.scaled(*EVAL_SIZE), ann)
             jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
         detections = self.detections_for(stem)
         return FrameView(stem, idx, image, size, ann, obs, result, jac, ms=1e3 * (time.perf_counter() - t0),
-                         reference_camera=ref, detections=detections)
+                         reference_camera=ref, detections=detections, origin=origin)
 
     def _observations(self, stem: str, ann, size) -> tuple[Observations | None, str | None]:
         """The observations to calibrate from and where they came from ("annotation",
