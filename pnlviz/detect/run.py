@@ -40,8 +40,8 @@ class Detector:
     #: (``s`` = input / frame size), PnLCalib's own scaling, kept for its published networks.
     #: True: ``X = (x + 0.5) / s - 0.5``, the exact inverse of ``cv2.resize`` (which aligns pixel
     #: centres), for a network that localises what it sees on its input grid: the light model,
-    #: trained on frames rendered at its input size (issue #5: without it its keypoints sat
-    #: 0.5 px up-left of the truth at 960x540).
+    #: trained on frames rendered at its input size (issue #5: without it the resize moved its
+    #: keypoints 0.5 px up-left at 960x540).
     centre_aligned_resize: bool = False
     #: sub-pixel refinement of the heatmap peaks (see :func:`pnlviz.detect.peaks.refine_peaks`):
     #: "log" suits Gaussian-shaped peaks (networks trained on the paper's MSE), "raw" the sharper
