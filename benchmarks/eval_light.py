@@ -7,8 +7,8 @@
    that lie in the image, at 960x540, with the left-right disambiguation the network is trained
    with) and line extremities: recall (a true line whose detected ends are both within 10 px of
    its annotated extremities, either order) and precision (detected lines that are such hits);
-3. ``pnlviz calibrate --detections`` (the detection settings) -> JaC / CR / FS under the official metric against the
-   synthetic annotations (required: FS@5 >= 0.70);
+3. ``pnlviz calibrate --detections`` with the detector's calibration settings -> JaC / CR / FS
+   under the official metric against the synthetic annotations (required: FS@5 >= 0.70);
 4. a picture of what it finds on ../shared/data/frames (messi_sample.png, wc14_trainval_16.jpg).
 Prints the figures and the peak memory.
 """
@@ -98,7 +98,7 @@ def main() -> None:
                 d = np.hypot(found[kid][0] - lab.x, found[kid][1] - lab.y)
                 hits5 += d <= 5
                 hits10 += d <= 10
-        res = calibrate(observations_from_predictions(pred, 960, 540), CalibParams().for_detections())
+        res = calibrate(observations_from_predictions(pred, 960, 540), CalibParams().updated(det.calibration))
         if res.ok:
             cams[stem] = res.camera
     s = evaluate_dataset(data, cams, progress=False)

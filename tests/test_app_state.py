@@ -232,7 +232,7 @@ def test_annotation_and_detections_merge_with_the_side_convention_resolved(share
     assert scores["both"] >= max(scores["annotation"], scores["detections"]) - 0.02
 
 
-def test_light_default_detector_calibrates_frames_without_annotation(tmp_path):
+def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, monkeypatch):
     """`pnlviz serve` with no weights runs the shipped light model: annotated frames keep the
     annotation as their source; a frame with only an image is calibrated from its detections."""
     import cv2
@@ -255,6 +255,7 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path):
         st.run_detector(stem)
     assert not st.needs_detection("solo") and len(st.detections_for("solo").keypoints) >= 4
     import pnlviz.app.state as state_module
+    from pnlviz.app.server import calibration_card
 
     used = {}
     real = state_module.calibrate
@@ -263,19 +264,15 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path):
         used[st.stem] = params
         return real(obs, params)
 
-    state_module.calibrate = recording
-    try:
-        for stem in ("solo", "00000"):
-            st.go(st.stems.index(stem))
-            view = st.view(stem)
-    finally:
-        state_module.calibrate = real
+    monkeypatch.setattr(state_module, "calibrate", recording)
+    for stem in ("solo", "00000"):
+        st.go(st.stems.index(stem))
+        st.view(stem)
+    monkeypatch.undo()
     view = st.view("solo")
     assert view.result is not None and view.result.ok and view.annotation is None
     # detections get the detection settings (no k1, robust final loss), annotations the default
     assert used["solo"] == CalibParams().updated(st.detector.calibration) and used["00000"] == CalibParams()
-    from pnlviz.app.server import calibration_card
-
     card = calibration_card(view, st)
     assert view.origin == "detections" and "calibrated from: **detections**" in card and "refine_k1=False" in card
     assert "calibrated from: **annotation**" in calibration_card(st.view("00000"), st)

@@ -64,7 +64,7 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         lines.append(f"**error**: {view.error}")
     res = view.result
     if view.origin is not None:
-        settings = state.detection_settings if view.origin == "detections" and state.pnl else {}
+        settings = state.applied_detection_settings(view.origin)
         lines.append(f"calibrated from: **{view.origin}**" + (
             " (the detector's settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()) + ")" if settings else ""))
     if view.reference_camera is not None:

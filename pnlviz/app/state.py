@@ -215,11 +215,14 @@ class AppState:
     def stem(self) -> str:
         return self.stems[self.index]
 
-    def params(self, detections_only: bool = False) -> CalibParams:
-        """The calibration settings; ``detections_only``: the keypoints all come from a detector."""
-        p = CalibParams(alpha=self.alpha)
-        if detections_only:
-            p = p.updated(self.detection_settings)
+    def applied_detection_settings(self, origin: str | None) -> dict:
+        """The detector's calibration settings when they apply: observations from detections
+        alone, with PnL on (without PnL there is nothing they change)."""
+        return self.detection_settings if origin == "detections" and self.pnl else {}
+
+    def params(self, origin: str | None = None) -> CalibParams:
+        """The calibration settings for observations from ``origin`` (see :meth:`_observations`)."""
+        p = CalibParams(alpha=self.alpha).updated(self.applied_detection_settings(origin))
         if not self.pnl:
             p = CalibParams(pnl=False, refine_focal=False, refine_k1=False)
         return p
@@ -315,7 +318,7 @@ class AppState:
             return FrameView(stem, idx, image, size, ann, None, None, error="nothing to calibrate from",
                              ms=1e3 * (time.perf_counter() - t0), reference_camera=ref)
         try:
-            result = calibrate(obs, self.params(detections_only=origin == "detections"))
+            result = calibrate(obs, self.params(origin))
         except Exception as exc:  # shown in the panel; the rest of the dataset keeps working
             return FrameView(stem, idx, image, size, ann, obs, None, error=f"internal error: {exc}", reference_camera=ref,
                              origin=origin)

@@ -120,19 +120,15 @@ def run_calibrate(args) -> int:
     if not stems:
         print(f"{args.data}: no frame to calibrate", file=sys.stderr)
         return 1
-    settings = {}
-    if args.detections is not None:
-        try:
-            settings = read_predictions_info(args.detections).get("calibration") or {}
-            params = frame_params(args, settings)
-        except (DataError, ValueError) as exc:
-            print(f"error: {predictions_info_path(args.detections)}: {exc}", file=sys.stderr)
-            return 2
-        if settings:
-            print(f"calibration settings of the detector ({predictions_info_path(args.detections).name}): "
-                  + ", ".join(f"{k}={v}" for k, v in settings.items()))
-    else:
-        params = frame_params(args)
+    try:  # the detector's settings, recorded beside its prediction zip by pnlviz detect
+        settings = (read_predictions_info(args.detections).get("calibration") or {}) if args.detections else {}
+        params = frame_params(args, settings)
+    except (DataError, ValueError) as exc:
+        print(f"error: {predictions_info_path(args.detections)}: {exc}", file=sys.stderr)
+        return 2
+    if settings:
+        print(f"calibration settings of the detector ({predictions_info_path(args.detections).name}): "
+              + ", ".join(f"{k}={v}" for k, v in settings.items()))
     job = _Worker(ds, predictions, args.size, params)
     workers = (os.cpu_count() or 1) if args.workers == 0 else max(1, args.workers)
     cameras, reports = {}, []

@@ -16,16 +16,16 @@ def add_detect_parser(sub) -> None:
                        description="Run PnLCalib-compatible networks on every image of a dataset and write a "
                                    "PnLCalib 2D prediction zip. The published architecture takes 6-7 s per frame "
                                    "per network at 960x540 on a 2-core CPU; without weights, the light default model "
-                                   "(assets/models/light.pt) takes about 60 ms.")
+                                   "(assets/models/light.pt) takes about 50 ms.")
     p.add_argument("--data", required=True, type=Path, help="dataset folder or zip with images")
     p.add_argument("--out", required=True, type=Path, help="output prediction zip")
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint (e.g. PnLCalib's SV_kp)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint (e.g. PnLCalib's SV_lines)")
     p.add_argument("--input-size", type=parse_size, default=(960, 540), help="network input size (default 960x540)")
     p.add_argument("--kp-threshold", type=float, default=None,
-                   help="keypoint heatmap threshold (default 0.1; the light default model: its own, 0.3)")
+                   help="keypoint heatmap threshold (default 0.1; the light default model: its sidecar's)")
     p.add_argument("--line-threshold", type=float, default=None,
-                   help="line heatmap threshold (default 0.1; the light default model: its own, 0.6)")
+                   help="line heatmap threshold (default 0.1; the light default model: its sidecar's)")
     p.add_argument("--batch", type=int, default=1, help="frames per forward pass")
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: all cores)")
     p.add_argument("--no-progress", action="store_true")

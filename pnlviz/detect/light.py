@@ -208,13 +208,11 @@ def light_detector(weights: str | Path, input_size: tuple[int, int] | None = Non
     if input_size is None:
         size = side.get("input_size")
         input_size = tuple(int(v) for v in size) if size else (960, 540)
-    for name in ("kp_threshold", "line_threshold"):
+    tuned = {"kp_threshold": side.get("kp_threshold"), "line_threshold": side.get("line_threshold"),
+             "refine": side.get("peak_refine"), "calibration": side.get("calibration")}
+    for name, value in tuned.items():  # what the caller leaves at None comes from the sidecar
         if kw.get(name) is None:
             kw.pop(name, None)
-            if name in side:
-                kw[name] = float(side[name])
-    if kw.get("refine") is None:
-        kw["refine"] = str(side.get("peak_refine", "log"))
-    if kw.get("calibration") is None:
-        kw["calibration"] = dict(side.get("calibration") or {})
+            if value is not None:
+                kw[name] = value
     return load_light(weights).detector(input_size, **kw)

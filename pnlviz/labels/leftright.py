@@ -59,7 +59,6 @@ def mirror_annotation(annotation: dict) -> dict:
     return out
 
 
-
 def flip_annotation(annotation: dict) -> dict:
     """The annotation of the horizontally flipped image: normalised x -> 1 - x (pixel x ->
     W - 1 - x, the evaluator's x * (W - 1) scaling) and every class renamed by
@@ -75,6 +74,7 @@ def flip_annotation(annotation: dict) -> dict:
             flipped = [{**p, "x": 1.0 - float(p["x"])} for p in pts]
         out[FLIP_X.get(canon, canon)] = flipped
     return out
+
 
 def viewing_azimuth_deg(homography: np.ndarray, at: np.ndarray, step: float = 10.0) -> float | None:
     """Angle (degrees, 0..180) between +x and the direction on the pitch that points "up the
