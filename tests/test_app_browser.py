@@ -50,6 +50,11 @@ def start(data):
     return PnlvizApp(AppState(data), port=_free_port())
 
 
+def stop(app):
+    app.stop()
+    app.state.close()
+
+
 def wait_for_text(page, text, timeout=20.0):
     page.get_by_text(text).first.wait_for(timeout=timeout * 1000)
 
@@ -60,6 +65,12 @@ def open_page(browser, app, text):
     page.goto(app.url)
     wait_for_text(page, text)
     return page
+
+
+def tab(app, n: int = 1):
+    """The session of the ``n``-th connected browser tab."""
+    wait_until(lambda: len(app.tabs()) >= n)
+    return app.tabs()[n - 1]
 
 
 def wait_until(condition, timeout=10.0):
@@ -77,11 +88,11 @@ def test_navigate_toggle_pnl_review_and_restart(data, browser):
         # navigation
         page.get_by_role("button", name="next").click()
         wait_for_text(page, "00001 (2/3)")
-        assert app.state.stem == "00001"
+        assert tab(app).stem == "00001"
         # PnL off: the card says so, the server recalibrated without it
         page.get_by_text("PnL refinement").click()
         wait_for_text(page, "PnL set: 0 lines")
-        assert app.state.pnl is False
+        assert tab(app).settings.pnl is False
         # review status: autosaved at once in the edits folder beside the data
         page.get_by_role("button", name="accepted").click()
         wait_for_text(page, "1 of 3 reviewed")
@@ -89,7 +100,7 @@ def test_navigate_toggle_pnl_review_and_restart(data, browser):
         assert saved["review"] == "accepted"
         page.close()
     finally:
-        app.stop()
+        stop(app)
     # a new server on the same data restores the review
     app = start(data)
     try:
@@ -98,7 +109,7 @@ def test_navigate_toggle_pnl_review_and_restart(data, browser):
         wait_for_text(page, "review: accepted")
         page.close()
     finally:
-        app.stop()
+        stop(app)
 
 
 def test_camera_view_puts_the_browser_camera_on_the_estimated_pose(data, browser):
@@ -108,7 +119,7 @@ def test_camera_view_puts_the_browser_camera_on_the_estimated_pose(data, browser
     try:
         page = open_page(browser, app, "focal")
         page.get_by_role("button", name="camera view").click()
-        cam = app.state.view().result.camera
+        cam = tab(app).view().result.camera
         deadline = time.time() + 10
         while time.time() < deadline:
             clients = list(app.server.get_clients().values())
@@ -118,7 +129,7 @@ def test_camera_view_puts_the_browser_camera_on_the_estimated_pose(data, browser
         assert np.allclose(clients[0].camera.position, cam.C, atol=1e-3)
         page.close()
     finally:
-        app.stop()
+        stop(app)
 
 
 def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
@@ -127,23 +138,24 @@ def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
     import numpy as np
 
     app = start(data)
-    stem = app.state.stem
-    before = app.state.view().result.camera.C.copy()
     try:
         page = open_page(browser, app, "focal")
-        obs = app.state.view().observations
+        session = tab(app)
+        stem = session.stem
+        before = session.view().result.camera.C.copy()
+        obs = session.view().observations
         # a keypoint in the left half of the frame (the panel covers the right), nudged by 6 px:
         # still an inlier, so the calibration follows it
         i = int(np.argmin(obs.kp_xy[:, 0]))
         kid = str(int(obs.kp_ids[i]))
         u, v = obs.kp_xy[i] + [6.0, 4.0]
-        app.kp_id.value = kid  # choose the id...
+        session.kp_id.value = kid  # choose the id...
         page.get_by_role("button", name="camera view").click()
         time.sleep(2.0)
         # ...and shift+click on the image. In camera view the canvas shows the frame with the
         # frame's vertical field of view, centred: pixel (u, v) is at this canvas point.
         box = page.locator("canvas").first.bounding_box()
-        W, H = app.state.view().size
+        W, H = session.view().size
         s = box["height"] / H
         page.keyboard.down("Shift")
         page.mouse.click(box["x"] + box["width"] / 2 + (u - W / 2) * s, box["y"] + v * s)
@@ -151,12 +163,12 @@ def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
         wait_until(lambda: "keypoints" in app.state.edits.get(stem))
         placed = app.state.edits.get(stem)["keypoints"][kid]
         np.testing.assert_allclose(placed, [u, v], atol=3.0)
-        moved = app.state.view().result.camera.C.copy()
+        moved = session.view().result.camera.C.copy()
         assert not np.allclose(moved, before)
         # undo restores the calibration, redo brings the edit back
         page.get_by_role("button", name="undo").click()
         wait_until(lambda: not app.state.edits.get(stem).get("keypoints"))
-        np.testing.assert_allclose(app.state.view().result.camera.C, before)
+        np.testing.assert_allclose(session.view().result.camera.C, before)
         page.get_by_role("button", name="redo").click()
         wait_until(lambda: bool(app.state.edits.get(stem).get("keypoints")))
         # export downloads a zip whose labels hold the edit
@@ -169,31 +181,31 @@ def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
         np.testing.assert_allclose([kps[kid]["x"], kps[kid]["y"]], placed)
         page.close()
     finally:
-        app.stop()
+        stop(app)
     # a restarted server keeps the edit
     app = start(data)
     try:
         np.testing.assert_allclose(app.state.edits.get(stem)["keypoints"][kid], placed)
         np.testing.assert_allclose(app.state.view(stem).result.camera.C, moved)
     finally:
-        app.stop()
+        stop(app)
 
 
 def test_dragging_a_keypoint_handle_recalibrates_and_autosaves(data, browser):
     import numpy as np
 
-    from pnlviz.app.server import HANDLE_SCALE
+    from pnlviz.app.scene import HANDLE_SCALE
 
     app = start(data)
-    stem = app.state.stem
-    before = app.state.view().result.camera.C.copy()
     try:
         page = open_page(browser, app, "focal")
-        app.handles_mode.value = "keypoints"
-        app.show()
+        session = tab(app)
+        stem = session.stem
+        before = session.view().result.camera.C.copy()
+        session.handles_mode.value = "keypoints"
         page.get_by_role("button", name="camera view").click()
         time.sleep(2.5)
-        view = app.state.view()
+        view = session.view()
         obs, cam = view.observations, view.result.camera
         i = int(np.argmin(obs.kp_xy[:, 0]))  # left of the frame, away from the panel
         kid, (u, v) = str(int(obs.kp_ids[i])), obs.kp_xy[i]
@@ -211,10 +223,10 @@ def test_dragging_a_keypoint_handle_recalibrates_and_autosaves(data, browser):
         wait_until(lambda: bool(app.state.edits.get(stem).get("keypoints")))
         moved = app.state.edits.get(stem)["keypoints"][kid]
         np.testing.assert_allclose(moved, [u + 20 / s, v], atol=2.0)  # along x only, by the pulled amount
-        assert not np.allclose(app.state.view().result.camera.C, before)
+        assert not np.allclose(session.view().result.camera.C, before)
         page.close()
     finally:
-        app.stop()
+        stop(app)
 
 
 def test_keyboard_shortcuts_n_p_and_ctrl_z(data, browser):
@@ -226,10 +238,10 @@ def test_keyboard_shortcuts_n_p_and_ctrl_z(data, browser):
         wait_for_text(page, "00001 (2/3)")
         page.keyboard.press("p")
         wait_for_text(page, "00000 (1/3)")
-        app.state.hide_keypoint(int(app.state.view().observations.kp_ids[0]))
+        app.state.hide_keypoint("00000", int(tab(app).view().observations.kp_ids[0]))
         page.keyboard.press("Control+z")
         wait_until(lambda: not app.state.edits.get("00000").get("keypoints"))
         assert not app.state.edits.get("00000").get("keypoints")
         page.close()
     finally:
-        app.stop()
+        stop(app)

@@ -9,7 +9,7 @@ import pytest
 
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app.overlay import Layers, render
-from pnlviz.app.state import AppState, default_edits_dir
+from pnlviz.app.state import AppState, Settings, default_edits_dir
 from pnlviz.calib.calibrate import CalibParams
 
 
@@ -42,8 +42,7 @@ def test_views_calibrate_on_demand_and_agree_with_the_annotation(data):
 def test_pnl_and_alpha_change_the_calibration(data):
     st = AppState(data)
     with_pnl = st.view("00002").result
-    st.pnl = False
-    without = st.view("00002").result
+    without = st.view("00002", Settings(pnl=False)).result
     assert without.pnl_lines == [] and with_pnl.pnl_lines
     assert not np.allclose(with_pnl.camera.C, without.camera.C)
 
@@ -51,15 +50,16 @@ def test_pnl_and_alpha_change_the_calibration(data):
 def test_review_and_edits_autosave_and_survive_a_restart(data):
     before = {p.name: p.read_bytes() for p in data.iterdir() if p.is_file()}
     st = AppState(data)
-    st.set_review("accepted", "00000")
+    st.set_review("00000", "accepted")
     ann = st.annotation("00001")
     moved = {k: v.copy() for k, v in ann.items()}
     name = next(iter(moved))
     moved[name][0] += [0.01, 0.0]
     cam_before = st.view("00001").result.camera
-    st.set_annotation(moved, "00001")
+    st.set_annotation("00001", moved)
     cam_after = st.view("00001").result.camera
     assert not np.allclose(cam_before.C, cam_after.C)
+    st.close()
     # a new server process sees the same state
     st2 = AppState(data)
     assert st2.edits.review("00000") == "accepted" and st2.edits.review("00001") == "corrected"
@@ -69,14 +69,19 @@ def test_review_and_edits_autosave_and_survive_a_restart(data):
     assert {p.name: p.read_bytes() for p in data.iterdir() if p.is_file()} == before
     assert sorted(p.name for p in (st.edits.frames).iterdir()) == ["00000.json", "00001.json"]
     json.loads((st.edits.frames / "00001.json").read_text())
+    st2.close()
 
 
-def test_a_damaged_edit_file_is_ignored(data):
+def test_a_damaged_edit_file_is_moved_aside(data):
     st = AppState(data)
-    st.set_review("rejected", "00000")
+    st.set_review("00000", "rejected")
+    st.close()
     (st.edits.frames / "00002.json").write_text("{half a reco")
     st2 = AppState(data)
     assert st2.edits.review("00000") == "rejected" and st2.edits.review("00002") is None
+    assert (st.edits.frames / "00002.json.damaged").read_text() == "{half a reco"
+    assert len(st2.edits.warnings) == 1 and "00002.json" in st2.edits.warnings[0]
+    st2.close()
 
 
 def test_overlay_draws_keypoints_and_pitch(data):
@@ -106,25 +111,25 @@ def test_server_panels_navigate_review_and_toggle_pnl(data):
     app = PnlvizApp(st, port=_free_port())
     try:
         assert app.url.startswith("http://127.0.0.1:")
-        app.goto(st.find("00000"))
-        assert "00000" in app.card.content and "focal" in app.card.content
-        app.step(1)
-        assert st.stem == st.stems[st.find("00000") + 1] and app.slider.value == st.find("00000") + 1
-        app.state.set_review("accepted")
-        app.show()
-        assert "1 of 5 reviewed" in app.progress_text.content
-        app.filter.value = "accepted"
-        app.refresh_order()
-        assert app.order == [st.index]
-        app.filter.value = "all"
-        app.refresh_order()
-        st.pnl = False
-        app.show()
-        assert "PnL set: 0 lines" in app.card.content
-        app.goto(st.find("bad"))
-        assert "error" in app.card.content and app._frustum is None
+        tab = app.session()
+        tab.goto(st.find("00000"))
+        assert "00000" in tab.card.content and "focal" in tab.card.content
+        tab.step(1)
+        assert tab.stem == st.stems[st.find("00000") + 1] and tab.slider.value == st.find("00000") + 1
+        st.set_review(tab.stem, "accepted")
+        assert "1 of 5 reviewed" in tab.progress_text.content  # the change reached the tab
+        tab.filter.value = "accepted"
+        tab.refresh_order()
+        assert tab.order == [tab.index]
+        tab.filter.value = "all"
+        tab.refresh_order()
+        tab.pnl.value = False
+        assert "PnL set: 0 lines" in tab.card.content
+        tab.goto(st.find("bad"))
+        assert "error" in tab.card.content and tab._frustum is None
     finally:
         app.stop()
+        st.close()
 
 
 def test_keypoint_edits_recalibrate_undo_redo_and_persist(data):
@@ -133,29 +138,32 @@ def test_keypoint_edits_recalibrate_undo_redo_and_persist(data):
     v0 = st.view(stem)
     kid = int(v0.observations.kp_ids[0])
     x, y = v0.observations.kp_xy[0]
-    st.move_keypoint(kid, x + 25, y - 10, stem)
+    st.move_keypoint(stem, kid, x + 25, y - 10)
     v1 = st.view(stem)
     i = list(v1.observations.kp_ids).index(kid)
     np.testing.assert_allclose(v1.observations.kp_xy[i], [x + 25, y - 10])
     assert not np.allclose(v1.result.camera.C, v0.result.camera.C)
     assert st.edits.review(stem) == "corrected"
-    st.hide_keypoint(kid, stem)
+    st.hide_keypoint(stem, kid)
     assert kid not in st.view(stem).observations.kp_ids
     assert st.undo(stem)  # back to the moved keypoint
     assert kid in st.view(stem).observations.kp_ids
     assert st.undo(stem) and not st.undo(stem)  # back to the original, nothing more to undo
     np.testing.assert_allclose(st.view(stem).result.camera.C, v0.result.camera.C)
+    assert st.edits.review(stem) is None  # undoing every edit undoes "corrected" too
     assert st.redo(stem)
+    st.close()
     restarted = AppState(data)
     j = list(restarted.view(stem).observations.kp_ids).index(kid)
     np.testing.assert_allclose(restarted.view(stem).observations.kp_xy[j], [x + 25, y - 10])
+    restarted.close()
 
 
 def test_line_point_edit_goes_into_the_annotation(data):
     st = AppState(data)
     ann = st.annotation("00001")
     name = next(iter(ann))
-    st.move_line_point(name, 0, 100.0, 200.0, "00001")
+    st.move_line_point("00001", name, 0, 100.0, 200.0)
     np.testing.assert_allclose(st.annotation("00001")[name][0], [100 / 959, 200 / 539])
     assert st.undo("00001")
     np.testing.assert_allclose(st.annotation("00001")[name][0], ann[name][0])
@@ -168,9 +176,9 @@ def test_export_holds_the_edit_and_only_reviewed_frames(data, tmp_path):
     from pnlviz.cli import main
 
     st = AppState(data)
-    st.set_review("accepted", "00000")
+    st.set_review("00000", "accepted")
     kid = int(st.view("00002").observations.kp_ids[0])
-    st.move_keypoint(kid, 123.0, 234.0, "00002")
+    st.move_keypoint("00002", kid, 123.0, 234.0)
     out = tmp_path / "export.zip"
     out.write_bytes(export_zip_bytes(st))
     with zipfile.ZipFile(out) as zf:
@@ -180,44 +188,60 @@ def test_export_holds_the_edit_and_only_reviewed_frames(data, tmp_path):
         coco = json.loads(zf.read("coco_keypoints.json"))
     assert set(manifest["frames"]) == {"00000", "00002"}
     assert manifest["frames"]["00002"]["keypoints_edited"] == [kid]
+    assert manifest["source"] == "set" and manifest["edits"] == "set.edits"  # names, never server paths
     assert {"annotations/00000.json", "cameras/camera_00000.json", "cameras/camera_00002.json"} <= names
     assert kps["keypoints"][str(kid)]["x"] == 123.0 and kps["keypoints"][str(kid)]["y"] == 234.0
     image_id = next(im["id"] for im in coco["images"] if im["stem"] == "00002")
     ann = next(a for a in coco["annotations"] if a["image_id"] == image_id)
     assert ann["keypoints"][3 * (kid - 1):3 * kid] == [123.0, 234.0, 2]
-    # the command line writes the same into a folder, and --all takes every frame
+    # the command line writes the same into a folder (while the app holds the edits), --all takes
+    # every frame; the unreadable frame is in the manifest without label files
     folder = tmp_path / "folder"
     assert main(["export", "--data", str(data), "--out", str(folder), "--all"]) == 0
-    assert len(json.loads((folder / "manifest.json").read_text())["frames"]) == len(st.stems)
-    assert write_export(st, tmp_path / "again") == 2
+    frames = json.loads((folder / "manifest.json").read_text())["frames"]
+    assert len(frames) == len(st.stems) and frames["bad"]["exported"] is False and "bad.json" in frames["bad"]["error"]
+    assert not (folder / "keypoints" / "bad.json").exists() and (folder / "keypoints" / "00001.json").exists()
+    assert len(write_export(st, tmp_path / "again")) == 2
     assert main(["export", "--data", str(data), "--out", str(data)]) == 2  # never over the source
+
+
+def test_export_only_reads_the_edits(data, tmp_path):
+    from pnlviz.cli import main
+
+    assert main(["export", "--data", str(data), "--out", str(tmp_path / "x.zip"), "--all"]) == 0
+    assert not default_edits_dir(data).exists()  # export created no edits folder
 
 
 def test_drag_end_recalibrates_on_the_server(data):
     from types import SimpleNamespace
 
-    from pnlviz.app.server import PnlvizApp, pixel_to_plane
+    from pnlviz.app.scene import pixel_to_plane
+    from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
     app = PnlvizApp(st, port=_free_port())
     try:
-        app.goto(st.find("00002"))
-        app.handles_mode.value = "keypoints"
-        app.show()
-        assert len(app._handles) == st.view().observations.n_keypoints
-        cam = app._shown_camera
-        before = st.view().result.camera.C.copy()
-        kid = int(st.view().observations.kp_ids[0])
+        tab = app.session()
+        tab.goto(st.find("00002"))
+        tab.handles_mode.value = "keypoints"
+        view = tab.view()
+        assert len(tab._handles) == view.observations.n_keypoints
+        stem, cam = tab._shown
+        before = view.result.camera.C.copy()
+        kid = int(view.observations.kp_ids[0])
         target = SimpleNamespace(position=pixel_to_plane(cam, (300.0, 200.0)))
-        app._on_drag(SimpleNamespace(phase="update", target=target), ("kp", kid), cam)
+        tab.on_drag(SimpleNamespace(phase="update", target=target), stem, ("kp", kid), cam)
         assert "keypoints" not in st.edits.get("00002")  # only the release counts
-        app._on_drag(SimpleNamespace(phase="end", target=target), ("kp", kid), cam)
-        saved = json.loads((st.edits.frames / "00002.json").read_text())
+        tab.goto(st.find("00001"))  # the tab moves on before the release...
+        tab.on_drag(SimpleNamespace(phase="end", target=target), stem, ("kp", kid), cam)
+        saved = json.loads((st.edits.frames / "00002.json").read_text())  # ...which still lands on 00002
         np.testing.assert_allclose(saved["keypoints"][str(kid)], [300.0, 200.0], atol=1e-6)
-        assert not np.allclose(st.view().result.camera.C, before)
-        assert app.last_recalibration_ms > 0
+        assert "keypoints" not in st.edits.get("00001")
+        assert not np.allclose(st.view("00002").result.camera.C, before)
+        assert tab.last_recalibration_ms > 0
     finally:
         app.stop()
+        st.close()
 
 
 def test_annotation_and_detections_merge_with_the_side_convention_resolved(shared_dir, tmp_path):
@@ -247,7 +271,7 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, m
     shutil.copy(EXAMPLES_DIR / "sample" / "00000.jpg", data / "00000.jpg")
     shutil.copy(EXAMPLES_DIR / "sample" / "00000.json", data / "00000.json")
     st = AppState(data, detector=Detector.from_weights(None, None), source="annotation", edits=tmp_path / "e")
-    assert st.source == "annotation" and st.needs_detection("solo")
+    assert st.default_settings.source == "annotation" and st.needs_detection("solo")
     before = st.view("solo")
     assert before.result is None or not before.result.ok  # nothing to calibrate from yet
     annotated = st.view("00000").observations
@@ -255,19 +279,18 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, m
         st.run_detector(stem)
     assert not st.needs_detection("solo") and len(st.detections_for("solo").keypoints) >= 4
     import pnlviz.app.state as state_module
-    from pnlviz.app.server import calibration_card
+    from pnlviz.app.session import calibration_card
 
     used = {}
     real = state_module.calibrate
 
     def recording(obs, params):
-        used[st.stem] = params
+        used[current] = params
         return real(obs, params)
 
     monkeypatch.setattr(state_module, "calibrate", recording)
-    for stem in ("solo", "00000"):
-        st.go(st.stems.index(stem))
-        st.view(stem)
+    for current in ("solo", "00000"):
+        st.view(current)
     monkeypatch.undo()
     view = st.view("solo")
     assert view.result is not None and view.result.ok and view.annotation is None
@@ -282,19 +305,29 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, m
     assert again.lines.keys() == annotated.lines.keys()
 
 
-def test_serve_start_up_defers_torch_to_the_first_detection():
-    """`pnlviz serve` hands the app a DeferredDetector: torch and the weights load on the first
-    detection (in the app's background thread), not before the URL is printed."""
+def test_the_detector_process_keeps_torch_out_of_the_app():
+    """The app's detector runs in a child process: the app process never imports torch (importing
+    it in a thread beside scipy crashed `pnlviz serve`), and a checkpoint that does not fit is a
+    clear error in the parent."""
     import subprocess
     import sys
 
     code = (
         "import sys, numpy as np\n"
-        "from pnlviz.detect.default import DEFAULT_MODEL, DeferredDetector\n"
-        "d = DeferredDetector()\n"
-        "assert DEFAULT_MODEL.is_file() and 'torch' not in sys.modules and not d.loaded\n"
+        "from pnlviz.detect.worker import DetectorLoadError, DetectorProcess\n"
+        "d = DetectorProcess()\n"
         "pred = d.detect([np.zeros((96, 160, 3), np.uint8)])[0]\n"
-        "assert d.loaded and 'torch' in sys.modules and len(pred.keypoints) < 57\n"
+        "assert 'torch' not in sys.modules and len(pred.keypoints) < 57 and d.calibration\n"
+        "d.close()\n"
+        "bad = DetectorProcess(weights_kp=__import__('pathlib').Path('no-such.pth'))\n"
+        "try:\n"
+        "    bad.load()\n"
+        "except DetectorLoadError as exc:\n"
+        "    assert 'no-such.pth' in str(exc), exc\n"
+        "else:\n"
+        "    raise AssertionError('no error')\n"
+        "bad.close()\n"
+        "assert 'torch' not in sys.modules\n"
         "print('ok')\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)

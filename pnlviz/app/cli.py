@@ -21,38 +21,75 @@ def add_serve_parser(sub) -> None:
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint: detect in the app (background)")
     p.add_argument("--no-detect", action="store_true",
                    help="do not run the light default detector (assets/models/light.pt) on frames without detections")
-    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to bind (default 127.0.0.1: this machine only; any other address needs a token)")
     p.add_argument("--port", type=int, default=8080)
+    p.add_argument("--token", help="access token for a non-loopback --host (default: a new random one, printed in "
+                                   "the URL)")
+    p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                   help="another host name the browser may use for this server (e.g. behind a proxy); repeatable")
     p.add_argument("--size", type=parse_size, default=(960, 540), help="image size for frames without an image")
+    p.add_argument("--detector-threads", type=int, default=1,
+                   help="torch threads of the background detector process (default 1: the app keeps a core)")
     p.set_defaults(func=run_serve)
+
+
+def _detector(args):
+    """The background detector (in its own process: this one never imports torch), or None."""
+    from pnlviz.detect.default import DEFAULT_MODEL
+    from pnlviz.detect.worker import DetectorProcess
+
+    if args.weights_kp or args.weights_lines:
+        return DetectorProcess(args.weights_kp, args.weights_lines, threads=args.detector_threads)
+    if not args.no_detect and not args.detections and DEFAULT_MODEL.is_file():
+        return DetectorProcess(threads=args.detector_threads)
+    return None
 
 
 def run_serve(args) -> int:
     from pnlviz import EXAMPLES_DIR
+    from pnlviz.app.edits import EditsFolderError
+    from pnlviz.app.guard import is_loopback
     from pnlviz.app.server import PnlvizApp
     from pnlviz.app.state import AppState
+    from pnlviz.detect.worker import DetectorLoadError, DetectorProcessError
 
     data = args.data or EXAMPLES_DIR / "sample"
-    detector, source = None, None
-    if args.weights_kp or args.weights_lines:
-        from pnlviz.detect.checkpoint import CheckpointError
-        from pnlviz.detect.run import Detector
-
-        try:
-            detector = Detector.from_weights(args.weights_kp, args.weights_lines)
-        except CheckpointError as exc:
+    detector = _detector(args)
+    if detector is not None and not detector.light:
+        print("pnlviz: loading the detector's checkpoints...", flush=True)
+        try:  # a checkpoint that does not fit is an error now, not on the first frame
+            detector.load()
+        except (DetectorLoadError, DetectorProcessError) as exc:
+            detector.close()
             print(f"error: {exc}", file=sys.stderr)
             return 2
-    elif not args.no_detect and not args.detections:
-        from pnlviz.detect.default import DEFAULT_MODEL, DeferredDetector
-
-        if DEFAULT_MODEL.is_file():  # the light default model: detections to look at, annotations still lead
-            detector, source = DeferredDetector(), "annotation"
-    state = AppState(data, detections=args.detections, edits=args.edits, size=args.size, detector=detector,
-                     source=source)
-    app = PnlvizApp(state, host=args.host, port=args.port)
+    # the light default model adds detections to look at; annotations stay the source
+    source = "annotation" if detector is not None and detector.light else None
+    try:
+        state = AppState(data, detections=args.detections, edits=args.edits, size=args.size, detector=detector,
+                         source=source)
+    except EditsFolderError as exc:
+        if detector is not None:
+            detector.close()
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        app = PnlvizApp(state, host=args.host, port=args.port, token=args.token, allowed_hosts=tuple(args.allow_host))
+    except BaseException:
+        state.close()
+        raise
+    urls = app.policy.urls()
+    state.edits.describe_holder(urls[0])
     print(f"pnlviz: {data} ({len(state.stems)} frames), edits in {state.edits.root}")
-    print(f"pnlviz: open {app.url}", flush=True)
+    for warning in state.edits.warnings:
+        print(f"pnlviz: warning: {warning}", file=sys.stderr)
+    if app.policy.port != args.port:
+        print(f"pnlviz: port {args.port} is busy, using {app.policy.port}")
+    if not is_loopback(args.host):
+        print(f"pnlviz: warning: listening on {args.host}: anyone who can reach this machine and has the token can "
+              f"read and edit these labels", file=sys.stderr)
+    print(f"pnlviz: open {urls[0]}" + "".join(f"\npnlviz:   or {u}" for u in urls[1:]), flush=True)
     try:
         while True:
             time.sleep(1.0)
@@ -60,6 +97,7 @@ def run_serve(args) -> int:
         print("pnlviz: stopped", file=sys.stderr)
     finally:
         app.stop()
+        state.close()
     return 0
 
 
@@ -88,8 +126,15 @@ def run_export(args) -> int:
     if args.out.resolve() == Path(data).resolve():
         print(f"error: --out {args.out} is the dataset itself; export writes beside it, never over it", file=sys.stderr)
         return 2
-    state = AppState(data, detections=args.detections, edits=args.edits, size=args.size)
-    n = write_export(state, args.out, include_all=args.all)
-    which = "frames" if args.all else "accepted/corrected frames"
-    print(f"exported {n} {which} of {len(state.stems)} to {args.out}")
+    # read-only: export never creates, locks or changes the edits folder
+    with AppState(data, detections=args.detections, edits=args.edits, size=args.size, writable=False) as state:
+        for warning in state.edits.warnings:
+            print(f"warning: {warning}", file=sys.stderr)
+        frames = write_export(state, args.out, include_all=args.all)
+        unreadable = {stem: e["error"] for stem, e in frames.items() if not e["exported"]}
+        for stem, error in unreadable.items():
+            print(f"skipped: {error}", file=sys.stderr)
+        which = "frames" if args.all else "accepted/corrected frames"
+        print(f"exported {len(frames) - len(unreadable)} {which} of {len(state.stems)} to {args.out}"
+              + (f" ({len(unreadable)} unreadable, listed in the manifest)" if unreadable else ""))
     return 0

@@ -1,34 +1,64 @@
 """The app's state without any GUI: the dataset, per-frame calibrations (computed on demand and
-cached), review statuses and the edits store. The viser server (:mod:`pnlviz.app.server`) and the
-tests drive the same object.
+cached per setting), the detector's results, review statuses and edits. The viser server
+(:mod:`pnlviz.app.server`), its browser tabs and the tests drive the same object.
 
-Edits never touch the source data: they live in an edits folder beside it
-(``<data>.edits/`` by default), one JSON file per frame written atomically, so a crash mid-write
-leaves the previous state intact and a restart restores everything.
+Nothing here knows which frame a tab shows: every call names its frame (``stem``) and the
+settings it is seen with (:class:`Settings`), so two annotators on two frames never touch each
+other's work. Edits never touch the source data: they live in an edits folder
+(:mod:`pnlviz.app.edits`), validated, written atomically, one frame's read-modify-write at a
+time.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import threading
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from pnlviz.app.edits import REVIEW_STATES, EditsStore, keypoint_ids
 from pnlviz.calib.calibrate import CalibParams, CalibrationResult, calibrate
 from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions
 from pnlviz.calib.observations import Observations
-from pnlviz.data import DataError, atomic_write_text, open_dataset, read_predictions, read_predictions_info
+from pnlviz.data import DataError, open_dataset, read_predictions, read_predictions_info
 from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.geometry.camera import Camera
 
-REVIEW_STATES = ("accepted", "corrected", "rejected")
+__all__ = ["AppState", "EditError", "FrameView", "REVIEW_STATES", "SOURCES", "Settings", "default_edits_dir"]
+
 SOURCES = ("annotation", "detections", "both")
 EVAL_SIZE = (960, 540)
+#: how far outside the frame a keypoint may be placed, as a fraction of its size (as the
+#: annotations' coordinate range allows: -0.5..1.5)
+PLACEMENT_MARGIN = 0.5
+
+
+class EditError(ValueError):
+    """An edit that cannot be applied (unknown frame or id, a position off the frame, ...)."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    """How a frame is calibrated: PnL on or off, its line weight, and the keypoint source."""
+
+    pnl: bool = True
+    alpha: float = 0.6
+    source: str = "annotation"
+
+    def __post_init__(self):
+        if self.source not in SOURCES:
+            raise ValueError(f"keypoint source must be one of {SOURCES}, got {self.source!r}")
+        if not (isinstance(self.alpha, (int, float)) and math.isfinite(self.alpha) and 0.0 <= self.alpha <= 1.0):
+            raise ValueError(f"alpha must be a number in [0, 1], got {self.alpha!r}")
+        object.__setattr__(self, "alpha", round(float(self.alpha), 4))
+        object.__setattr__(self, "pnl", bool(self.pnl))
 
 
 def default_edits_dir(data: Path) -> Path:
@@ -45,7 +75,7 @@ def default_edits_dir(data: Path) -> Path:
 
 @dataclass
 class FrameView:
-    """Everything the app shows for one frame under the current settings."""
+    """Everything the app shows for one frame under one setting."""
 
     stem: str
     index: int
@@ -60,6 +90,14 @@ class FrameView:
     reference_camera: Camera | None = None  # a known camera (e.g. synthetic ground truth), scaled to the frame
     detections: object | None = None  # the frame's PnLCalib detections (pnlviz.data.Predictions), if any
     origin: str | None = None  # where the observations came from: annotation, detections, both or edits
+    settings: Settings = Settings()
+
+    @property
+    def camera(self) -> Camera | None:
+        """The camera to show the frame with: the calibration's, else the known one."""
+        if self.result is not None and self.result.ok:
+            return self.result.camera
+        return self.reference_camera
 
 
 def _mirror_ids() -> dict[int, int]:
@@ -132,60 +170,30 @@ def apply_keypoint_edits(obs: Observations, overrides: dict) -> Observations:
                         np.array(sets, dtype="<U3"), np.array(main, bool), obs.lines, obs.circles)
 
 
-class EditsStore:
-    """One JSON file per frame in ``root/frames/``: review status and edited annotation."""
+#: what one undo step restores
+_UNDOABLE = ("annotation", "keypoints", "review")
 
-    def __init__(self, root: Path):
-        self.root = Path(root)
-        self.frames = self.root / "frames"
-        self.frames.mkdir(parents=True, exist_ok=True)
-        self._lock = threading.Lock()
-        self._cache: dict[str, dict] = {}
-        for p in self.frames.glob("*.json"):
-            try:
-                self._cache[p.stem] = json.loads(p.read_text())
-            except (OSError, json.JSONDecodeError):
-                continue  # a damaged edit file is ignored, never fatal
 
-    def get(self, stem: str) -> dict:
-        return dict(self._cache.get(stem, {}))
-
-    def update(self, stem: str, **changes) -> dict:
-        with self._lock:
-            rec = dict(self._cache.get(stem, {}))
-            for k, v in changes.items():
-                if v is None:
-                    rec.pop(k, None)
-                else:
-                    rec[k] = v
-            rec["updated"] = time.time()
-            atomic_write_text(self.frames / f"{stem}.json", json.dumps(rec, indent=1))
-            self._cache[stem] = rec
-            return rec
-
-    def review(self, stem: str) -> str | None:
-        return self._cache.get(stem, {}).get("review")
-
-    def counts(self) -> dict[str, int]:
-        out = {s: 0 for s in REVIEW_STATES}
-        for rec in self._cache.values():
-            if rec.get("review") in out:
-                out[rec["review"]] += 1
-        return out
+class _Unchanged(Exception):
+    """Raised inside an edit transaction that changes nothing: no write, no undo step."""
 
 
 class AppState:
-    """Dataset + settings + calibration cache + edits. Thread-safe for the server's callbacks."""
+    """Dataset + calibration cache + detections + edits; thread-safe for the server's callbacks.
+
+    ``writable=False`` opens the edits read-only (``pnlviz export``); otherwise this process
+    holds the edits folder until :meth:`close`.
+    """
 
     def __init__(self, data: Path, *, detections: Path | None = None, edits: Path | None = None,
-                 size: tuple[int, int] = EVAL_SIZE, detector=None, source: str | None = None):
+                 size: tuple[int, int] = EVAL_SIZE, detector=None, source: str | None = None, writable: bool = True):
         self.data = Path(data)
         self.ds = open_dataset(self.data)
         if not len(self.ds):
             raise DataError(str(self.data), "no frames (expected <stem>.jpg / <stem>.json files)")
         self.predictions = read_predictions(detections) if detections else None
-        #: a pnlviz.detect.run.Detector run on demand (in the background by the server) for frames
-        #: without detections in the zip; its results join ``detected``
+        #: a detector (pnlviz.detect.worker.DetectorProcess) run on demand, in the background, for
+        #: frames without detections in the zip; its results join ``detected``
         self.detector = detector
         self.detected: dict[str, object] = {}
         if detector is not None and self.predictions is None:
@@ -195,54 +203,54 @@ class AppState:
         self.detection_settings = dict((read_predictions_info(detections).get("calibration") if detections else None)
                                        or getattr(detector, "calibration", None) or {})
         CalibParams().updated(self.detection_settings)  # unknown names fail here, not on the first frame
-        self.edits = EditsStore(edits or default_edits_dir(self.data))
         self.size = size
         self.stems = list(self.ds.stems)
-        # start on the first frame with an image, the most telling one
-        self.index = next((i for i, s in enumerate(self.stems) if self.ds.frame(s).has_image), 0)
-        self.pnl = True
-        self.alpha = 0.6
-        # the keypoint source: "both" once there are detections, unless the caller says otherwise
-        self.source = source or ("annotation" if self.predictions is None else "both")
+        self._index = {s: i for i, s in enumerate(self.stems)}
+        #: the settings a new tab starts with: "both" once there are detections, unless told otherwise
+        self.default_settings = Settings(source=source or ("annotation" if self.predictions is None else "both"))
+        self.edits = EditsStore(edits or default_edits_dir(self.data), writable=writable)
+        #: the frame a new tab opens: the first with an image, the most telling one
+        self.first_index = next((i for i, s in enumerate(self.stems) if self.ds.frame(s).has_image), 0)
         self._cache: dict[tuple, FrameView] = {}
         self._lock = threading.RLock()
         self._images: dict[str, np.ndarray | None] = {}
         self._undo: dict[str, list[dict]] = {}
         self._redo: dict[str, list[dict]] = {}
+        self._listeners: list[Callable[[str], None]] = []
 
-    # ------------------------------------------------------------------ settings
-    @property
-    def stem(self) -> str:
-        return self.stems[self.index]
+    def close(self) -> None:
+        """Release the edits folder (and stop the detector, when it runs in a process)."""
+        self.edits.close()
+        close = getattr(self.detector, "close", None)
+        if close is not None:
+            close()
 
-    def applied_detection_settings(self, origin: str | None) -> dict:
-        """The detector's calibration settings when they apply: observations from detections
-        alone, with PnL on (without PnL there is nothing they change)."""
-        return self.detection_settings if origin == "detections" and self.pnl else {}
+    def __enter__(self) -> AppState:
+        return self
 
-    def params(self, origin: str | None = None) -> CalibParams:
-        """The calibration settings for observations from ``origin`` (see :meth:`_observations`)."""
-        p = CalibParams(alpha=self.alpha).updated(self.applied_detection_settings(origin))
-        if not self.pnl:
-            p = CalibParams(pnl=False, refine_focal=False, refine_k1=False)
-        return p
-
-    def _key(self, stem: str) -> tuple:
-        rec = self.edits.get(stem)
-        edit = {k: rec[k] for k in ("annotation", "keypoints") if rec.get(k) is not None}
-        return stem, self.pnl, round(self.alpha, 4), self.source, json.dumps(edit, sort_keys=True) if edit else None
-
-    def go(self, index: int) -> str:
-        self.index = int(np.clip(index, 0, len(self.stems) - 1))
-        return self.stem
-
-    def find(self, stem: str) -> int | None:
-        try:
-            return self.stems.index(stem.strip())
-        except ValueError:
-            return None
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     # ------------------------------------------------------------------ frames
+    def index_of(self, stem: str) -> int:
+        """The frame's position; EditError for a stem the dataset does not have."""
+        try:
+            return self._index[stem]
+        except (KeyError, TypeError):
+            raise EditError(f"no frame {str(stem)[:60]!r} in {self.data.name}") from None
+
+    def find(self, stem: str) -> int | None:
+        return self._index.get(str(stem).strip())
+
+    def frame_size(self, stem: str) -> tuple[int, int]:
+        """(W, H) of the frame's image, else the size frames without an image are shown at."""
+        try:
+            if self.ds.frame(stem).has_image:
+                return self.ds.image_size(stem) or self.size
+        except DataError:
+            pass
+        return self.size
+
     def annotation(self, stem: str) -> dict[str, np.ndarray] | None:
         """The edited annotation if any, else the source one."""
         edit = self.edits.get(stem).get("annotation")
@@ -271,10 +279,10 @@ class AppState:
             # views computed before the detections existed are stale
             for key in [k for k in self._cache if k[0] == stem]:
                 del self._cache[key]
+        self._changed(stem)
 
-    def image(self, stem: str | None = None) -> np.ndarray | None:
+    def image(self, stem: str) -> np.ndarray | None:
         """The frame's pixels (BGR), decoded on demand; a few recent ones are kept."""
-        stem = stem or self.stem
         with self._lock:
             if stem in self._images:
                 return self._images[stem]
@@ -288,52 +296,76 @@ class AppState:
                 self._images.pop(next(iter(self._images)))
         return img
 
-    def view(self, stem: str | None = None) -> FrameView:
-        """The frame's view under the current settings (cached). Never raises on bad data."""
-        stem = stem or self.stem
-        key = self._key(stem)
+    # ------------------------------------------------------------------ calibration
+    def applied_detection_settings(self, origin: str | None, settings: Settings) -> dict:
+        """The detector's calibration settings when they apply: observations from detections
+        alone, with PnL on (without PnL there is nothing they change)."""
+        return self.detection_settings if origin == "detections" and settings.pnl else {}
+
+    def params(self, settings: Settings, origin: str | None = None) -> CalibParams:
+        """The calibration parameters for observations from ``origin`` (see :meth:`_observations`)."""
+        if not settings.pnl:
+            return CalibParams(pnl=False, refine_focal=False, refine_k1=False)
+        return CalibParams(alpha=settings.alpha).updated(self.applied_detection_settings(origin, settings))
+
+    def _key(self, stem: str, settings: Settings) -> tuple:
+        rec = self.edits.get(stem)
+        edit = {k: rec[k] for k in ("annotation", "keypoints") if rec.get(k) is not None}
+        return stem, settings, json.dumps(edit, sort_keys=True) if edit else None
+
+    def view(self, stem: str, settings: Settings | None = None) -> FrameView:
+        """The frame's view under ``settings`` (default: :attr:`default_settings`), cached. Never
+        raises on bad data."""
+        settings = settings or self.default_settings
+        key = self._key(stem, settings)
         with self._lock:
             if key in self._cache:
                 return self._cache[key]
-        view = self._compute(stem)
+        view = self._compute(stem, settings)
         with self._lock:
             self._cache[key] = view
         return view
 
-    def _compute(self, stem: str) -> FrameView:
+    def cached_views(self, settings: Settings | None = None) -> list[FrameView]:
+        """The views computed so far under ``settings`` for the frames as they are now."""
+        settings = settings or self.default_settings
+        with self._lock:
+            items = list(self._cache.items())
+        return [v for k, v in items if k[1] == settings and k == self._key(k[0], settings)]
+
+    def _compute(self, stem: str, settings: Settings) -> FrameView:
         from pnlviz.metrics.soccernet import evaluate_frame
 
-        idx = self.stems.index(stem)
+        idx = self.index_of(stem)
         t0 = time.perf_counter()
         try:
             image = self.ds.frame(stem).has_image
-            size = (self.ds.image_size(stem) or self.size) if image else self.size
+            size = self.frame_size(stem)
             ann = self.annotation(stem)
             ref = self.ds.camera_dict(stem)
             ref = Camera.from_soccernet(ref).scaled(*size) if ref is not None else None
         except DataError as exc:
-            return FrameView(stem, idx, False, self.size, None, None, None, error=str(exc))
-        obs, origin = self._observations(stem, ann, size)
+            return FrameView(stem, idx, False, self.size, None, None, None, error=str(exc), settings=settings)
+        obs, origin = self._observations(stem, ann, size, settings)
         if obs is None:
             return FrameView(stem, idx, image, size, ann, None, None, error="nothing to calibrate from",
-                             ms=1e3 * (time.perf_counter() - t0), reference_camera=ref)
+                             ms=1e3 * (time.perf_counter() - t0), reference_camera=ref, settings=settings)
         try:
-            result = calibrate(obs, self.params(origin))
+            result = calibrate(obs, self.params(settings, origin))
         except Exception as exc:  # shown in the panel; the rest of the dataset keeps working
             return FrameView(stem, idx, image, size, ann, obs, None, error=f"internal error: {exc}", reference_camera=ref,
-                             origin=origin)
+                             origin=origin, settings=settings)
         jac = {}
         if result.ok and ann:
             fr = evaluate_frame(result.camera.scaled(*EVAL_SIZE), ann)
             jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
-        detections = self.detections_for(stem)
         return FrameView(stem, idx, image, size, ann, obs, result, jac, ms=1e3 * (time.perf_counter() - t0),
-                         reference_camera=ref, detections=detections, origin=origin)
+                         reference_camera=ref, detections=self.detections_for(stem), origin=origin, settings=settings)
 
-    def _observations(self, stem: str, ann, size) -> tuple[Observations | None, str | None]:
+    def _observations(self, stem: str, ann, size, settings: Settings) -> tuple[Observations | None, str | None]:
         """The observations to calibrate from and where they came from ("annotation",
         "detections", "both", "edits" when only dragged keypoints exist, or None)."""
-        obs, origin = self._base_observations(stem, ann, size)
+        obs, origin = self._base_observations(stem, ann, size, settings.source)
         overrides = self.edits.get(stem).get("keypoints")
         if not overrides:
             return obs, origin
@@ -341,12 +373,12 @@ class AppState:
             obs, origin = Observations(*size), "edits"
         return apply_keypoint_edits(obs, overrides), origin
 
-    def _base_observations(self, stem: str, ann, size) -> tuple[Observations | None, str | None]:
+    def _base_observations(self, stem: str, ann, size, source: str) -> tuple[Observations | None, str | None]:
         W, H = size
         pred = self.detections_for(stem)
-        use_ann = ann is not None and self.source in ("annotation", "both")
+        use_ann = ann is not None and source in ("annotation", "both")
         # a frame with no annotation falls back to its detections under "annotation"
-        use_det = pred is not None and (self.source in ("detections", "both") or not use_ann)
+        use_det = pred is not None and (source in ("detections", "both") or not use_ann)
         if use_ann and use_det:
             return merge_observations(observations_from_annotation(ann, W, H)[0],
                                       observations_from_predictions(pred, W, H)), "both"
@@ -356,68 +388,117 @@ class AppState:
             return observations_from_predictions(pred, W, H), "detections"
         return None, None
 
+    # ------------------------------------------------------------------ change notices
+    def subscribe(self, callback: Callable[[str], None]) -> None:
+        """Call ``callback(stem)`` after every change to a frame (edit, review, new detections)."""
+        self._listeners.append(callback)
+
+    def _changed(self, stem: str) -> None:
+        for callback in list(self._listeners):
+            callback(stem)
+
     # ------------------------------------------------------------------ review and edits
-    def set_review(self, status: str | None, stem: str | None = None) -> None:
+    def _check_position(self, stem: str, x, y) -> tuple[float, float]:
+        W, H = self.frame_size(stem)
+        try:
+            x, y = float(x), float(y)
+        except (TypeError, ValueError):
+            raise EditError(f"a position must be two numbers, got {x!r}, {y!r}") from None
+        m = PLACEMENT_MARGIN
+        if not (math.isfinite(x) and math.isfinite(y) and -m * W <= x <= (1 + m) * W and -m * H <= y <= (1 + m) * H):
+            raise EditError(f"position ({x:.6g}, {y:.6g}) is off the {W}x{H} frame of {stem} by more than half its size")
+        return x, y
+
+    @staticmethod
+    def _check_id(kid) -> int:
+        try:
+            kid = int(kid)
+        except (TypeError, ValueError):
+            raise EditError(f"keypoint id must be a whole number, got {str(kid)[:20]!r}") from None
+        if kid not in keypoint_ids():
+            raise EditError(f"keypoint id {kid} is not in the catalogue (1..73)")
+        return kid
+
+    def _edit(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True) -> None:
+        """One user action on one frame: ``change(record)`` under the frame's lock, one undo
+        step, autosaved at once (an OSError of the write reaches the caller, nothing changes)."""
+        self.index_of(stem)
+        with self.edits.lock(stem):
+            try:
+                with self.edits.edit(stem) as rec:
+                    before = {k: rec.get(k) for k in _UNDOABLE}
+                    change(rec)
+                    if corrected:
+                        rec["review"] = "corrected"
+                    if {k: rec.get(k) for k in _UNDOABLE} == before:
+                        raise _Unchanged
+            except _Unchanged:
+                return
+            with self._lock:  # the write succeeded: now it is an undo step
+                self._undo.setdefault(stem, []).append(before)
+                self._redo.pop(stem, None)
+        self._changed(stem)
+
+    def set_review(self, stem: str, status: str | None) -> None:
         if status is not None and status not in REVIEW_STATES:
-            raise ValueError(f"review status must be one of {REVIEW_STATES}")
-        self.edits.update(stem or self.stem, review=status)
+            raise EditError(f"review status must be one of {', '.join(REVIEW_STATES)} or none, got {str(status)[:20]!r}")
+        self._edit(stem, lambda rec: rec.__setitem__("review", status), corrected=False)
 
-    def set_annotation(self, annotation: dict[str, np.ndarray], stem: str | None = None) -> None:
+    def set_annotation(self, stem: str, annotation: dict[str, np.ndarray]) -> None:
         """Store an edited annotation (autosaved at once) and mark the frame corrected."""
-        stem = stem or self.stem
-        self._record(stem, annotation=annotation_to_json(annotation))
+        try:
+            text = annotation_to_json(annotation)
+            parse_annotation(text)
+        except DataError as exc:
+            raise EditError(exc.problem) from None
+        self._edit(stem, lambda rec: rec.__setitem__("annotation", text))
 
-    # one user action = one undo step; the edit record (annotation, keypoint overrides) is
-    # autosaved at once, the undo history lives as long as the server
-    def _record(self, stem: str, **changes) -> None:
-        rec = self.edits.get(stem)
-        before = {k: rec.get(k) for k in ("annotation", "keypoints")}
-        with self._lock:
-            self._undo.setdefault(stem, []).append(before)
-            self._redo.pop(stem, None)
-        self.edits.update(stem, review="corrected", **changes)
-
-    def move_keypoint(self, kid: int, x: float, y: float, stem: str | None = None) -> None:
+    def move_keypoint(self, stem: str, kid: int, x: float, y: float) -> None:
         """Put keypoint ``kid`` at pixel (x, y) of the frame (adds it if it was missing)."""
-        stem = stem or self.stem
-        kps = dict(self.edits.get(stem).get("keypoints") or {})
-        kps[str(int(kid))] = [float(x), float(y)]
-        self._record(stem, keypoints=kps)
+        kid, (x, y) = self._check_id(kid), self._check_position(stem, x, y)
+        self._edit(stem, lambda rec: rec.__setitem__("keypoints", {**(rec.get("keypoints") or {}), str(kid): [x, y]}))
 
-    def hide_keypoint(self, kid: int, stem: str | None = None) -> None:
+    def hide_keypoint(self, stem: str, kid: int) -> None:
         """Mark keypoint ``kid`` not visible: it leaves the calibration and the labels."""
-        stem = stem or self.stem
-        kps = dict(self.edits.get(stem).get("keypoints") or {})
-        kps[str(int(kid))] = None
-        self._record(stem, keypoints=kps)
+        kid = self._check_id(kid)
+        self._edit(stem, lambda rec: rec.__setitem__("keypoints", {**(rec.get("keypoints") or {}), str(kid): None}))
 
-    def move_line_point(self, name: str, index: int, x: float, y: float, stem: str | None = None) -> None:
+    def move_line_point(self, stem: str, name: str, index: int, x: float, y: float) -> None:
         """Move point ``index`` of annotated class ``name`` to pixel (x, y)."""
-        stem = stem or self.stem
-        ann = {k: v.copy() for k, v in (self.annotation(stem) or {}).items()}
-        W, H = self.view(stem).size
-        ann[name][index] = [x / (W - 1), y / (H - 1)]
-        self._record(stem, annotation=annotation_to_json(ann))
+        x, y = self._check_position(stem, x, y)
+        W, H = self.frame_size(stem)
 
-    def undo(self, stem: str | None = None) -> bool:
-        return self._step(stem or self.stem, self._undo, self._redo)
+        def change(rec):
+            edited = rec.get("annotation")
+            ann = parse_annotation(edited) if edited is not None else self.ds.annotation(stem)
+            if not ann or name not in ann or not (0 <= int(index) < len(ann[name])):
+                raise EditError(f"{stem} has no point {index} on {str(name)[:40]!r}")
+            ann[name][int(index)] = [x / (W - 1), y / (H - 1)]
+            rec["annotation"] = annotation_to_json(ann)
 
-    def redo(self, stem: str | None = None) -> bool:
-        return self._step(stem or self.stem, self._redo, self._undo)
+        self._edit(stem, change)
+
+    def undo(self, stem: str) -> bool:
+        return self._step(stem, self._undo, self._redo)
+
+    def redo(self, stem: str) -> bool:
+        return self._step(stem, self._redo, self._undo)
 
     def _step(self, stem: str, source: dict, target: dict) -> bool:
-        with self._lock:
-            if not source.get(stem):
-                return False
-            state = source[stem].pop()
-            rec = self.edits.get(stem)
-            target.setdefault(stem, []).append({k: rec.get(k) for k in ("annotation", "keypoints")})
-        self.edits.update(stem, annotation=state["annotation"], keypoints=state["keypoints"])
+        self.index_of(stem)
+        with self.edits.lock(stem):
+            with self._lock:
+                if not source.get(stem):
+                    return False
+                state = source[stem][-1]
+            with self.edits.edit(stem) as rec:
+                current = {k: rec.get(k) for k in _UNDOABLE}
+                rec.update(state)
+            with self._lock:  # written: move the step across
+                source[stem].pop()
+                target.setdefault(stem, []).append(current)
+        self._changed(stem)
         return True
 
     def review_progress(self) -> tuple[int, int]:
         return sum(self.edits.counts().values()), len(self.stems)
-
-    def cached_views(self) -> list[FrameView]:
-        with self._lock:
-            return [v for k, v in self._cache.items() if k == self._key(k[0])]

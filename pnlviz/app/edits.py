@@ -1,0 +1,241 @@
+"""The edits folder: review statuses and label corrections, beside the data and never over it.
+
+Layout::
+
+    <edits>/frames/<stem>.json          {"review": "accepted"|"corrected"|"rejected",
+                                         "annotation": {SoccerNet annotation},
+                                         "keypoints": {"<id>": [x, y] | null},   # pixels; null = not visible
+                                         "updated": <unix time>}
+    <edits>/frames/<stem>.json.damaged  a file that failed validation, moved aside (kept, never deleted)
+    <edits>/lock                        held by the one process writing here (its pid and URL inside)
+
+Every record is validated when it is read and before it is written (the same rules), so what is
+on disk is always something the app can use. Writes are atomic (a crash leaves the old file or
+the new one) and every read-modify-write of a frame runs under that frame's lock, so concurrent
+edits from several browser tabs are applied one after the other, none lost.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import socket
+import threading
+import time
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+from pnlviz.data import DataError, atomic_write_text
+from pnlviz.data.annotations import parse_annotation
+from pnlviz.data.jsonio import as_number, describe, dumps
+
+REVIEW_STATES = ("accepted", "corrected", "rejected")
+#: the fields a record may hold; anything else is dropped when it is read
+FIELDS = ("review", "annotation", "keypoints", "updated")
+#: keypoint coordinates are pixels: anything larger is not a position in a frame
+MAX_COORDINATE = 1e6
+
+
+class EditsFolderError(RuntimeError):
+    """The edits folder cannot be used: not writable, or in use by another process."""
+
+
+def keypoint_ids() -> frozenset[int]:
+    """The catalogue's keypoint ids (PnLCalib's 1..73)."""
+    from pnlviz.field.model import load_field_model
+
+    return frozenset(int(i) for i in load_field_model().keypoint_ids)
+
+
+def validate_keypoint(kid: Any, value: Any, source: str) -> tuple[str, list[float] | None]:
+    """``("<id>", [x, y] | None)`` of one keypoint edit; DataError when the id is not in the
+    catalogue or the value is not null or two finite numbers."""
+    text = str(kid)
+    if not text.isdigit() or int(text) not in keypoint_ids():
+        raise DataError(source, f"keypoint id {text[:20]!r} is not in the catalogue (1..73)")
+    if value is None:
+        return str(int(text)), None
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise DataError(source, f"keypoint {text}: expected [x, y] or null, got {describe(value)}")
+    xy = [as_number(v) for v in value]
+    if any(v is None or not math.isfinite(v) or abs(v) > MAX_COORDINATE for v in xy):
+        raise DataError(source, f"keypoint {text}: [x, y] must be two finite pixel coordinates, got {value!r:.60}")
+    return str(int(text)), xy
+
+
+def validate_record(obj: Any, source: str) -> dict:
+    """A checked copy of an edit record (see the module docstring); DataError on anything else."""
+    if not isinstance(obj, Mapping):
+        raise DataError(source, f"an edit record must be a JSON object, got {describe(obj)}")
+    rec: dict = {}
+    review = obj.get("review")
+    if review is not None:
+        if review not in REVIEW_STATES:
+            raise DataError(source, f"review must be one of {', '.join(REVIEW_STATES)} or null, got {describe(review)}")
+        rec["review"] = review
+    if obj.get("annotation") is not None:
+        parse_annotation(obj["annotation"], source)  # raises DataError
+        rec["annotation"] = obj["annotation"]
+    kps = obj.get("keypoints")
+    if kps is not None:
+        if not isinstance(kps, Mapping):
+            raise DataError(source, f'"keypoints" must be an object of id -> [x, y] | null, got {describe(kps)}')
+        rec["keypoints"] = dict(validate_keypoint(k, v, source) for k, v in kps.items())
+    updated = as_number(obj.get("updated"))
+    if updated is not None and math.isfinite(updated):
+        rec["updated"] = updated
+    return rec
+
+
+class EditsStore:
+    """One validated JSON record per frame in ``root/frames/``.
+
+    ``writable=True`` (the app): the folder is created, locked for this process (a second
+    process gets :class:`EditsFolderError`), leftovers of interrupted writes are removed, and
+    damaged records are moved aside as ``*.damaged``. ``writable=False`` (``pnlviz export``):
+    nothing is created or moved; damaged records are skipped. Either way every problem is one
+    line in :attr:`warnings`, and a frame whose record is damaged falls back to its source labels.
+    """
+
+    def __init__(self, root: Path, *, writable: bool = True):
+        self.root = Path(root)
+        self.frames = self.root / "frames"
+        self.writable = writable
+        self.warnings: list[str] = []
+        self._cache: dict[str, dict] = {}
+        self._locks: dict[str, threading.RLock] = {}
+        self._locks_lock = threading.Lock()
+        self._lock_file = None
+        if writable:
+            self._take_folder()
+            self._remove_leftovers()
+        self._load()
+
+    # ------------------------------------------------------------------ the folder
+    def _take_folder(self) -> None:
+        try:
+            self.frames.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.root / "lock", os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise EditsFolderError(f"{self.root}: the edits folder cannot be written ({exc.strerror or exc}); "
+                                   f"give --edits a folder you can write") from None
+        try:
+            import fcntl
+
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except ImportError:  # no advisory locks on this platform: one server per folder is on the user
+            pass
+        except OSError:
+            holder = os.read(fd, 4096).decode("utf-8", "replace").strip()
+            os.close(fd)
+            raise EditsFolderError(f"{self.root} is in use by another pnlviz process ({holder or 'unknown'}); "
+                                   f"stop it, or give this one another --edits folder") from None
+        self._lock_file = fd
+        self.describe_holder()
+
+    def describe_holder(self, url: str | None = None) -> None:
+        """Write who holds the folder (pid, host, URL) into the lock file, for the message a second
+        process shows."""
+        if self._lock_file is None:
+            return
+        text = f"pid {os.getpid()} on {socket.gethostname()}" + (f", {url}" if url else "") + \
+            f", since {time.strftime('%Y-%m-%d %H:%M:%S')}"
+        os.ftruncate(self._lock_file, 0)
+        os.pwrite(self._lock_file, text.encode(), 0)
+
+    def _remove_leftovers(self) -> None:
+        """Temporary files of writes that a crash interrupted (``.<name>.<random>.tmp``)."""
+        for p in self.frames.glob(".*.tmp"):
+            with contextlib.suppress(OSError):
+                p.unlink()
+
+    def close(self) -> None:
+        """Release the folder (another process may then take it)."""
+        if self._lock_file is not None:
+            os.close(self._lock_file)  # closing the descriptor releases the flock
+            self._lock_file = None
+
+    def __enter__(self) -> EditsStore:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ reading
+    def _load(self) -> None:
+        if not self.frames.is_dir():
+            return
+        for p in sorted(self.frames.glob("*.json")):
+            try:
+                data = p.read_bytes()
+                rec = validate_record(json.loads(data), str(p))
+            except (OSError, ValueError, RecursionError) as exc:  # DataError and JSONDecodeError are ValueErrors
+                self._damaged(p, exc)
+                continue
+            self._cache[p.stem] = rec
+
+    def _damaged(self, path: Path, exc: Exception) -> None:
+        reason = exc.problem if isinstance(exc, DataError) else str(exc) or type(exc).__name__
+        if not self.writable:
+            self.warnings.append(f"{path}: damaged edit record ignored ({reason})")
+            return
+        target = path.with_name(path.name + ".damaged")
+        n = 1
+        while target.exists():
+            target = path.with_name(f"{path.name}.damaged.{n}")
+            n += 1
+        try:
+            os.replace(path, target)
+            self.warnings.append(f"{path}: damaged edit record moved to {target.name} ({reason}); "
+                                 f"the frame shows its source labels")
+        except OSError as move_error:
+            self.warnings.append(f"{path}: damaged edit record ignored ({reason}); cannot move it aside: {move_error}")
+
+    def get(self, stem: str) -> dict:
+        """A copy of the frame's record ({} when it has none)."""
+        rec = self._cache.get(stem)
+        return json.loads(json.dumps(rec)) if rec else {}
+
+    def review(self, stem: str) -> str | None:
+        return self._cache.get(stem, {}).get("review")
+
+    def counts(self) -> dict[str, int]:
+        out = {s: 0 for s in REVIEW_STATES}
+        for rec in list(self._cache.values()):
+            if rec.get("review") in out:
+                out[rec["review"]] += 1
+        return out
+
+    def stems(self) -> list[str]:
+        return list(self._cache)
+
+    # ------------------------------------------------------------------ writing
+    def lock(self, stem: str) -> threading.RLock:
+        """The frame's lock (re-entrant): hold it to make several steps one transaction."""
+        with self._locks_lock:
+            return self._locks.setdefault(stem, threading.RLock())
+
+    @contextlib.contextmanager
+    def edit(self, stem: str) -> Iterator[dict]:
+        """Read-modify-write of one frame's record under its lock: the block changes the yielded
+        copy, which is validated and written atomically when the block ends without an error
+        (nothing is written, nor cached, when it raises, or when the write fails)."""
+        if not self.writable:
+            raise EditsFolderError(f"{self.root}: opened read-only")
+        with self.lock(stem):
+            rec = self.get(stem)
+            yield rec
+            rec = {k: v for k, v in rec.items() if v is not None and k in FIELDS}
+            rec["updated"] = time.time()
+            rec = validate_record(rec, f"{self.frames / stem}.json")
+            atomic_write_text(self.frames / f"{stem}.json", dumps(rec, indent=1))
+            self._cache[stem] = rec
+
+    def update(self, stem: str, **changes) -> dict:
+        """Set (or with None, remove) fields of a frame's record; returns the new record."""
+        with self.edit(stem) as rec:
+            rec.update(changes)
+        return self.get(stem)
