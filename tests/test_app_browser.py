@@ -245,3 +245,85 @@ def test_keyboard_shortcuts_n_p_and_ctrl_z(data, browser):
         page.close()
     finally:
         stop(app)
+
+
+def test_a_page_from_another_origin_cannot_connect(data, browser):
+    """A page served from another local port opens a websocket to the app: refused at the
+    handshake, so it reads nothing and changes nothing."""
+    import http.server
+    import threading
+
+    app = start(data)
+    page_html = (f'<script>const ws = new WebSocket("ws://127.0.0.1:{app.policy.port}", ["viser-v1.1.1"]);'
+                 'ws.onopen = () => document.title = "open"; ws.onmessage = () => document.title = "message";'
+                 'ws.onerror = () => document.title = "refused";</script>').encode()
+
+    class Page(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.end_headers()
+            self.wfile.write(page_html)
+
+        def log_message(self, *args):
+            pass
+
+    other = http.server.HTTPServer(("127.0.0.1", 0), Page)
+    threading.Thread(target=other.serve_forever, daemon=True).start()
+    try:
+        own = open_page(browser, app, "focal")  # the app's own page connects
+        assert len(app.tabs()) == 1
+        page = browser.new_page()
+        page.goto(f"http://127.0.0.1:{other.server_address[1]}/")
+        page.wait_for_function("document.title !== ''", timeout=20000)
+        assert page.title() == "refused"
+        time.sleep(1.0)
+        assert len(app.tabs()) == 1  # no session was made for it
+        page.close()
+        own.close()
+    finally:
+        other.shutdown()
+        stop(app)
+
+
+def test_serve_starts_clean_with_a_client_while_the_detector_loads(tmp_path, browser):
+    """`pnlviz serve` as a user starts it (the light default model detecting in the background),
+    three times, with both cores busy: the page shows the frame calibrated from the detections,
+    the server lives on, and its process never loads torch (importing torch in a thread beside
+    scipy crashed it: issue #10)."""
+    import subprocess
+    import sys
+
+    import cv2
+
+    from pnlviz.synth import make_frame
+
+    data = tmp_path / "set"
+    data.mkdir()
+    cv2.imwrite(str(data / "solo.jpg"), make_frame(2, 777, (960, 540))["image"])  # an image only: detect it
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        for round_ in range(3):
+            port = _free_port()
+            proc = subprocess.Popen([sys.executable, "-m", "pnlviz.cli", "serve", "--data", str(data), "--port", str(port),
+                                     "--edits", str(tmp_path / f"edits{round_}")],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            try:
+                for line in proc.stdout:
+                    if "open http" in line:
+                        break
+                page = browser.new_page()
+                page.goto(f"http://127.0.0.1:{port}/")
+                wait_for_text(page, "calibrated from: detections", timeout=120)
+                wait_for_text(page, "detections ready for solo", timeout=30)
+                page.close()
+                assert proc.poll() is None
+                maps = open(f"/proc/{proc.pid}/maps").read()
+                assert "libtorch" not in maps
+            finally:
+                proc.terminate()
+                out, err = proc.communicate(timeout=30)
+            assert "Traceback" not in err and "Error" not in err, err
+    finally:
+        for b in burners:
+            b.kill()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 from pathlib import Path
@@ -90,6 +91,7 @@ def run_serve(args) -> int:
         print(f"pnlviz: warning: listening on {args.host}: anyone who can reach this machine and has the token can "
               f"read and edit these labels", file=sys.stderr)
     print(f"pnlviz: open {urls[0]}" + "".join(f"\npnlviz:   or {u}" for u in urls[1:]), flush=True)
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as Ctrl+C does: edits folder released
     try:
         while True:
             time.sleep(1.0)
@@ -99,6 +101,10 @@ def run_serve(args) -> int:
         app.stop()
         state.close()
     return 0
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 def add_export_parser(sub) -> None:

@@ -99,16 +99,18 @@ class AccessPolicy:
     # ------------------------------------------------------------------ checks
     def refusal(self, headers, path: str) -> str | None:
         """Why a request is refused, or None when it may go on."""
-        host = _host_name(headers.get("Host", ""))
-        if not self.any_host and host not in self.names:
-            return f"this server does not answer to the host name {host!r}"
-        origin = headers.get("Origin")
-        if origin is not None:
-            parts = urlsplit(origin)
-            if parts.scheme not in ("http", "https") or parts.netloc.lower() != headers.get("Host", "").strip().lower():
-                return f"pages from {origin} may not use this server"
+        hosts, origins = headers.get_all("Host"), headers.get_all("Origin")
+        if len(hosts) != 1 or len(origins) > 1:
+            return "one Host header (and at most one Origin) expected"
+        host_header = hosts[0].strip().lower()
+        if not self.any_host and _host_name(host_header) not in self.names:
+            return f"this server does not answer to the host name {_host_name(host_header)!r}"
+        if origins:
+            parts = urlsplit(origins[0])
+            if parts.scheme not in ("http", "https") or parts.netloc.lower() != host_header:
+                return f"pages from {origins[0][:80]} may not use this server"
         if self.token and not self._has_token(headers, path):
-            return "this server needs its token: open the URL it printed (…/?token=…)"
+            return "this server needs its token: open the URL it printed (.../?token=...)"
         return None
 
     def token_in_query(self, path: str) -> bool:

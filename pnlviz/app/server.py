@@ -142,12 +142,13 @@ class PnlvizApp:
             if self._stop.is_set():
                 return
             st.view(stem)
-            if i % 10 == 0 or i == n - 1:
+            if (i % 10 == 0 or i == n - 1) and not self._stop.is_set():
                 self._say(f"background calibration: {i + 1}/{n} frames")
             time.sleep(0)
 
     def stop(self) -> None:
         self._stop.set()
+        self._worker.join(timeout=5.0)  # it stops after the frame it is on
         for session in self._all_sessions():
             session.close()
         self.server.stop()

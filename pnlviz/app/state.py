@@ -399,6 +399,7 @@ class AppState:
 
     # ------------------------------------------------------------------ review and edits
     def _check_position(self, stem: str, x, y) -> tuple[float, float]:
+        self.index_of(stem)
         W, H = self.frame_size(stem)
         try:
             x, y = float(x), float(y)

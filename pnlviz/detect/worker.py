@@ -14,6 +14,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import threading
+import time
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -35,12 +36,20 @@ class DetectorLoadError(ValueError):
     in the parent with the child's message, so the parent needs no torch to unpickle it."""
 
 
-def _child_init(threads: int) -> None:
+def _child_init(threads: int, parent: int) -> None:
     os.environ["OMP_NUM_THREADS"] = str(threads)
     try:
         os.nice(NICENESS)
     except OSError:  # not permitted here: run at the same priority
         pass
+    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
+
+
+def _exit_with_parent(parent: int) -> None:
+    """End the child when its parent is gone (killed, or stopped without closing us)."""
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os._exit(0)
 
 
 def _child_detector(weights_kp, weights_lines, kw):
@@ -106,7 +115,7 @@ class DetectorProcess:
             if self._pool is None:
                 ctx = multiprocessing.get_context("spawn")
                 self._pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_child_init,
-                                                 initargs=(self.threads,))
+                                                 initargs=(self.threads, os.getpid()))
             pool = self._pool
         try:
             return pool.submit(fn, *self._args, *args).result()
