@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pnlviz.data.predictions import Predictions, read_predictions, write_predictions
@@ -183,8 +183,7 @@ def test_import_does_not_import_torch():
 @given(x1=st.floats(0.0, W - 0.5), y1=st.floats(0.0, H - 0.5), x2=st.floats(0.0, W - 0.5),
        y2=st.floats(0.0, H - 0.5), lid=st.integers(1, 23))
 def test_line_two_peaks_give_both_extremities(x1, y1, x2, y2, lid):
-    if math.hypot(x2 - x1, y2 - y1) < 6.0:
-        return
+    assume(math.hypot(x2 - x1, y2 - y1) >= 6.0)
     ch = np.maximum(gaussian(x1, y1), gaussian(x2, y2))
     lines = extract_lines(line_heatmaps({lid: ch}))
     assert set(lines) == {lid}

@@ -535,6 +535,17 @@ def test_wc14_ground_truth_homographies_survive_the_camera_decomposition(gt_h):
 
 
 def test_the_package_exports_load_lazily():
+    import subprocess
+    import sys
+
+    # a fresh interpreter: importing the package loads neither its modules nor OpenCV...
+    code = ("import sys; import pnlviz.metrics as m; "
+            "assert 'pnlviz.metrics.soccernet' not in sys.modules and 'cv2' not in sys.modules; "
+            "m.evaluate_frame; assert 'pnlviz.metrics.soccernet' in sys.modules; "
+            "assert 'pnlviz.metrics.homography' not in sys.modules; print('ok')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+    # ...and the first use gives the module's own object
     import pnlviz.metrics as metrics
     from pnlviz.metrics import soccernet
 
