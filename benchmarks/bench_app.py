@@ -36,7 +36,7 @@ def main() -> None:
         t0 = time.perf_counter()
         big_state = AppState(big, edits=big.parent / "edits")
         t1 = time.perf_counter()
-        big_state.view()
+        big_state.view(big_state.stems[big_state.first_index])
         print(f"open a {args.open_frames}-frame folder: {1e3 * (t1 - t0):.0f} ms, first frame shown "
               f"{1e3 * (time.perf_counter() - t1):.0f} ms later; peak memory so far "
               f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
@@ -52,7 +52,7 @@ def main() -> None:
         i = int(rng.integers(v.observations.n_keypoints))
         kid, (x, y) = int(v.observations.kp_ids[i]), v.observations.kp_xy[i]
         t0 = time.perf_counter()
-        st.move_keypoint(kid, x + 3.0, y - 2.0, stem)  # autosave included
+        st.move_keypoint(stem, kid, x + 3.0, y - 2.0)  # autosave included
         t1 = time.perf_counter()
         view = st.view(stem)
         t2 = time.perf_counter()

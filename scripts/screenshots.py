@@ -50,8 +50,9 @@ def session(browser, data: Path, edits: Path, shots: list[tuple[str, str, bool]]
         page = browser.new_page(viewport={"width": 1600, "height": 900})
         page.goto(app.url)
         page.get_by_text("Calibration").first.wait_for(timeout=30000)
+        tab = app.tabs()[0]
         for name, stem, camera_view in shots:
-            app.goto(app.state.find(stem))
+            tab.goto(app.state.find(stem))
             time.sleep(1.0)
             if camera_view:
                 page.get_by_role("button", name="camera view").click()
@@ -59,6 +60,7 @@ def session(browser, data: Path, edits: Path, shots: list[tuple[str, str, bool]]
         page.close()
     finally:
         app.stop()
+        app.state.close()
 
 
 def main() -> None:
