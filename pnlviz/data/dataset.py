@@ -111,8 +111,10 @@ class Dataset:
 
     Use :func:`open_dataset` to create one. ``len(ds)``, ``ds.stems`` (natural order),
     ``ds.frame(stem)``, ``ds.annotation(stem)``, ``ds.image(stem)``, ``ds.image_size(stem)``,
-    ``ds.camera_dict(stem)``, ``ds.match_info``, ``ds.iter_annotations(on_error=...)``.
-    Unknown stems raise KeyError; problems with file contents raise :class:`DataError`.
+    ``ds.camera_dict(stem)``, ``ds.camera_stems()``, ``ds.match_info``,
+    ``ds.iter_annotations(on_error=...)``, ``ds.rejected`` (files not used, one DataError each),
+    ``ds.require_frames()``. Unknown stems raise KeyError; problems with file contents raise
+    :class:`DataError`.
     """
 
     def __init__(self, path: str | os.PathLike, cache_size: int = 64):
