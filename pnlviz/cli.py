@@ -20,6 +20,23 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def print_skipped(lines, prefix: str = "skipped: ") -> None:
+    """Print problems to stderr, one line each (DataErrors or strings)."""
+    for line in lines:
+        print(f"{prefix}{line}", file=sys.stderr)
+
+
+def open_input_dataset(path):
+    """Open the dataset of a batch command: its rejected files (bad names, duplicates) are printed,
+    one line each; a dataset without any frame is a DataError (nothing to do)."""
+    from pnlviz.data import open_dataset
+
+    ds = open_dataset(path)
+    print_skipped(ds.rejected)
+    ds.require_frames()
+    return ds
+
+
 # ------------------------------------------------------------------------------------ validate
 def _add_validate(sub) -> None:
     p = sub.add_parser("validate", help="check every annotation (and optionally image) of a dataset",
@@ -56,15 +73,35 @@ def _run_validate(args) -> int:
                     ds.image(stem)
                 except DataError as exc:
                     problems.append(str(exc))
-    print(f"{args.data}: {len(ds)} frames, {n_ann} valid annotations, {n_img} images")
+    n_cam, camera_problems = _validate_cameras(ds)
+    problems = [str(e) for e in ds.rejected] + problems + camera_problems
+    if not len(ds):
+        print_skipped(problems, prefix="")
+        ds.require_frames()
+    print(f"{args.data}: {len(ds)} frames, {n_ann} valid annotations, {n_img} images, {n_cam} valid cameras")
     for name, count in sorted(classes.items(), key=lambda kv: -kv[1]):
         print(f"  {count:7d}  {name}")
     if problems:
         print(f"{len(problems)} problem(s), skipped:", file=sys.stderr)
-        for line in problems:
-            print(f"  {line}", file=sys.stderr)
+        print_skipped(problems, prefix="  ")
         return 1
     return 0
+
+
+def _validate_cameras(ds) -> tuple[int, list[str]]:
+    """Parse every ``cameras/camera_<stem>.json``: (valid count, one line per problem)."""
+    from pnlviz.data import DataError
+
+    n_ok, problems = 0, []
+    for stem in ds.camera_stems():
+        try:
+            ds.camera_dict(stem)
+            n_ok += 1
+        except DataError as exc:
+            problems.append(str(exc))
+        if stem not in ds:
+            problems.append(str(DataError(ds.camera_source(stem), f"camera without a frame: no {stem}.jpg/.png/.json")))
+    return n_ok, problems
 
 
 # ------------------------------------------------------------------------------------- sheet
@@ -82,15 +119,22 @@ def _add_sheet(sub) -> None:
     p.set_defaults(func=_run_sheet)
 
 
+SHEET_FORMATS = (".png", ".jpg", ".jpeg")
+
+
 def _run_sheet(args) -> int:
     import cv2
 
-    from pnlviz.data import DataError, open_dataset, read_camera_zip
+    from pnlviz.data import DataError, OutputError, atomic_write_bytes, check_output, read_camera_zip
     from pnlviz.geometry import Camera
     from pnlviz.viz import blank_canvas, caption, contact_sheet, draw_annotation, draw_pitch
 
-    ds = open_dataset(args.data)
-    cams = read_camera_zip(args.cameras) if args.cameras else {}
+    ext = args.out.suffix.lower()
+    if ext not in SHEET_FORMATS:
+        raise OutputError(f"--out {args.out}", "the sheet must be a .png or .jpg file")
+    check_output(args.out, inputs=[args.cameras], datasets=[args.data])
+    ds = open_input_dataset(args.data)
+    cams = read_camera_zip(args.cameras, on_error=lambda e: print_skipped([e])) if args.cameras else {}
     tiles = []
     for stem in ds.stems[: args.n]:
         frame = ds.frame(stem)
@@ -104,15 +148,16 @@ def _run_sheet(args) -> int:
             text = stem if cam_dict is None else f"{stem}  {cam_dict.get('synth', {}).get('kind', '')}".strip()
             tiles.append(caption(img, text))
         except DataError as exc:
-            print(f"skipped: {exc}", file=sys.stderr)
+            print_skipped([exc])
     if not tiles:
         print("nothing to draw", file=sys.stderr)
         return 1
     sheet = contact_sheet(tiles, columns=args.columns, tile_width=args.tile_width)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(args.out), sheet):
-        print(f"{args.out}: cannot write image", file=sys.stderr)
+    ok, encoded = cv2.imencode(ext, sheet)  # encoded here, written by Python: any file name works
+    if not ok:
+        print(f"{args.out}: cannot encode the sheet as {ext}", file=sys.stderr)
         return 1
+    atomic_write_bytes(args.out, encoded.tobytes())
     print(f"wrote {args.out} ({len(tiles)} frames)")
     return 0
 
@@ -146,16 +191,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _printable_streams() -> None:
+    """File names that are not valid UTF-8 (surrogate escapes) print as ``\\udcff`` instead of
+    ending the command with UnicodeEncodeError after its work is done."""
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
+
+
 def main(argv: list[str] | None = None) -> int:
+    _printable_streams()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
     from pnlviz.data.errors import DataError
+    from pnlviz.data.outputs import OutputError
 
     try:
         return int(args.func(args) or 0)
+    except OutputError as exc:  # an output over an input or inside a dataset: a usage error
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     except DataError as exc:  # a bad input file: one line, no traceback
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -20,9 +20,16 @@ ANNOTATION_BGR = (255, 80, 255)  # magenta: what the labels say
 _CLASS_COLOURS: dict[str, tuple[int, int, int]] = {}
 
 
+def cv_text(text: str) -> str:
+    """``text`` as OpenCV can draw it: ASCII (its Hershey fonts have nothing else), ``?`` for the
+    rest. OpenCV crashes (segfault) on a str it cannot encode, such as a file name with surrogate
+    escapes; never hand it one."""
+    return str(text).encode("ascii", "replace").decode("ascii")
+
+
 def class_colour(name: str) -> tuple[int, int, int]:
     if name not in _CLASS_COLOURS:
-        h = zlib.crc32(name.strip().encode()) % 180
+        h = zlib.crc32(name.strip().encode("utf-8", "surrogatepass")) % 180
         hsv = np.uint8([[[h, 200, 255]]])
         _CLASS_COLOURS[name] = tuple(int(c) for c in cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0])
     return _CLASS_COLOURS[name]
@@ -62,12 +69,13 @@ def draw_annotation(image: np.ndarray, annotation: dict[str, np.ndarray], *, nor
             cv2.circle(image, tuple(_to_int(p)[0, 0]), radius << 4, col, 1, cv2.LINE_AA, shift=4)
         if labels and len(pts):
             x, y = pts[len(pts) // 2]
-            cv2.putText(image, name.strip(), (int(x) + 4, int(y) - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35, col, 1, cv2.LINE_AA)
+            cv2.putText(image, cv_text(name.strip()), (int(x) + 4, int(y) - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35, col, 1, cv2.LINE_AA)
     return image
 
 
 def caption(image: np.ndarray, text: str) -> np.ndarray:
-    """Write ``text`` on a dark band at the top-left. In place."""
+    """Write ``text`` on a dark band at the top-left (non-ASCII characters as ``?``). In place."""
+    text = cv_text(text)
     (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
     cv2.rectangle(image, (0, 0), (tw + 8, th + base + 6), (0, 0, 0), -1)
     cv2.putText(image, text, (4, th + 3), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)

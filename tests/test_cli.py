@@ -15,15 +15,16 @@ from pnlviz.cli import main, parse_size
 def small_dataset(tmp_path):
     """Four sample frames plus one corrupt annotation, one unknown class and one broken image."""
     src = EXAMPLES_DIR / "sample"
-    (tmp_path / "cameras").mkdir()
+    ds = tmp_path / "ds"
+    (ds / "cameras").mkdir(parents=True)
     for stem in ("00000", "00001", "00002", "00003"):
-        shutil.copy(src / "cameras" / f"camera_{stem}.json", tmp_path / "cameras" / f"camera_{stem}.json")
-        shutil.copy(src / f"{stem}.jpg", tmp_path / f"{stem}.jpg")
-        shutil.copy(src / f"{stem}.json", tmp_path / f"{stem}.json")
-    (tmp_path / "00004.json").write_text('{"Side line top": [{"x": 0.1, "y": 0.2}, ')  # truncated
-    (tmp_path / "00005.json").write_text(json.dumps({"Big rect left mian": [{"x": 0.1, "y": 0.2}, {"x": 0.3, "y": 0.2}]}))
-    (tmp_path / "00006.jpg").write_bytes(b"not a jpeg at all")
-    return tmp_path
+        shutil.copy(src / "cameras" / f"camera_{stem}.json", ds / "cameras" / f"camera_{stem}.json")
+        shutil.copy(src / f"{stem}.jpg", ds / f"{stem}.jpg")
+        shutil.copy(src / f"{stem}.json", ds / f"{stem}.json")
+    (ds / "00004.json").write_text('{"Side line top": [{"x": 0.1, "y": 0.2}, ')  # truncated
+    (ds / "00005.json").write_text(json.dumps({"Big rect left mian": [{"x": 0.1, "y": 0.2}, {"x": 0.3, "y": 0.2}]}))
+    (ds / "00006.jpg").write_bytes(b"not a jpeg at all")
+    return ds
 
 
 def test_validate_reports_each_bad_file_in_one_line_and_fails(small_dataset, capsys):

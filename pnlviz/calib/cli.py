@@ -104,25 +104,59 @@ class _Worker:
         return calibrate_frame(self.ds, stem, pred, self.size, self.params)
 
 
+def _ignore_sigint() -> None:
+    """Pool workers leave Ctrl+C to the main process, which keeps what was computed."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _check_outputs(args) -> None:
+    """--out and --report: not over an input (nor over each other), not inside the dataset."""
+    from pnlviz.data import check_output, predictions_info_path
+
+    inputs = [args.detections, predictions_info_path(args.detections)] if args.detections else []
+    check_output(args.out, inputs=inputs, datasets=[args.data])
+    if args.report:
+        check_output(args.report, inputs=[*inputs, args.out], datasets=[args.data], what="--report")
+
+
+def _frames(ds, predictions) -> list[str]:
+    """The frames to calibrate: annotated frames, or those with detections (unknown ones use --size)."""
+    from pnlviz.data import sort_stems
+
+    if predictions is None:
+        return [s for s in ds.stems if ds.frame(s).has_annotation]
+    known = set(ds.stems)
+    return [s for s in ds.stems if s in predictions] + [s for s in sort_stems(predictions) if s not in known]
+
+
+def _detection_params(args):
+    """(settings recorded beside the detections, CalibParams); DataError/ValueError for a bad file."""
+    from pnlviz.data import read_predictions_info
+
+    settings = (read_predictions_info(args.detections).get("calibration") or {}) if args.detections else {}
+    return settings, frame_params(args, settings)
+
+
 def run_calibrate(args) -> int:
+    import contextlib
+
     from tqdm import tqdm
 
-    from pnlviz.data import (DataError, open_dataset, predictions_info_path, read_predictions, read_predictions_info,
-                             sort_stems, write_camera_zip)
+    from pnlviz.cli import open_input_dataset, print_skipped
+    from pnlviz.data import DataError, LineStream, ZipStream, predictions_info_path, read_predictions
+    from pnlviz.data.cameras import camera_member, camera_zip_order
 
-    ds = open_dataset(args.data)
-    predictions = read_predictions(args.detections) if args.detections else None
-    if predictions is None:
-        stems = [s for s in ds.stems if ds.frame(s).has_annotation]
-    else:  # the frames with detections; those unknown to the dataset use --size
-        known = set(ds.stems)
-        stems = [s for s in ds.stems if s in predictions] + [s for s in sort_stems(predictions) if s not in known]
+    _check_outputs(args)
+    ds = open_input_dataset(args.data)
+    predictions = read_predictions(args.detections, on_error=lambda e: print_skipped([e])) if args.detections else None
+    stems = _frames(ds, predictions)
     if not stems:
         print(f"{args.data}: no frame to calibrate", file=sys.stderr)
         return 1
     try:  # the detector's settings, recorded beside its prediction zip by pnlviz detect
-        settings = (read_predictions_info(args.detections).get("calibration") or {}) if args.detections else {}
-        params = frame_params(args, settings)
+        settings, params = _detection_params(args)
     except (DataError, ValueError) as exc:
         print(f"error: {predictions_info_path(args.detections)}: {exc}", file=sys.stderr)
         return 2
@@ -131,39 +165,47 @@ def run_calibrate(args) -> int:
               + ", ".join(f"{k}={v}" for k, v in settings.items()))
     job = _Worker(ds, predictions, args.size, params)
     workers = (os.cpu_count() or 1) if args.workers == 0 else max(1, args.workers)
-    cameras, reports = {}, []
+    order = {s: i for i, s in enumerate(stems)}
+    failures: list[str] = []
+    interrupted = False
     t0 = time.perf_counter()
     bar = tqdm(total=len(stems), desc="calibrate", unit="frame", disable=args.no_progress or None)
-    if workers == 1:
-        results = map(job, stems)
-    else:
-        import multiprocessing as mp
+    with contextlib.ExitStack() as stack:
+        cams = stack.enter_context(ZipStream(args.out, key=camera_zip_order))
+        reports = stack.enter_context(LineStream(args.report)) if args.report else None
+        pool = None
+        if workers == 1:
+            results = map(job, stems)
+        else:
+            import multiprocessing as mp
 
-        pool = mp.get_context("spawn").Pool(workers)
-        results = pool.imap_unordered(job, stems, chunksize=8)
-    for stem, cam, report in results:
-        if cam is not None:
-            cameras[stem] = cam
-        reports.append(report)
-        bar.update()
-    bar.close()
-    if workers > 1:
-        pool.close()
-        pool.join()
+            pool = stack.enter_context(mp.get_context("spawn").Pool(workers, initializer=_ignore_sigint))
+            results = pool.imap_unordered(job, stems, chunksize=8)
+        try:
+            for stem, cam, report in results:
+                if cam is not None:
+                    try:  # written at once: an interrupted or failing batch keeps it
+                        cams.add(*camera_member(stem, cam, args.out))
+                    except DataError as exc:
+                        cam, report["failure"] = None, f"skipped: not written: {exc}"
+                if cam is None:
+                    failures.append(report.get("failure") or "")
+                if reports is not None:
+                    reports.add(json.dumps(report), key=order[stem])
+                bar.update()
+        except KeyboardInterrupt:
+            interrupted = True
+        bar.close()
     elapsed = time.perf_counter() - t0
-    write_camera_zip(args.out, cameras)
-    if args.report:
-        from pnlviz.data import atomic_write_text
-
-        order = {s: i for i, s in enumerate(stems)}
-        reports.sort(key=lambda r: order[r["stem"]])
-        atomic_write_text(args.report, "".join(json.dumps(r) + "\n" for r in reports))
-    failures = Counter((r.get("failure") or "").split(" (")[0] for r in reports if r["stem"] not in cameras)
-    print(f"calibrated {len(cameras)}/{len(stems)} frames in {elapsed:.1f} s "
+    if interrupted:
+        print(f"interrupted: kept {len(cams)} of {len(stems)} frames in {args.out}", file=sys.stderr)
+        return 130
+    print(f"calibrated {len(cams)}/{len(stems)} frames in {elapsed:.1f} s "
           f"({1e3 * elapsed / len(stems):.1f} ms/frame with {workers} worker(s)) -> {args.out}")
-    for reason, n in failures.most_common():
+    for reason, n in Counter(f.split(" (")[0] for f in failures).most_common():
         print(f"  {n:5d} not calibrated: {reason}")
-    skipped = [r for r in reports if str(r.get("failure", "")).startswith("skipped")]
-    for r in skipped:
-        print(f"  {r['failure']}", file=sys.stderr)
+    print_skipped([f for f in failures if f.startswith("skipped")], prefix="  ")
+    if not len(cams):
+        print(f"error: no frame calibrated: {args.out} holds no camera", file=sys.stderr)
+        return 1
     return 0

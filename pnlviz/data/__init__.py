@@ -1,8 +1,8 @@
 """Pure I/O for pnlviz: SoccerNet datasets and annotations, camera JSON zips, PnLCalib 2D
-prediction zips, WC14 homographies, and atomic writes.
+prediction zips, WC14 homographies, atomic and streaming writes, output path checks.
 
 Every problem with an input file raises :class:`DataError` with a one-line message
-``"<file>: <problem>"``.
+``"<file>: <problem>"``. Input sizes are capped (:mod:`pnlviz.data.limits`).
 """
 
 from .annotations import (
@@ -20,6 +20,7 @@ from .atomic import atomic_open, atomic_write_bytes, atomic_write_text
 from .cameras import (
     REQUIRED_CAMERA_KEYS,
     camera_member_name,
+    camera_stem,
     read_camera_json,
     read_camera_zip,
     validate_camera_dict,
@@ -30,6 +31,8 @@ from .dataset import IMAGE_EXTENSIONS, Dataset, Frame, decode_image, open_datase
 from .errors import DataError
 from .homographies import parse_homographies, read_homographies, write_homographies
 from .layout import natural_key, sort_stems
+from .limits import MAX_IMAGE_BYTES, MAX_IMAGE_PIXELS, MAX_JSON_BYTES
+from .outputs import OutputError, check_output
 from .predictions import (
     KEYPOINT_IDS,
     LINE_IDS,
@@ -43,23 +46,32 @@ from .predictions import (
     write_predictions,
     write_predictions_info,
 )
+from .zipwriter import LineStream, ZipStream
 
 __all__ = [
     "COORD_RANGE",
     "IMAGE_EXTENSIONS",
     "KEYPOINT_IDS",
     "LINE_IDS",
+    "MAX_IMAGE_BYTES",
+    "MAX_IMAGE_PIXELS",
+    "MAX_JSON_BYTES",
     "REQUIRED_CAMERA_KEYS",
     "Annotation",
     "DataError",
     "Dataset",
     "Frame",
+    "LineStream",
+    "OutputError",
     "Predictions",
+    "ZipStream",
     "annotation_to_json",
     "atomic_open",
     "atomic_write_bytes",
     "atomic_write_text",
     "camera_member_name",
+    "camera_stem",
+    "check_output",
     "decode_image",
     "from_pixels",
     "natural_key",

@@ -10,19 +10,22 @@ from __future__ import annotations
 import math
 import os
 import re
-import zipfile
-from collections.abc import Mapping
-from pathlib import Path
+from collections.abc import Callable, Mapping
 from typing import Any
 
-from .atomic import atomic_open, atomic_write_text
-from .errors import DataError, member_source, read_zip_member
+from .atomic import atomic_write_text
+from .errors import DataError, member_source
 from .jsonio import as_number, describe, dumps, parse_json_bytes, read_file_bytes, to_jsonable
-from .layout import is_junk, sort_stems, split_member
+from .layout import is_junk, natural_key, sort_stems, split_member
+from .reading import open_zip, read_zip_member
+from .zipwriter import ZipStream
 
 __all__ = [
     "REQUIRED_CAMERA_KEYS",
     "camera_member_name",
+    "camera_stem",
+    "camera_member",
+    "camera_zip_order",
     "validate_camera_dict",
     "parse_camera_bytes",
     "read_camera_json",
@@ -52,6 +55,18 @@ _CAMERA_NAME = re.compile(r"camera_(.+)\.json")
 def camera_member_name(stem: str) -> str:
     """File name of the camera of annotation ``<stem>.json``: ``camera_<stem>.json``."""
     return f"camera_{stem}.json"
+
+
+def camera_stem(name: str) -> str | None:
+    """``"camera_<stem>.json"`` -> ``"<stem>"``; None for any other file name."""
+    m = _CAMERA_NAME.fullmatch(name)
+    return m.group(1) if m else None
+
+
+def camera_zip_order(name: str) -> tuple:
+    """Sort key of the members of a camera zip: natural order of their stems."""
+    stem = camera_stem(name)
+    return natural_key(name if stem is None else stem)
 
 
 def _check_number(value: Any, key: str, source: str) -> None:
@@ -110,45 +125,53 @@ def write_camera_json(path: str | os.PathLike, camera: Mapping) -> None:
     atomic_write_text(path, _camera_text(camera, os.fspath(path)))
 
 
-def _open_zip(path: str | os.PathLike) -> zipfile.ZipFile:
-    try:
-        return zipfile.ZipFile(path)
-    except (OSError, zipfile.BadZipFile) as e:
-        raise DataError(os.fspath(path), f"cannot open zip archive: {e}") from None
+def _camera_members(zf, zpath: str) -> dict[str, str]:
+    """``{stem: member}`` of the cameras of an open zip (DataError for duplicates or several folders)."""
+    found: dict[str, str] = {}
+    folders = set()
+    for name in zf.namelist():
+        if is_junk(name):
+            continue
+        prefix, base = split_member(name)
+        stem = camera_stem(base)
+        if stem is None:
+            continue
+        if stem in found:
+            raise DataError(zpath, f"camera of frame {stem!r} appears twice ({found[stem]!r} and {name!r})")
+        found[stem] = name
+        folders.add(prefix)
+    if len(folders) > 1:
+        listed = ", ".join(repr(f or "/") for f in sorted(folders)[:3])
+        raise DataError(zpath, f"camera files are spread over several folders ({listed}); expected one flat folder")
+    return found
 
 
-def read_camera_zip(path: str | os.PathLike) -> dict[str, dict]:
+def read_camera_zip(path: str | os.PathLike, on_error: Callable[[DataError], Any] | None = None) -> dict[str, dict]:
     """Read a zip of ``camera_<stem>.json`` files -> ``{stem: camera dict}`` in natural order.
 
     The files are normally at the top level; one folder level (all cameras in the same folder)
-    is accepted too. Other members are ignored. Each camera is validated.
+    is accepted too. Other members are ignored. Each camera is validated. A camera that cannot
+    be read or validated raises DataError, or with ``on_error`` is passed to it and skipped.
     """
     zpath = os.fspath(path)
-    with _open_zip(path) as zf:
-        found: dict[str, str] = {}
-        folders = set()
-        for name in zf.namelist():
-            if is_junk(name):
-                continue
-            prefix, base = split_member(name)
-            m = _CAMERA_NAME.fullmatch(base)
-            if not m:
-                continue
-            stem = m.group(1)
-            if stem in found:
-                raise DataError(zpath, f"camera of frame {stem!r} appears twice ({found[stem]!r} and {name!r})")
-            found[stem] = name
-            folders.add(prefix)
-        if len(folders) > 1:
-            listed = ", ".join(repr(f or "/") for f in sorted(folders)[:3])
-            raise DataError(zpath, f"camera files are spread over several folders ({listed}); expected one flat folder")
+    with open_zip(path) as zf:
+        found = _camera_members(zf, zpath)
         out: dict[str, dict] = {}
         for stem in sort_stems(found):
-            member = found[stem]
-            source = member_source(zpath, member)
-            data = read_zip_member(zf, member, source)
-            out[stem] = parse_camera_bytes(data, source)
+            source = member_source(zpath, found[stem])
+            try:
+                out[stem] = parse_camera_bytes(read_zip_member(zf, found[stem], source), source)
+            except DataError as err:
+                if on_error is None:
+                    raise
+                on_error(err)
     return out
+
+
+def camera_member(stem: str, camera: Mapping, zip_path: str | os.PathLike) -> tuple[str, str]:
+    """``(member name, JSON text)`` of one camera in a camera zip (DataError if it is invalid)."""
+    name = camera_member_name(stem)
+    return name, _camera_text(camera, member_source(zip_path, name))
 
 
 def write_camera_zip(path: str | os.PathLike, cameras: Mapping[str, Mapping]) -> None:
@@ -157,11 +180,7 @@ def write_camera_zip(path: str | os.PathLike, cameras: Mapping[str, Mapping]) ->
     by_stem = {str(stem): cam for stem, cam in cameras.items()}
     if len(by_stem) != len(cameras):
         raise DataError(zpath, "two cameras have the same stem once written as text")
-    texts = {}
-    for stem in sort_stems(by_stem):
-        name = camera_member_name(stem)
-        texts[name] = _camera_text(by_stem[stem], member_source(zpath, name))
-    Path(zpath).parent.mkdir(parents=True, exist_ok=True)
-    with atomic_open(zpath, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        for name, text in texts.items():
-            zf.writestr(name, text)
+    members = [camera_member(stem, by_stem[stem], zpath) for stem in sort_stems(by_stem)]
+    with ZipStream(zpath, keep_partial=False) as zs:
+        for name, text in members:
+            zs.add(name, text)

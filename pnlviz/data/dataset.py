@@ -9,11 +9,24 @@ Layout (folder or zip, or a zip holding one folder with it)::
 Opening only lists names (``os.scandir`` / the zip's central directory); annotations, images and
 cameras are read when asked for, so a 23k-frame folder opens in a blink. Annotations are cached
 in a small LRU. A :class:`Dataset` pickles (a zip is reopened in the worker process).
+
+Files that are not used are listed in :attr:`Dataset.rejected`, one :class:`DataError` each:
+
+* a name that is not valid UTF-8 (it never becomes a stem);
+* a second file for the same frame. The rule: for the annotation, the ``.json`` name in lower
+  case wins (``00001.json`` over ``00001.JSON``), else the first name in sorted order; for the
+  image, the extension earliest in :data:`IMAGE_EXTENSIONS` wins (``.jpg`` over ``.png``), then
+  a lower-case extension, then the first name in sorted order;
+* a member name that appears twice in a zip (the last copy is the one a zip reader sees).
+
+Sizes are capped before reading (:mod:`pnlviz.data.limits`): a file over its byte limit, or an
+image over the pixel limit (read from its header, :mod:`pnlviz.data.imagesize`), is a DataError.
 """
 
 from __future__ import annotations
 
 import copy
+import io
 import os
 import threading
 import zipfile
@@ -26,10 +39,12 @@ from typing import Any
 import numpy as np
 
 from .annotations import Annotation, parse_annotation_bytes
-from .cameras import camera_member_name, parse_camera_bytes
+from .cameras import camera_member_name, camera_stem, parse_camera_bytes
 from .errors import DataError, member_source
+from .imagesize import header_size
 from .jsonio import describe, parse_json_bytes
 from .layout import find_root, is_junk, sort_stems, split_member
+from .reading import bad_name_error, is_utf8, limit_for, open_file, open_zip, read_file, read_zip_member, zip_member
 
 __all__ = ["Frame", "Dataset", "open_dataset", "IMAGE_EXTENSIONS"]
 
@@ -37,6 +52,8 @@ __all__ = ["Frame", "Dataset", "open_dataset", "IMAGE_EXTENSIONS"]
 IMAGE_EXTENSIONS: tuple[str, ...] = (".jpg", ".jpeg", ".png")
 MATCH_INFO = "match_info.json"
 CAMERAS_DIR = "cameras"
+#: The message of a dataset without a single frame.
+NO_FRAMES = "no frames (expected <stem>.jpg/.png/.json at the top level or inside one folder)"
 
 
 @dataclass(frozen=True)
@@ -81,8 +98,12 @@ def _classify(base: str) -> tuple[str, str] | None:
     return None
 
 
-def _image_rank(name: str) -> int:
-    return IMAGE_EXTENSIONS.index("." + name.rpartition(".")[2].lower())
+def _preference(what: str, base: str) -> tuple:
+    """Sort key of the files of one frame: the first one is used (rule in the module docstring)."""
+    ext = "." + base.rpartition(".")[2]
+    if what == "annotation":
+        return (ext != ".json", base)
+    return (IMAGE_EXTENSIONS.index(ext.lower()), ext != ext.lower(), base)
 
 
 class Dataset:
@@ -90,8 +111,10 @@ class Dataset:
 
     Use :func:`open_dataset` to create one. ``len(ds)``, ``ds.stems`` (natural order),
     ``ds.frame(stem)``, ``ds.annotation(stem)``, ``ds.image(stem)``, ``ds.image_size(stem)``,
-    ``ds.camera_dict(stem)``, ``ds.match_info``, ``ds.iter_annotations(on_error=...)``.
-    Unknown stems raise KeyError; problems with file contents raise :class:`DataError`.
+    ``ds.camera_dict(stem)``, ``ds.camera_stems()``, ``ds.match_info``,
+    ``ds.iter_annotations(on_error=...)``, ``ds.rejected`` (files not used, one DataError each),
+    ``ds.require_frames()``. Unknown stems raise KeyError; problems with file contents raise
+    :class:`DataError`.
     """
 
     def __init__(self, path: str | os.PathLike, cache_size: int = 64):
@@ -99,18 +122,26 @@ class Dataset:
         self.cache_size = cache_size
         #: ``(stem, DataError)`` of the frames the last :meth:`iter_annotations` skipped.
         self.skipped: list[tuple[str, DataError]] = []
+        #: Files that are not used (bad names, duplicates; see the module docstring), one line each.
+        self.rejected: list[DataError] = []
         self._lock = threading.RLock()
         self._zf: zipfile.ZipFile | None = None
         self._cache: OrderedDict[tuple[str, bool], Annotation] = OrderedDict()
         self._sizes: dict[str, tuple[int, int]] = {}
         self._match_info: Any = ...
+        self._camera_stems: tuple[str, ...] | None = None
         if not self.path.exists():
             raise DataError(os.fspath(self.path), "no such file or folder")
         self.is_zip = not self.path.is_dir()
+        self._images: dict[str, str] = {}
+        self._annotations: dict[str, str] = {}
+        self._files: dict[tuple[str, str], list[tuple[str, str]]] = {}
         if self.is_zip:
             self._index_zip()
         else:
             self._index_folder()
+        self._resolve()
+        self.rejected.sort(key=str)
         self._stems = tuple(sort_stems(set(self._images) | set(self._annotations)))
 
     # ----------------------------------------------------------------- indexing
@@ -118,20 +149,25 @@ class Dataset:
         kind = _classify(base)
         if kind is None:
             return
-        what, stem = kind
-        if what == "annotation":
-            self._annotations[stem] = name
-        else:
-            old = self._images.get(stem)
-            if old is None or _image_rank(name) < _image_rank(old):
-                self._images[stem] = name
+        if not is_utf8(kind[1]):
+            self.rejected.append(bad_name_error(self._source(name)))
+            return
+        self._files.setdefault(kind, []).append((base, name))
+
+    def _resolve(self) -> None:
+        """One file per frame and kind: the preferred one; the others go to :attr:`rejected`."""
+        for (what, stem), files in self._files.items():
+            files.sort(key=lambda f: _preference(what, f[0]))
+            (self._annotations if what == "annotation" else self._images)[stem] = files[0][1]
+            for _, name in files[1:]:
+                self.rejected.append(DataError(self._source(name), f"another {what} of frame {stem!r} is used "
+                                                                   f"({files[0][0]}): this file is ignored"))
+        del self._files
 
     def _index_folder(self) -> None:
-        self._images: dict[str, str] = {}
-        self._annotations: dict[str, str] = {}
         root = self.path
         for _ in range(2):  # the folder itself, or the single folder inside it
-            subdirs = []
+            subdirs, files = [], []
             with os.scandir(root) as it:
                 for entry in it:
                     if entry.name.startswith("."):
@@ -140,28 +176,30 @@ class Dataset:
                         if entry.name != CAMERAS_DIR:
                             subdirs.append(entry.path)
                     elif _classify(entry.name) is not None:
-                        self._add(entry.name, entry.path)
-            if self._images or self._annotations or len(subdirs) != 1:
+                        files.append((entry.name, entry.path))
+            if files or len(subdirs) != 1:
                 break
             root = Path(subdirs[0])
+        for base, name in files:
+            self._add(base, name)
         self._root_dir = Path(root)
         self._camera_names: set[str] | None = None  # checked on demand in a folder
 
     def _index_zip(self) -> None:
-        zpath = os.fspath(self.path)
-        try:
-            zf = zipfile.ZipFile(self.path)
-        except zipfile.BadZipFile:
-            raise DataError(zpath, "not a folder or a valid .zip archive") from None
-        except OSError as e:
-            raise DataError(zpath, f"cannot open zip archive: {e.strerror or e}") from None
+        zf = open_zip(self.path, not_zip="not a folder or a valid .zip archive")
         self._zf = zf
-        names = [n for n in zf.namelist() if not is_junk(n)]
+        names, seen = [], set()
+        for n in zf.namelist():
+            if is_junk(n):
+                continue
+            if n in seen:
+                self.rejected.append(DataError(self._source(n), "appears twice in the archive: the last copy is used"))
+                continue
+            seen.add(n)
+            names.append(n)
         candidates = [n for n in names if n.split("/", 1)[0] != CAMERAS_DIR]
         root = find_root(candidates, lambda b: _classify(b) is not None)
         self._root = root
-        self._images = {}
-        self._annotations = {}
         self._camera_names = set()
         self._names = set(names)
         cam_prefix = root + CAMERAS_DIR + "/"
@@ -229,21 +267,23 @@ class Dataset:
     def _source(self, name: str) -> str:
         return member_source(self.path, name) if self.is_zip else name
 
+    def require_frames(self) -> None:
+        """DataError when the dataset has no frame at all (batch commands have nothing to do)."""
+        if not self._stems:
+            raise DataError(os.fspath(self.path), NO_FRAMES)
+
+    def _zip(self) -> zipfile.ZipFile:
+        if self._zf is None:
+            self._zf = open_zip(self.path)
+        return self._zf
+
     def _read(self, name: str) -> bytes:
-        """Bytes of a file (folder) or member (zip); DataError when unreadable."""
+        """Bytes of a file (folder) or member (zip), capped by :func:`~pnlviz.data.reading.limit_for`;
+        DataError when unreadable or too large."""
         if not self.is_zip:
-            try:
-                with open(name, "rb") as f:
-                    return f.read()
-            except OSError as e:
-                raise DataError(name, f"cannot read file: {e.strerror or e}") from None
+            return read_file(name, limit_for(name))
         with self._lock:
-            try:
-                if self._zf is None:
-                    self._zf = zipfile.ZipFile(self.path)
-                return self._zf.read(name)
-            except (OSError, zipfile.BadZipFile, EOFError, KeyError) as e:
-                raise DataError(self._source(name), f"cannot read zip member: {e}") from None
+            return read_zip_member(self._zip(), name, self._source(name), limit_for(name))
 
     # ------------------------------------------------------------ annotations
     def _parse_annotation(self, stem: str, keep_unknown: bool) -> Annotation | None:
@@ -304,7 +344,8 @@ class Dataset:
 
     def image(self, stem: str) -> np.ndarray | None:
         """The image of ``stem`` as BGR uint8 ``(H, W, 3)``, pixels as stored (EXIF orientation
-        ignored); None if the frame has no image. Corrupt data raises DataError."""
+        ignored); None if the frame has no image. Corrupt data, or an image over the size caps,
+        raises DataError (checked from the header, before decoding)."""
         name = self.frame(stem).image_path
         if name is None:
             return None
@@ -314,8 +355,8 @@ class Dataset:
         return img
 
     def image_size(self, stem: str) -> tuple[int, int] | None:
-        """``(width, height)`` of the image of ``stem`` (reads the header only when Pillow is
-        installed); None if the frame has no image."""
+        """``(width, height)`` of the image of ``stem``, from its header (never decoded); None if
+        the frame has no image. A corrupt header or an image over the size caps raises DataError."""
         with self._lock:
             if stem in self._sizes:
                 return self._sizes[stem]
@@ -323,40 +364,56 @@ class Dataset:
         if name is None:
             return None
         size = self._header_size(name)
-        if size is None:
-            img = decode_image(self._read(name), self._source(name))
-            size = (img.shape[1], img.shape[0])
         with self._lock:
             self._sizes[stem] = size
         return size
 
-    def _header_size(self, name: str) -> tuple[int, int] | None:
-        """Size from the image header only (Pillow), None if that is not possible."""
-        try:
-            if not self.is_zip:
-                with open(name, "rb") as f:
-                    return _pil_size(f)
-            with self._lock:
-                if self._zf is None:
-                    self._zf = zipfile.ZipFile(self.path)
-                with self._zf.open(name) as f:
-                    return _pil_size(f)
-        except (OSError, zipfile.BadZipFile, EOFError, KeyError):
-            return None
+    def _header_size(self, name: str) -> tuple[int, int]:
+        source = self._source(name)
+        if not self.is_zip:
+            with open_file(name, limit_for(name)) as f:
+                return header_size(f.read, source)
+        with self._lock, zip_member(self._zip(), name, source, limit_for(name)) as f:
+            return header_size(f.read, source)
 
     # ------------------------------------------------------- cameras, match info
+    def camera_stems(self) -> tuple[str, ...]:
+        """Stems of the cameras in ``cameras/`` (``camera_<stem>.json``), natural order, whether or
+        not the dataset has that frame. A name that is not valid UTF-8 goes to :attr:`rejected`."""
+        if self._camera_stems is None:
+            if self.is_zip:
+                names = self._camera_names
+            else:
+                folder = self._root_dir / CAMERAS_DIR
+                names = set(os.listdir(folder)) if folder.is_dir() else set()
+            stems = set()
+            for base in names:
+                stem = camera_stem(base)
+                if stem is None:
+                    continue
+                if is_utf8(stem):
+                    stems.add(stem)
+                else:
+                    self.rejected.append(bad_name_error(self._source(self._camera_path(base))))
+            self._camera_stems = tuple(sort_stems(stems))
+        return self._camera_stems
+
+    def _camera_path(self, base: str) -> str:
+        if self.is_zip:
+            return self._root + CAMERAS_DIR + "/" + base
+        return os.fspath(self._root_dir / CAMERAS_DIR / base)
+
+    def camera_source(self, stem: str) -> str:
+        """The ``<file>`` part of a message about the camera of ``stem``."""
+        return self._source(self._camera_path(camera_member_name(stem)))
+
     def camera_dict(self, stem: str) -> dict | None:
         """The ground-truth camera ``cameras/camera_<stem>.json`` (raw dict, validated), or None."""
         base = camera_member_name(stem)
-        if self.is_zip:
-            if base not in self._camera_names:
-                return None
-            name = self._root + CAMERAS_DIR + "/" + base
-        else:
-            path = self._root_dir / CAMERAS_DIR / base
-            if not path.is_file():
-                return None
-            name = os.fspath(path)
+        name = self._camera_path(base)
+        present = base in self._camera_names if self.is_zip else os.path.isfile(name)
+        if not present:
+            return None
         return parse_camera_bytes(self._read(name), self._source(name))
 
     @property
@@ -380,11 +437,11 @@ class Dataset:
 
 
 def decode_image(data: bytes, source: str) -> np.ndarray:
-    """Decode image file bytes to BGR uint8 with OpenCV; DataError when corrupt."""
+    """Decode image file bytes to BGR uint8 with OpenCV; DataError when corrupt, not PNG/JPEG, or
+    over the pixel cap (read from the header first)."""
     import cv2
 
-    if not data:
-        raise DataError(source, "corrupt image: the file is empty")
+    header_size(io.BytesIO(data).read, source)
     try:
         img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     except cv2.error as e:
@@ -392,20 +449,6 @@ def decode_image(data: bytes, source: str) -> np.ndarray:
     if img is None or img.size == 0:
         raise DataError(source, "corrupt image: OpenCV cannot decode it (corrupt or unsupported format)")
     return img
-
-
-def _pil_size(fileobj) -> tuple[int, int] | None:
-    """Image size from the header with Pillow (no decode); None when unavailable."""
-    try:
-        from PIL import Image
-    except ImportError:
-        return None
-    try:
-        with Image.open(fileobj) as im:
-            w, h = im.size
-    except Exception:  # noqa: BLE001 - any Pillow failure: fall back to OpenCV
-        return None
-    return (int(w), int(h)) if w > 0 and h > 0 else None
 
 
 def open_dataset(path: str | os.PathLike, cache_size: int = 64) -> Dataset:

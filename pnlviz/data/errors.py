@@ -13,8 +13,16 @@ import os
 __all__ = ["DataError", "member_source"]
 
 
+def _printable(text: str) -> str:
+    """File names that are not valid UTF-8 (surrogate escapes) shown as ``\\xff``: always printable."""
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # a lone surrogate that is no escape (e.g. from a JSON "\\udcff")
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def _one_line(text: object) -> str:
-    return " ".join(str(text).splitlines()).strip()
+    return _printable(" ".join(str(text).splitlines()).strip())
 
 
 class DataError(ValueError):
@@ -39,13 +47,3 @@ class DataError(ValueError):
 def member_source(zip_path: str | os.PathLike, member: str) -> str:
     """The ``<file>`` part of an error message for ``member`` inside ``zip_path``."""
     return f"{os.fspath(zip_path)}:{member}"
-
-
-def read_zip_member(zf, member: str, source: str) -> bytes:
-    """The bytes of a zip member; a damaged member is a :class:`DataError` naming ``source``."""
-    import zipfile
-
-    try:
-        return zf.read(member)
-    except (OSError, zipfile.BadZipFile, EOFError) as e:
-        raise DataError(source, f"cannot read zip member: {e}") from None

@@ -11,6 +11,8 @@ import numpy as np
 
 from .atomic import atomic_write_text
 from .errors import DataError
+from .limits import MAX_JSON_BYTES
+from .reading import read_file
 
 __all__ = ["parse_json_bytes", "read_json_file", "write_json_file", "to_jsonable", "as_number", "describe"]
 
@@ -30,12 +32,9 @@ def parse_json_bytes(data: bytes | str, source: str) -> Any:
 
 
 def read_file_bytes(path: str | os.PathLike) -> bytes:
-    """The bytes of ``path``; an unreadable file raises DataError."""
-    try:
-        with open(path, "rb") as f:
-            return f.read()
-    except OSError as e:
-        raise DataError(os.fspath(path), f"cannot read file: {e.strerror or e}") from None
+    """The bytes of ``path``; an unreadable file, or one over :data:`~pnlviz.data.limits.MAX_JSON_BYTES`,
+    raises DataError."""
+    return read_file(path, MAX_JSON_BYTES)
 
 
 def read_json_file(path: str | os.PathLike) -> Any:

@@ -15,8 +15,7 @@ from __future__ import annotations
 import math
 import os
 import re
-import zipfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,9 +23,11 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_open
-from .errors import DataError, member_source, read_zip_member
+from .errors import DataError, member_source
 from .jsonio import as_number, describe, dumps, parse_json_bytes, read_file_bytes
 from .layout import find_root, is_junk, natural_key, sort_stems, split_member
+from .reading import bad_name_error, is_utf8, open_zip, read_zip_member
+from .zipwriter import ZipStream
 
 __all__ = [
     "KEYPOINT_IDS",
@@ -35,6 +36,8 @@ __all__ = [
     "parse_predictions",
     "parse_predictions_bytes",
     "predictions_info_path",
+    "prediction_member",
+    "prediction_zip_order",
     "predictions_to_json",
     "read_predictions",
     "read_predictions_info",
@@ -165,36 +168,74 @@ def _is_frame_json(base: str) -> bool:
     return base.endswith(".json") and base != "match_info.json" and len(base) > 5
 
 
-def read_predictions(path: str | os.PathLike) -> dict[str, Predictions]:
+def _folder_members(folder: Path, fail: Callable[[DataError], None]) -> dict[str, str]:
+    """``{stem: path}`` of the ``<stem>.json`` files of a folder (names not valid UTF-8 rejected)."""
+    members = {}
+    for e in os.scandir(folder):
+        if not (e.is_file() and not is_junk(e.name) and _is_frame_json(e.name)):
+            continue
+        if is_utf8(e.name):
+            members[e.name[:-5]] = e.path
+        else:
+            fail(bad_name_error(e.path))
+    return members
+
+
+def _zip_members(zf) -> dict[str, str]:
+    names = [n for n in zf.namelist() if not is_junk(n)]
+    root = find_root(names, _is_frame_json)
+    members = {}
+    for n in names:
+        prefix, base = split_member(n)
+        if prefix == root and _is_frame_json(base):
+            members[base[:-5]] = n
+    return members
+
+
+def read_predictions(path: str | os.PathLike,
+                     on_error: Callable[[DataError], Any] | None = None) -> dict[str, Predictions]:
     """Read a prediction zip (flat, or all files in one folder) or a folder of ``<stem>.json``.
 
-    Returns ``{stem: Predictions}`` in natural stem order.
+    Returns ``{stem: Predictions}`` in natural stem order. A frame file that cannot be read or
+    validated (or whose name is not valid UTF-8) raises DataError, or with ``on_error`` is passed
+    to it and skipped.
     """
+    def fail(err: DataError) -> None:
+        if on_error is None:
+            raise err
+        on_error(err)
+
     p = Path(path)
     out: dict[str, Predictions] = {}
     if p.is_dir():
-        names = [e.name for e in os.scandir(p) if e.is_file() and not is_junk(e.name) and _is_frame_json(e.name)]
-        for name in sort_stems(n[:-5] for n in names):
-            out[name] = parse_predictions_bytes(read_file_bytes(p / f"{name}.json"), os.fspath(p / f"{name}.json"))
+        members = _folder_members(p, fail)
+        for stem in sort_stems(members):
+            try:
+                out[stem] = parse_predictions_bytes(read_file_bytes(members[stem]), members[stem])
+            except DataError as err:
+                fail(err)
         return out
     zpath = os.fspath(p)
-    try:
-        zf = zipfile.ZipFile(p)
-    except (OSError, zipfile.BadZipFile) as e:
-        raise DataError(zpath, f"cannot open zip archive: {e}") from None
-    with zf:
-        names = [n for n in zf.namelist() if not is_junk(n)]
-        root = find_root(names, _is_frame_json)
-        members = {}
-        for n in names:
-            prefix, base = split_member(n)
-            if prefix == root and _is_frame_json(base):
-                members[base[:-5]] = n
+    with open_zip(p) as zf:
+        members = _zip_members(zf)
         for stem in sort_stems(members):
             source = member_source(zpath, members[stem])
-            data = read_zip_member(zf, members[stem], source)
-            out[stem] = parse_predictions_bytes(data, source)
+            try:
+                out[stem] = parse_predictions_bytes(read_zip_member(zf, members[stem], source), source)
+            except DataError as err:
+                fail(err)
     return out
+
+
+def prediction_zip_order(name: str) -> tuple:
+    """Sort key of the members of a prediction zip: natural order of their stems."""
+    return natural_key(name[:-5] if name.endswith(".json") else name)
+
+
+def prediction_member(stem: str, pred: Predictions, zip_path: str | os.PathLike) -> tuple[str, str]:
+    """``(member name, JSON text)`` of one frame in a prediction zip (DataError if it is invalid)."""
+    name = f"{stem}.json"
+    return name, dumps(predictions_to_json(pred, member_source(zip_path, name)))
 
 
 def write_predictions(path: str | os.PathLike, predictions: Mapping[str, Predictions]) -> None:
@@ -202,13 +243,13 @@ def write_predictions(path: str | os.PathLike, predictions: Mapping[str, Predict
     zpath = os.fspath(path)
     texts = {}
     for stem, pred in predictions.items():
-        name = f"{stem}.json"
+        name, text = prediction_member(stem, pred, zpath)
         if name in texts:
             raise DataError(zpath, f"two frames have the stem {str(stem)!r}")
-        texts[name] = dumps(predictions_to_json(pred, member_source(zpath, name)))
-    with atomic_open(zpath, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        for name in sorted(texts, key=lambda n: natural_key(n[:-5])):
-            zf.writestr(name, texts[name])
+        texts[name] = text
+    with ZipStream(zpath, keep_partial=False) as zs:
+        for name in sorted(texts, key=prediction_zip_order):
+            zs.add(name, texts[name])
 
 
 # -- provenance next to a prediction zip ---------------------------------------------------------

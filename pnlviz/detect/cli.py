@@ -32,59 +32,98 @@ def add_detect_parser(sub) -> None:
     p.set_defaults(func=run_detect)
 
 
+def _check_outputs(args) -> None:
+    """--out must be a .zip; neither it nor its sidecar (preds.json) may overwrite an input or land
+    inside the dataset."""
+    from pnlviz.data import OutputError, check_output, predictions_info_path
+
+    if args.out.suffix.lower() != ".zip":
+        raise OutputError(f"--out {args.out}", "must end in .zip (its sidecar, the .json of the same name, "
+                                               "records the detector)")
+    inputs = [args.weights_kp, args.weights_lines]
+    check_output(args.out, inputs=inputs, datasets=[args.data])
+    check_output(predictions_info_path(args.out), inputs=inputs, datasets=[args.data], what="the sidecar of --out")
+
+
+def _load_detector(args):
+    from pnlviz.detect.run import Detector
+
+    thresholds = {k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
+                  if v is not None}
+    return Detector.from_weights(args.weights_kp, args.weights_lines, input_size=args.input_size, **thresholds)
+
+
+def _sidecar(args, det, frames: int) -> dict:
+    from pnlviz.detect.default import DEFAULT_MODEL
+
+    weights = {"kp": args.weights_kp, "lines": args.weights_lines}
+    return {
+        "detector": "light default model" if not any(weights.values()) else "PnLCalib networks",
+        "weights": {k: str(v) for k, v in weights.items() if v} or str(DEFAULT_MODEL),
+        "input_size": list(det.input_size), "kp_threshold": det.kp_threshold,
+        "line_threshold": det.line_threshold, "peak_refine": det.refine,
+        "calibration": det.calibration, "frames": frames,
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
 def run_detect(args) -> int:
     import os
 
     import torch
     from tqdm import tqdm
 
-    from pnlviz.data import DataError, open_dataset, write_predictions, write_predictions_info
+    from pnlviz.cli import open_input_dataset, print_skipped
+    from pnlviz.data import DataError, ZipStream, write_predictions_info
+    from pnlviz.data.predictions import prediction_member, prediction_zip_order
     from pnlviz.detect.checkpoint import CheckpointError
-    from pnlviz.detect.default import DEFAULT_MODEL
-    from pnlviz.detect.run import Detector, NoModelError
+    from pnlviz.detect.run import NoModelError
 
-    torch.set_num_threads(args.threads or os.cpu_count() or 1)
-    try:
-        thresholds = {k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
-                      if v is not None}
-        det = Detector.from_weights(args.weights_kp, args.weights_lines, input_size=args.input_size, **thresholds)
-    except (NoModelError, CheckpointError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    ds = open_dataset(args.data)
+    _check_outputs(args)
+    ds = open_input_dataset(args.data)
     stems = [s for s in ds.stems if ds.frame(s).has_image]
     if not stems:
         print(f"{args.data}: no images to detect on", file=sys.stderr)
         return 1
-    preds, skipped = {}, []
+    torch.set_num_threads(args.threads or os.cpu_count() or 1)
+    try:
+        det = _load_detector(args)
+    except (NoModelError, CheckpointError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    skipped: list[str] = []
+    interrupted = False
+    step = max(1, args.batch)
     t0 = time.perf_counter()
     bar = tqdm(total=len(stems), desc="detect", unit="frame", disable=args.no_progress or None)
-    for i in range(0, len(stems), max(1, args.batch)):
-        batch, images = [], []
-        for stem in stems[i:i + max(1, args.batch)]:
-            try:
-                images.append(ds.image(stem))
-                batch.append(stem)
-            except DataError as exc:
-                skipped.append(str(exc))
-        if images:
-            for stem, p in zip(batch, det.detect(images)):
-                preds[stem] = p
-        bar.update(len(stems[i:i + max(1, args.batch)]))
-    bar.close()
-    write_predictions(args.out, preds)
+    with ZipStream(args.out, key=prediction_zip_order) as preds:
+        try:
+            for i in range(0, len(stems), step):
+                batch, images = [], []
+                for stem in stems[i:i + step]:
+                    try:
+                        images.append(ds.image(stem))
+                        batch.append(stem)
+                    except DataError as exc:
+                        skipped.append(str(exc))
+                for stem, p in zip(batch, det.detect(images) if images else []):
+                    try:  # written at once: an interrupted or failing batch keeps it
+                        preds.add(*prediction_member(stem, p, args.out))
+                    except DataError as exc:
+                        skipped.append(str(exc))
+                bar.update(len(stems[i:i + step]))
+        except KeyboardInterrupt:
+            interrupted = True
+        bar.close()
     dt = time.perf_counter() - t0
-    weights = {"kp": args.weights_kp, "lines": args.weights_lines}
-    write_predictions_info(args.out, {
-        "detector": "light default model" if not any(weights.values()) else "PnLCalib networks",
-        "weights": {k: str(v) for k, v in weights.items() if v} or str(DEFAULT_MODEL),
-        "input_size": list(det.input_size), "kp_threshold": det.kp_threshold,
-        "line_threshold": det.line_threshold, "peak_refine": det.refine,
-        "calibration": det.calibration, "frames": len(preds),
-        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-    })
+    write_predictions_info(args.out, _sidecar(args, det, len(preds)))
+    if interrupted:
+        print(f"interrupted: kept {len(preds)} of {len(stems)} frames in {args.out}", file=sys.stderr)
+        return 130
     print(f"detected {len(preds)}/{len(stems)} frames in {dt:.1f} s ({1e3 * dt / max(1, len(stems)):.0f} ms/frame) "
           f"-> {args.out}")
-    for line in skipped:
-        print(f"  skipped: {line}", file=sys.stderr)
+    print_skipped(skipped, prefix="  skipped: ")
+    if not len(preds):
+        print(f"error: no frame detected: {args.out} holds no detection", file=sys.stderr)
+        return 1
     return 0

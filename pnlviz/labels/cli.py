@@ -78,16 +78,22 @@ def add_labels_parser(subparsers) -> argparse.ArgumentParser:
 def run_labels(args) -> int:
     from tqdm import tqdm
 
-    from pnlviz.data import open_dataset
+    from pnlviz.cli import open_input_dataset
+    from pnlviz.data import DataError, OutputError, check_output
 
     from .types import SETS, LabelParams
 
     out_dir = Path(args.out)
-    ds = open_dataset(args.data)
-    if not ds.is_zip and out_dir.exists() and out_dir.resolve() == Path(args.data).resolve():
-        print(f"error: --out {out_dir} is the dataset folder: its annotations would be overwritten",
-              file=sys.stderr)
+    try:
+        check_output(out_dir, datasets=[args.data])
+        if out_dir.exists() and not out_dir.is_dir():
+            raise OutputError(f"--out {out_dir}", "is a file: expected a folder for the label files")
+    except OutputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
         return 2
+    ds = open_input_dataset(args.data)
+    if not any(ds.frame(s).has_annotation for s in ds.stems):
+        raise DataError(str(args.data), "no annotated frame: no labels to compute")
     out_dir.mkdir(parents=True, exist_ok=True)
     params = LabelParams(kp3_all=bool(getattr(args, "kp3_all", False)),
                          lr_disambiguation=bool(getattr(args, "lr", False)))
@@ -147,4 +153,4 @@ def run_labels(args) -> int:
         print(f"{len(skipped)} bad frame(s) skipped:", file=sys.stderr)
         for line in skipped:
             print(f"  {line}", file=sys.stderr)
-    return 1 if failed else 0
+    return 1 if failed or not n_ok else 0

@@ -87,6 +87,17 @@ def _read_homographies_leniently(path: Path) -> dict:
     return out
 
 
+def _require_matches(args, summary, n_cameras: int) -> None:
+    """DataError when there is nothing to score: no readable annotation, or no frame with a camera."""
+    from pnlviz.data import DataError
+
+    if not summary.n_frames:
+        raise DataError(os.fspath(args.gt), "no annotation could be read: nothing to evaluate")
+    if not summary.n_calibrated:
+        raise DataError(os.fspath(args.pred), f"no camera matches a frame of {args.gt} ({summary.n_frames} "
+                                              f"frames, {n_cameras} cameras read): nothing to evaluate")
+
+
 def run_eval(args) -> int:
     from pnlviz.data import DataError
 
@@ -102,6 +113,11 @@ def run_eval(args) -> int:
     if any(t <= 0 for t in args.thresholds):
         print("error: thresholds must be positive", file=sys.stderr)
         return 2
+    if args.csv is not None:
+        from pnlviz.data import check_output
+
+        check_output(args.csv, inputs=[args.gt, args.pred, args.homographies, args.pred_homographies],
+                     datasets=[args.gt], what="--csv")
     progress = not args.no_progress
     cameras = None
     if args.pred is not None:
@@ -109,11 +125,14 @@ def run_eval(args) -> int:
 
         cameras, _ = read_cameras(args.pred, on_error=_report)
     if args.gt is not None:
+        from pnlviz.cli import open_input_dataset
         from pnlviz.metrics.soccernet import evaluate_dataset
 
-        summary = evaluate_dataset(args.gt, cameras, args.thresholds, progress=progress,
+        gt = open_input_dataset(args.gt)
+        summary = evaluate_dataset(gt, cameras, args.thresholds, progress=progress,
                                    count_unknown=not args.ignore_unknown, workers=max(1, args.workers),
                                    on_error=_report)
+        _require_matches(args, summary, len(cameras))
         print(f"SoccerNet camera calibration (960x540): {args.gt} vs {args.pred}")
         print(summary.table())
         skipped = len(summary.skipped_annotations)
@@ -140,6 +159,9 @@ def run_eval(args) -> int:
                 except (DataError, ValueError) as e:
                     _report(f"camera_{stem}.json: {e}")
             what = args.pred
+        if not any(stem in pred_h for stem in gt_h):
+            raise DataError(os.fspath(what), f"no homography matches a frame of {args.homographies} "
+                                             f"({len(gt_h)} frames, {len(pred_h)} homographies): nothing to evaluate")
         hs = evaluate_homographies(gt_h, pred_h, progress=progress)
         print(f"Homography metrics (1280x720 image, 115x74 yd template): {args.homographies} vs {what}")
         print(hs.table())

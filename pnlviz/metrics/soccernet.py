@@ -42,8 +42,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
-import zipfile
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,9 +50,11 @@ from typing import Any
 import numpy as np
 
 from pnlviz.data import DataError, open_dataset
-from pnlviz.data.cameras import parse_camera_bytes
+from pnlviz.data.cameras import camera_stem, parse_camera_bytes
 from pnlviz.data.dataset import Dataset
+from pnlviz.data.errors import member_source
 from pnlviz.data.layout import is_junk, sort_stems, split_member
+from pnlviz.data.reading import bad_name_error, is_utf8, open_zip, read_file, read_zip_member
 from pnlviz.field.names import MIRROR
 from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.polylines import visible_pitch
@@ -384,39 +384,43 @@ class Summary:
         return "\n".join(lines)
 
 
-_CAMERA_NAME = re.compile(r"camera_(.+)\.json")
+def _camera_files(path: Path, zf, problems: list[str]) -> dict[str, list[tuple[str, str]]]:
+    """``{folder prefix: [(stem, member or file path)]}`` of the cameras of a zip or a folder."""
+    found: dict[str, list[tuple[str, str]]] = {}
+    if zf is None:
+        for p in sorted(path.iterdir()):
+            stem = camera_stem(p.name)
+            if stem is None or not p.is_file():
+                continue
+            if is_utf8(stem):
+                found.setdefault("", []).append((stem, os.fspath(p)))
+            else:
+                problems.append(str(bad_name_error(os.fspath(p))))
+        return found
+    for name in zf.namelist():
+        if is_junk(name):
+            continue
+        prefix, base = split_member(name)
+        stem = camera_stem(base)
+        if stem is not None:
+            found.setdefault(prefix, []).append((stem, name))
+    return found
 
 
 def read_cameras(path: str | os.PathLike, on_error: Callable[[str], Any] | None = None) -> tuple[dict[str, dict], list[str]]:
     """Read a zip (or folder) of ``camera_<stem>.json`` leniently -> ``({stem: dict}, problems)``.
 
-    Unlike :func:`pnlviz.data.read_camera_zip`, a camera that cannot be read or validated is
-    skipped with a one-line problem (``on_error(line)`` is called too) instead of failing the
-    whole archive. Files at the top level are used; if there are none, one folder level is
-    accepted. A problem with the archive itself raises :class:`DataError`.
+    Unlike :func:`pnlviz.data.read_camera_zip`, a camera that cannot be read or validated (or
+    whose file name is not valid UTF-8) is skipped with a one-line problem (``on_error(line)`` is
+    called too) instead of failing the whole archive. Files at the top level are used; if there
+    are none, one folder level is accepted. A problem with the archive itself raises
+    :class:`DataError`.
     """
     path = Path(path)
-    found: dict[str, list[tuple[str, str]]] = {}  # folder prefix -> [(stem, member)]
     problems: list[str] = []
-    if path.is_dir():
-        for p in sorted(path.iterdir()):
-            m = _CAMERA_NAME.fullmatch(p.name)
-            if m and p.is_file():
-                found.setdefault("", []).append((m.group(1), os.fspath(p)))
-        zf = None
-    else:
-        try:
-            zf = zipfile.ZipFile(path)
-        except (OSError, zipfile.BadZipFile) as e:
-            raise DataError(os.fspath(path), f"cannot open zip archive: {e}") from None
-        for name in zf.namelist():
-            if is_junk(name):
-                continue
-            prefix, base = split_member(name)
-            m = _CAMERA_NAME.fullmatch(base)
-            if m:
-                found.setdefault(prefix, []).append((m.group(1), name))
+    zf = None if path.is_dir() else open_zip(path)
     try:
+        found = _camera_files(path, zf, problems)
         if "" in found:
             members = found[""]
         elif len(found) == 1:
@@ -428,14 +432,12 @@ def read_cameras(path: str | os.PathLike, on_error: Callable[[str], Any] | None 
                                 f"({', '.join(sorted(found)[:3])}); none used")
         by_stem: dict[str, dict] = {}
         for stem, member in members:
-            source = f"{os.fspath(path)}:{member}" if zf else member
+            source = member_source(path, member) if zf else member
             try:
-                data = zf.read(member) if zf else Path(member).read_bytes()
+                data = read_zip_member(zf, member, source) if zf else read_file(member)
                 by_stem[stem] = parse_camera_bytes(data, source)
             except DataError as e:
                 problems.append(str(e))
-            except (OSError, zipfile.BadZipFile, EOFError) as e:
-                problems.append(f"{source}: cannot read: {e}")
     finally:
         if zf is not None:
             zf.close()

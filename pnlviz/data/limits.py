@@ -1,0 +1,24 @@
+"""Resource caps on input files, checked before anything is read, decompressed or decoded.
+
+A file over a cap is a one-line :class:`~pnlviz.data.errors.DataError` naming it and the limit.
+"""
+
+from __future__ import annotations
+
+__all__ = ["MAX_JSON_BYTES", "MAX_IMAGE_BYTES", "MAX_IMAGE_PIXELS", "format_bytes"]
+
+#: Largest JSON file (annotation, camera, predictions, homographies, match info) read, in bytes.
+MAX_JSON_BYTES = 64 * 2**20
+#: Largest encoded image file read, in bytes.
+MAX_IMAGE_BYTES = 256 * 2**20
+#: Largest image decoded, in pixels (an 8K UHD frame is 33 megapixels).
+MAX_IMAGE_PIXELS = 50_000_000
+
+
+def format_bytes(n: int) -> str:
+    """``67108864`` -> ``"64 MiB"``; ``2147483648`` -> ``"2.0 GiB"``."""
+    if n >= 2**30:
+        return f"{n / 2**30:.1f} GiB"
+    if n >= 2**20:
+        return f"{n / 2**20:.0f} MiB"
+    return f"{n} bytes"

@@ -1,0 +1,181 @@
+"""Streaming batch outputs: each result goes into a temporary file beside the output as soon as it
+is computed; :meth:`close` renames that file over the output, so the output is complete and valid
+whenever it exists under its name, and an interrupted batch keeps what it computed.
+
+:class:`ZipStream` writes a zip (deflated members, as :meth:`zipfile.ZipFile.writestr` does) and
+:class:`LineStream` a text file of one line per result. With a sort ``key``, results that came
+out of order are put in order when the file is closed (the zip is rewritten member by member
+with the same timestamps), so the bytes do not depend on the order of arrival.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+from .errors import DataError, member_source
+from .reading import is_utf8
+
+__all__ = ["ZipStream", "LineStream"]
+
+
+class _TempOutput:
+    """A temporary file beside ``path`` that :meth:`_commit` renames over it."""
+
+    def __init__(self, path: str | os.PathLike, keep_partial: bool):
+        self.path = Path(path)
+        self.keep_partial = keep_partial
+        if self.path.is_dir():
+            raise DataError(os.fspath(self.path), "is a folder: expected a file name for the output")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._tmp = self._new_temp()
+        self.closed = False
+
+    def _new_temp(self) -> str:
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
+        os.close(fd)
+        return tmp
+
+    def _commit(self) -> None:
+        with open(self._tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(self._tmp, 0o666 & ~umask)  # mkstemp gives 0600; the output gets the usual mode
+        os.replace(self._tmp, self.path)
+        self.closed = True
+
+    def _remove_temp(self) -> None:
+        with contextlib.suppress(OSError):
+            os.unlink(self._tmp)
+
+    def close(self) -> Path:
+        raise NotImplementedError
+
+    def discard(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        """Close (keep) on success; on an exception close too when ``keep_partial``, else discard."""
+        if self.closed:
+            return
+        if exc_type is not None and not self.keep_partial:
+            self.discard()
+            return
+        try:
+            self.close()
+        except BaseException:
+            self.discard()
+            if exc_type is None:
+                raise
+
+
+class ZipStream(_TempOutput):
+    """A zip written member by member; see the module docstring.
+
+    ``key(name)`` orders the members at :meth:`close` (None: order of :meth:`add`).
+    ``keep_partial``: an exception inside ``with ZipStream(...)`` still closes and keeps the zip
+    (the default; for batches) instead of discarding it.
+    """
+
+    def __init__(self, path: str | os.PathLike, key: Callable[[str], Any] | None = None, keep_partial: bool = True):
+        super().__init__(path, keep_partial)
+        self.key = key
+        self.names: list[str] = []
+        self._seen: set[str] = set()
+        self._zip = zipfile.ZipFile(self._tmp, "w", compression=zipfile.ZIP_DEFLATED)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def add(self, name: str, data: str | bytes) -> None:
+        """Write one member now. A name that cannot be stored (not UTF-8, already written) raises
+        DataError and writes nothing; the zip stays usable."""
+        source = member_source(self.path, name)
+        if not is_utf8(name):
+            raise DataError(source, "member name is not valid UTF-8: not written")
+        if name in self._seen:
+            raise DataError(source, "written twice: the second copy is dropped")
+        self._zip.writestr(name, data)
+        self.names.append(name)
+        self._seen.add(name)
+
+    def close(self) -> Path:
+        """Finish the zip, put its members in ``key`` order, and move it over ``path``."""
+        self._zip.close()
+        if self.key is not None and self.names != sorted(self.names, key=self.key):
+            self._reorder()
+        self._commit()
+        return self.path
+
+    def _reorder(self) -> None:
+        tmp = self._new_temp()
+        try:
+            with zipfile.ZipFile(self._tmp) as src, zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as dst:
+                for info in sorted(src.infolist(), key=lambda i: self.key(i.filename)):
+                    copy = zipfile.ZipInfo(info.filename, date_time=info.date_time)
+                    copy.compress_type, copy.external_attr = info.compress_type, info.external_attr
+                    dst.writestr(copy, src.read(info))
+            os.replace(tmp, self._tmp)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+
+    def discard(self) -> None:
+        """Drop everything written; ``path`` is left as it was."""
+        with contextlib.suppress(Exception):
+            self._zip.close()
+        self._remove_temp()
+        self.closed = True
+
+
+class LineStream(_TempOutput):
+    """A text file of one line per result, written as they come (UTF-8).
+
+    The ``key`` given to each :meth:`add` orders the lines at :meth:`close` (a stable sort:
+    lines with equal keys keep their order).
+    """
+
+    def __init__(self, path: str | os.PathLike, keep_partial: bool = True):
+        super().__init__(path, keep_partial)
+        self._file: IO[str] = open(self._tmp, "w", encoding="utf-8", newline="")
+        self._keys: list[Any] = []
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    def add(self, line: str, key: Any = 0) -> None:
+        """Write ``line`` (a newline is added; it must not hold one)."""
+        if "\n" in line or "\r" in line:
+            raise ValueError("LineStream.add: one line at a time")
+        self._file.write(line + "\n")
+        self._file.flush()
+        self._keys.append(key)
+
+    def close(self) -> Path:
+        """Finish the file, put its lines in key order, and move it over ``path``."""
+        self._file.close()
+        order = sorted(range(len(self._keys)), key=self._keys.__getitem__)
+        if order != list(range(len(self._keys))):
+            with open(self._tmp, encoding="utf-8", newline="") as f:
+                lines = f.readlines()
+            with open(self._tmp, "w", encoding="utf-8", newline="") as f:
+                f.writelines(lines[i] for i in order)
+        self._commit()
+        return self.path
+
+    def discard(self) -> None:
+        """Drop everything written; ``path`` is left as it was."""
+        with contextlib.suppress(Exception):
+            self._file.close()
+        self._remove_temp()
+        self.closed = True
