@@ -72,7 +72,7 @@ def test_the_app_runs_the_detector_on_demand(frames, tmp_path):
     torch.manual_seed(0)
     det = Detector(keypoint_net().eval(), line_net().eval(), input_size=(224, 128), kp_threshold=0.0)
     st = AppState(frames, edits=tmp_path / "edits", detector=det)
-    assert st.source == "both" and st.needs_detection("00000")
+    assert st.default_settings.source == "both" and st.needs_detection("00000")
     before = st.view("00000")
     assert before.detections is None
     st.run_detector("00000")

@@ -80,6 +80,8 @@ def run_serve(args) -> int:
     except BaseException:
         state.close()
         raise
+    if detector is not None and detector.light:
+        detector.warm_up()  # torch and the weights load in the detector process while the browser connects
     urls = app.policy.urls()
     state.edits.describe_holder(urls[0])
     print(f"pnlviz: {data} ({len(state.stems)} frames), edits in {state.edits.root}")
@@ -127,10 +129,13 @@ def run_export(args) -> int:
     from pnlviz import EXAMPLES_DIR
     from pnlviz.app.export import write_export
     from pnlviz.app.state import AppState
+    from pnlviz.data.outputs import OutputError, check_output
 
     data = args.data or EXAMPLES_DIR / "sample"
-    if args.out.resolve() == Path(data).resolve():
-        print(f"error: --out {args.out} is the dataset itself; export writes beside it, never over it", file=sys.stderr)
+    try:
+        check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits))
+    except OutputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
         return 2
     # read-only: export never creates, locks or changes the edits folder
     with AppState(data, detections=args.detections, edits=args.edits, size=args.size, writable=False) as state:

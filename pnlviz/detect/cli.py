@@ -21,7 +21,9 @@ def add_detect_parser(sub) -> None:
     p.add_argument("--out", required=True, type=Path, help="output prediction zip")
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint (e.g. PnLCalib's SV_kp)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint (e.g. PnLCalib's SV_lines)")
-    p.add_argument("--input-size", type=parse_size, default=(960, 540), help="network input size (default 960x540)")
+    p.add_argument("--input-size", type=parse_size, default=None,
+                   help="network input size (default: the network's own, 960x540 for PnLCalib's networks, "
+                        "480x272 for the light default model, as its sidecar says)")
     p.add_argument("--kp-threshold", type=float, default=None,
                    help="keypoint heatmap threshold (default 0.1; the light default model: its sidecar's)")
     p.add_argument("--line-threshold", type=float, default=None,

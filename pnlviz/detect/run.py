@@ -55,6 +55,8 @@ class Detector:
     def from_weights(cls, weights_kp: Path | None, weights_lines: Path | None, **kw) -> "Detector":
         """The published networks from their checkpoints, or with no weights the light default
         model shipped in ``assets/models/light.pt`` (one file, both heads)."""
+        if kw.get("input_size") is None:  # each network's own: 960x540, or the light model's sidecar
+            kw.pop("input_size", None)
         if weights_kp is None and weights_lines is None:
             if not DEFAULT_MODEL.exists():
                 raise NoModelError(f"no detector weights: pass --weights-kp and/or --weights-lines (PnLCalib's "
@@ -62,7 +64,6 @@ class Detector:
                                    f"`pnlviz train` ({DEFAULT_MODEL} is missing)")
             from pnlviz.detect.light import light_detector
 
-            kw.pop("input_size", None)  # the light model runs at the size it was trained at
             return light_detector(DEFAULT_MODEL, **kw)
         kp = line = None
         if weights_kp is not None:

@@ -129,6 +129,17 @@ class DetectorProcess:
         """Start the child and build the detector in it; its errors are raised here."""
         self._calibration = self._submit(_child_load)
 
+    def warm_up(self) -> None:
+        """Start the child and build the detector in it, without waiting (an error shows on the
+        first :meth:`detect`)."""
+        threading.Thread(target=self._quiet_load, daemon=True, name="detector-warm-up").start()
+
+    def _quiet_load(self) -> None:
+        try:
+            self.load()
+        except (DetectorLoadError, DetectorProcessError):
+            pass
+
     def detect(self, images_bgr) -> list:
         return self._submit(_child_detect, list(images_bgr))
 
