@@ -337,3 +337,28 @@ def test_serve_on_all_interfaces_warns_and_prints_an_openable_url(data, tmp_path
         proc.terminate()
         _, err = proc.communicate(timeout=30)
     assert "warning: listening on 0.0.0.0" in err
+
+
+def test_unused_files_and_unreadable_images_are_said_not_hidden(data, tmp_path, capsys):
+    """A file name that is not UTF-8 and a truncated image: the app and export say so in one
+    line each; the frame with the bad image is still calibrated from its annotation."""
+    import os
+
+    from pnlviz.cli import main
+
+    with open(os.path.join(os.fsencode(data), b"\xff.json"), "wb") as f:
+        f.write(b"{}")
+    (data / "00001.jpg").write_bytes(b"")  # unreadable even for its size
+    (data / "00002.jpg").write_bytes((EXAMPLES_DIR / "sample" / "00002.jpg").read_bytes()[:2000])  # truncated
+    st = AppState(data)
+    assert len(st.problems) == 1 and "UTF-8" in st.problems[0]
+    view = st.view("00001")
+    assert view.result.ok and "00001.jpg" in view.error and not view.has_image
+    from pnlviz.app.session import calibration_card
+
+    assert st.image("00002") is None and "image not shown" in calibration_card(st.view("00002"), st)
+    st.close()
+    assert main(["export", "--data", str(data), "--out", str(tmp_path / "x"), "--all"]) == 0
+    err = capsys.readouterr().err
+    assert "UTF-8" in err and sum("00001.jpg" in line for line in err.splitlines()) == 1 and "Traceback" not in err
+    assert (tmp_path / "x" / "keypoints" / "00001.json").is_file()

@@ -225,7 +225,7 @@ def test_drag_end_recalibrates_on_the_server(data):
         tab.goto(st.find("00002"))
         tab.handles_mode.value = "keypoints"
         view = tab.view()
-        assert len(tab._handles) == view.observations.n_keypoints
+        assert len(tab._handles) == view.observations.n_keypoints and set(tab._handles) == {("kp", int(k)) for k in view.observations.kp_ids}
         stem, cam = tab._shown
         before = view.result.camera.C.copy()
         kid = int(view.observations.kp_ids[0])

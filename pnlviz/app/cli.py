@@ -85,7 +85,7 @@ def run_serve(args) -> int:
     urls = app.policy.urls()
     state.edits.describe_holder(urls[0])
     print(f"pnlviz: {data} ({len(state.stems)} frames), edits in {state.edits.root}")
-    for warning in state.edits.warnings:
+    for warning in state.problems + state.edits.warnings:
         print(f"pnlviz: warning: {warning}", file=sys.stderr)
     if app.policy.port != args.port:
         print(f"pnlviz: port {args.port} is busy, using {app.policy.port}")
@@ -139,12 +139,13 @@ def run_export(args) -> int:
         return 2
     # read-only: export never creates, locks or changes the edits folder
     with AppState(data, detections=args.detections, edits=args.edits, size=args.size, writable=False) as state:
-        for warning in state.edits.warnings:
+        for warning in state.problems + state.edits.warnings:
             print(f"warning: {warning}", file=sys.stderr)
         frames = write_export(state, args.out, include_all=args.all)
         unreadable = {stem: e["error"] for stem, e in frames.items() if not e["exported"]}
-        for stem, error in unreadable.items():
-            print(f"skipped: {error}", file=sys.stderr)
+        for stem, e in frames.items():
+            if e["error"]:
+                print(f"{'skipped' if stem in unreadable else 'warning'}: {e['error']}", file=sys.stderr)
         which = "frames" if args.all else "accepted/corrected frames"
         print(f"exported {len(frames) - len(unreadable)} {which} of {len(state.stems)} to {args.out}"
               + (f" ({len(unreadable)} unreadable, listed in the manifest)" if unreadable else ""))

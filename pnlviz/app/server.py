@@ -59,8 +59,10 @@ class PnlvizApp:
         with self._sessions_lock:
             self.sessions[client.client_id] = session
         session.background.content = self._background_text
-        for warning in self.state.edits.warnings[:5]:
-            session.notify("edit record set aside", warning)
+        problems = self.state.problems + self.state.edits.warnings
+        if problems:  # the server's log has them all
+            more = f" (and {len(problems) - 3} more, listed where the server runs)" if len(problems) > 3 else ""
+            session.notify("files not used", "\n".join(problems[:3]) + more)
         session.show()
 
     def _disconnect(self, client: viser.ClientHandle) -> None:

@@ -13,6 +13,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -36,6 +37,8 @@ def calibration_card(view: FrameView, state: AppState) -> str:
     lines.append(f"review: **{review or 'not reviewed'}**")
     if view.error:
         lines.append(f"**error**: {view.error}")
+    elif view.stem in state.image_errors:
+        lines.append(f"**image not shown**: {state.image_errors[view.stem]}")
     res = view.result
     if view.origin is not None:
         settings = state.applied_detection_settings(view.origin, view.settings)
@@ -79,9 +82,13 @@ class Session:
         self.settings: Settings = self.state.default_settings
         self.layers = Layers()
         self.last_recalibration_ms = 0.0
+        self.grabs = self.releases = 0  # handle drags started and released in this tab
         self._lock = threading.RLock()
         self._frustum = self._rays = None
-        self._handles: list = []
+        self._handles: dict[tuple, object] = {}  # what ("kp", id) / ("line", class, i) -> transform controls
+        self._handle_frame: dict[tuple, tuple] = {}  # what -> (stem, camera) the handle is placed with
+        self._dragging: dict[tuple, tuple | None] = {}  # drags in progress: what -> (stem, camera) at start
+        self._edits = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pnlviz-tab-edits")
         self._shown: tuple[str, object] | None = None  # (stem, camera) of the image plane on screen
         self._closed = False
         self._build_gui()
@@ -313,33 +320,63 @@ class Session:
         self._update_handles(view, cam)
 
     def _update_handles(self, view: FrameView, cam) -> None:
-        """Drag handles on the image plane for keypoints or annotated line points."""
-        for h in self._handles:
-            h.remove()
-        self._handles = []
+        """Drag handles on the image plane for keypoints or annotated line points, updated in place
+        (a handle keeps its identity across redraws, so a drag in progress is never cut short by a
+        redraw that another tab's edit caused; the handle being dragged is left where the hand is)."""
         mode = self.handles_mode.value
-        if cam is None or mode not in ("keypoints", "line points"):
-            return
-        targets = []  # (what, uv)
-        if mode == "keypoints" and view.observations is not None:
-            targets = [(("kp", int(k)), p) for k, p in zip(view.observations.kp_ids, view.observations.kp_xy)]
-        elif mode == "line points" and view.annotation:
+        targets: dict[tuple, np.ndarray] = {}  # what -> uv
+        if cam is not None and mode == "keypoints" and view.observations is not None:
+            targets = {("kp", int(k)): p for k, p in zip(view.observations.kp_ids, view.observations.kp_xy)}
+        elif cam is not None and mode == "line points" and view.annotation:
             W, H = view.size
-            targets = [(("line", name, i), p * [W - 1, H - 1]) for name, pts in view.annotation.items()
-                       for i, p in enumerate(pts)]
+            targets = {("line", name, i): p * [W - 1, H - 1] for name, pts in view.annotation.items()
+                       for i, p in enumerate(pts)}
+        for what in [w for w in self._handles if w not in targets and w not in self._dragging]:
+            self._handles.pop(what).remove()
+            self._handle_frame.pop(what, None)
+        if not targets:
+            return
         wxyz = camera_wxyz(cam.R)
-        for n, (what, uv) in enumerate(targets):
-            h = self.scene.add_transform_controls(
-                f"/frame/handles/{n}", scale=HANDLE_SCALE, disable_rotations=True, disable_sliders=True,
-                active_axes=(True, True, False), depth_test=False, wxyz=wxyz, position=pixel_to_plane(cam, uv))
-            h.on_update(lambda event, what=what, stem=view.stem, cam=cam: self.on_drag(event, stem, what, cam))
-            self._handles.append(h)
+        for what, uv in targets.items():
+            self._handle_frame[what] = (view.stem, cam)
+            handle = self._handles.get(what)
+            if handle is None:
+                handle = self.scene.add_transform_controls(
+                    f"/frame/handles/{'/'.join(map(str, what))}", scale=HANDLE_SCALE, disable_rotations=True,
+                    disable_sliders=True, active_axes=(True, True, False), depth_test=False, wxyz=wxyz,
+                    position=pixel_to_plane(cam, uv))
+                handle.on_update(self._drag_callback(what))
+                self._handles[what] = handle
+            elif what not in self._dragging:
+                handle.wxyz, handle.position = wxyz, pixel_to_plane(cam, uv)
+
+    def _drag_callback(self, what: tuple):
+        """An ``async`` callback: viser awaits those on its event loop in the order the browser sent
+        them, so a drag's start is always seen before its end. It only records the phases; the edit
+        itself runs on this tab's edit thread, one after the other in the order they were made."""
+
+        async def on_update(event) -> None:
+            if event.phase == "start":
+                self.grabs += 1
+                self._dragging[what] = self._handle_frame.get(what)  # the frame the drag began on
+            elif event.phase == "end":
+                began_on = self._dragging.pop(what, None) or self._handle_frame.get(what)
+                if began_on is not None and not self._closed:
+                    stem, cam = began_on
+                    self._edits.submit(self.release, stem, what, cam, np.array(event.target.position, float))
+
+        return on_update
 
     def on_drag(self, event, stem: str, what: tuple, cam) -> None:
-        """A handle moved: on release, the edit goes to ``stem``, the frame the handle was made on."""
-        if event.phase != "end":
-            return
-        uv = plane_to_pixel(cam, event.target.position)
+        """A drag event of the handle ``what`` placed on ``stem`` with ``cam``: the release edits."""
+        if event.phase == "end":
+            self.release(stem, what, cam, event.target.position)
+
+    def release(self, stem: str, what: tuple, cam, position) -> None:
+        """A handle was released at ``position`` (on the image plane of ``cam``): the edit goes to
+        ``stem``, the frame the drag began on, whatever this tab shows now."""
+        self.releases += 1
+        uv = plane_to_pixel(cam, position)
         t0 = time.perf_counter()
 
         def edit() -> None:
@@ -445,6 +482,8 @@ class Session:
         return self.client.atomic() if self.client is not None else self.app.server.atomic()
 
     def close(self) -> None:
-        """The tab is gone: stop drawing (its GUI and scene nodes went with its connection)."""
+        """The tab is gone: stop drawing (its GUI and scene nodes went with its connection). Edits
+        already released still go through."""
         with self._lock:
             self._closed = True
+        self._edits.shutdown(wait=False)

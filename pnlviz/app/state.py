@@ -214,6 +214,8 @@ class AppState:
         self._cache: dict[tuple, FrameView] = {}
         self._lock = threading.RLock()
         self._images: dict[str, np.ndarray | None] = {}
+        #: why an image could not be decoded (stem -> one line), once it was tried
+        self.image_errors: dict[str, str] = {}
         self._undo: dict[str, list[dict]] = {}
         self._redo: dict[str, list[dict]] = {}
         self._listeners: list[Callable[[str], None]] = []
@@ -243,13 +245,29 @@ class AppState:
         return self._index.get(str(stem).strip())
 
     def frame_size(self, stem: str) -> tuple[int, int]:
-        """(W, H) of the frame's image, else the size frames without an image are shown at."""
+        """(W, H) of the frame's image, else (no image, or one that cannot be read) the size
+        frames without an image are shown at."""
         try:
             if self.ds.frame(stem).has_image:
                 return self.ds.image_size(stem) or self.size
         except DataError:
             pass
         return self.size
+
+    def image_problem(self, stem: str) -> str | None:
+        """Why the frame's image cannot be used (one line), None when it can or there is none."""
+        try:
+            if self.ds.frame(stem).has_image:
+                self.ds.image_size(stem)
+        except DataError as exc:
+            return str(exc)
+        return None
+
+    @property
+    def problems(self) -> list[str]:
+        """Files of the dataset that are not used (names that are not UTF-8, a second file for
+        the same frame...), one line each."""
+        return [str(e) for e in self.ds.rejected]
 
     def annotation(self, stem: str) -> dict[str, np.ndarray] | None:
         """The edited annotation if any, else the source one."""
@@ -288,7 +306,8 @@ class AppState:
                 return self._images[stem]
         try:
             img = self.ds.image(stem) if self.ds.frame(stem).has_image else None
-        except DataError:
+        except DataError as exc:  # the card says why the frame shows no pixels
+            self.image_errors[stem] = str(exc)
             img = None
         with self._lock:
             self._images[stem] = img
@@ -339,7 +358,8 @@ class AppState:
         idx = self.index_of(stem)
         t0 = time.perf_counter()
         try:
-            image = self.ds.frame(stem).has_image
+            image_error = self.image_problem(stem)  # shown, and the frame is calibrated as one without an image
+            image = self.ds.frame(stem).has_image and image_error is None
             size = self.frame_size(stem)
             ann = self.annotation(stem)
             ref = self.ds.camera_dict(stem)
@@ -348,7 +368,7 @@ class AppState:
             return FrameView(stem, idx, False, self.size, None, None, None, error=str(exc), settings=settings)
         obs, origin = self._observations(stem, ann, size, settings)
         if obs is None:
-            return FrameView(stem, idx, image, size, ann, None, None, error="nothing to calibrate from",
+            return FrameView(stem, idx, image, size, ann, None, None, error=image_error or "nothing to calibrate from",
                              ms=1e3 * (time.perf_counter() - t0), reference_camera=ref, settings=settings)
         try:
             result = calibrate(obs, self.params(settings, origin))
@@ -359,8 +379,9 @@ class AppState:
         if result.ok and ann:
             fr = evaluate_frame(result.camera.scaled(*EVAL_SIZE), ann)
             jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
-        return FrameView(stem, idx, image, size, ann, obs, result, jac, ms=1e3 * (time.perf_counter() - t0),
-                         reference_camera=ref, detections=self.detections_for(stem), origin=origin, settings=settings)
+        return FrameView(stem, idx, image, size, ann, obs, result, jac, error=image_error,
+                         ms=1e3 * (time.perf_counter() - t0), reference_camera=ref,
+                         detections=self.detections_for(stem), origin=origin, settings=settings)
 
     def _observations(self, stem: str, ann, size, settings: Settings) -> tuple[Observations | None, str | None]:
         """The observations to calibrate from and where they came from ("annotation",
