@@ -89,7 +89,7 @@ def one_run(browser, args, edits: Path) -> dict:
     if not run["why"] and proc.returncode != 0:
         run["why"] = f"exit code {proc.returncode} after SIGTERM"
     if not run["why"] and "Traceback" in err:
-        run["why"] = "traceback on stderr: " + err.strip().splitlines()[-1]
+        run["why"] = "traceback on stderr:\n    " + "\n    ".join(err.strip().splitlines()[-12:])
     run["ok"] = not run["why"]
     return run
 

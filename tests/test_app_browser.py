@@ -150,6 +150,7 @@ def test_place_a_keypoint_undo_redo_export_and_restart(data, browser, tmp_path):
         kid = str(int(obs.kp_ids[i]))
         u, v = obs.kp_xy[i] + [6.0, 4.0]
         session.kp_id.value = kid  # choose the id...
+        session.flush()
         page.get_by_role("button", name="camera view").click()
         time.sleep(2.0)
         # ...and shift+click on the image. In camera view the canvas shows the frame with the
@@ -203,6 +204,7 @@ def test_dragging_a_keypoint_handle_recalibrates_and_autosaves(data, browser):
         stem = session.stem
         before = session.view().result.camera.C.copy()
         session.handles_mode.value = "keypoints"
+        session.flush()
         page.get_by_role("button", name="camera view").click()
         time.sleep(2.5)
         view = session.view()
@@ -327,3 +329,64 @@ def test_serve_starts_clean_with_a_client_while_the_detector_loads(tmp_path, bro
     finally:
         for b in burners:
             b.kill()
+
+
+def _screen_point(client, box, world):
+    """Where a world point shows on the canvas of ``client`` (viser cameras: OpenCV axes)."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    w, x, y, z = client.camera.wxyz
+    p = Rotation.from_quat([x, y, z, w]).as_matrix().T @ (np.asarray(world) - client.camera.position)
+    f = box["height"] / 2 / np.tan(client.camera.fov / 2)
+    return box["x"] + box["width"] / 2 + f * p[0] / p[2], box["y"] + box["height"] / 2 + f * p[1] / p[2]
+
+
+def test_two_tabs_dragging_on_one_frame_keep_every_edit(data, browser):
+    """Two tabs on the same frame drag handles in turns without waiting: each release
+    recalibrates the frame and moves the other tab's handles in place (never re-creating one
+    under the hand); every drag that grabbed a handle is on disk, and both tabs show them all."""
+    import numpy as np
+
+    from pnlviz.app.scene import HANDLE_SCALE
+
+    app = start(data)
+    try:
+        tabs = []
+        for _ in range(2):
+            page = open_page(browser, app, "focal")
+            wait_until(lambda: len(app.tabs()) == len(tabs) + 1)
+            session = next(t for t in app.tabs() if all(t is not s for _, s in tabs))
+            session.handles_mode.value = "keypoints"
+            session.flush()
+            page.get_by_role("button", name="camera view").click()
+            tabs.append((page, session))
+        time.sleep(3.0)
+        stem = tabs[0][1].stem
+        obs = tabs[0][1].view().observations
+        dragged = [int(obs.kp_ids[i]) for i in np.argsort(obs.kp_xy[:, 0])[:6]]  # left: away from the panel
+        for n, kid in enumerate(dragged):
+            page, session = tabs[n % 2]
+            box = page.locator("canvas").first.bounding_box()
+            pos = np.asarray(session._handles[("kp", kid)].position, float)
+            cam = session._handle_frame[("kp", kid)][1]
+            x0, y0 = _screen_point(session.client, box, pos + 0.5 * HANDLE_SCALE * cam.R[0])
+            page.mouse.move(x0, y0)
+            page.mouse.down()
+            page.mouse.move(x0 + 8, y0, steps=3)
+            page.mouse.move(x0 + 15, y0, steps=3)
+            page.mouse.up()
+        grabbed = lambda: sum(s.grabs for _, s in tabs)  # noqa: E731
+        wait_until(lambda: sum(s.releases for _, s in tabs) == grabbed() and
+                   len(app.state.edits.get(stem).get("keypoints") or {}) >= grabbed(), timeout=20)
+        saved = app.state.edits.get(stem).get("keypoints") or {}
+        assert grabbed() >= 4 and sum(s.releases for _, s in tabs) == grabbed()
+        assert len(saved) == grabbed() and set(saved) <= {str(k) for k in dragged}
+        for page, session in tabs:  # both tabs show every edit
+            view = session.view()
+            for kid, xy in saved.items():
+                i = list(view.observations.kp_ids).index(int(kid))
+                np.testing.assert_allclose(view.observations.kp_xy[i], xy)
+            page.close()
+    finally:
+        stop(app)

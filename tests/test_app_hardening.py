@@ -76,6 +76,7 @@ def test_two_tabs_on_two_frames_never_touch_each_other(data):
         a.goto(st.find("00003"))
         b.goto(st.find("00001"))
         a.handles_mode.value = "keypoints"
+        a.flush()
         stem, cam = a._shown
         kid = int(a.view().observations.kp_ids[0])
         target = SimpleNamespace(position=pixel_to_plane(cam, (321.0, 123.0)))
@@ -84,7 +85,6 @@ def test_two_tabs_on_two_frames_never_touch_each_other(data):
         assert stem == "00003" and a.stem == "00003" and b.stem == "00002"
         np.testing.assert_allclose(st.edits.get("00003")["keypoints"][str(kid)], [321.0, 123.0], atol=1e-6)
         assert st.edits.get("00002") == {} and st.edits.get("00001") == {}
-        b.review.value = None
         st.set_review(b.stem, "rejected")  # a review from tab b: a's frame and progress follow
         assert st.edits.review("00003") == "corrected" and "rejected 1" in a.progress_text.content
     finally:
@@ -133,7 +133,6 @@ def test_a_failed_write_is_shown_and_changes_nothing(data, monkeypatch):
             raise OSError(28, "No space left on device")
 
         monkeypatch.setattr(edits_module, "atomic_write_text", full_disk)
-        tab.review.value = "accepted"
         tab._guarded(lambda: st.set_review(tab.stem, "accepted"))
         assert said and said[-1][0] == "not saved" and "No space left" in said[-1][1]
         assert st.edits.review(tab.stem) is None and not st._undo.get(tab.stem)  # nothing half-done
@@ -209,6 +208,7 @@ def test_values_no_honest_browser_sends_are_refused(data):
         tab.notify = lambda title, body, error=True: said.append(body)
         stem = tab.stem
         tab.kp_id.value = "999"  # a dropdown value outside its options
+        tab.flush()
         tab._guarded(lambda: st.hide_keypoint(stem, tab.kp_id.value))
         assert "999" in said[-1] and st.edits.get(stem) == {}
         for x, y in ((math.nan, 10.0), (math.inf, 10.0), (1e9, 10.0), (-2000.0, 10.0)):
@@ -222,13 +222,17 @@ def test_values_no_honest_browser_sends_are_refused(data):
             st.move_line_point(stem, "Not a class", 0, 10.0, 10.0)
         assert st.edits.get(stem) == {}
         tab.filter.value = "everything"  # resets to a known filter, the panels keep working
+        tab.flush()
         tab.refresh_order()
         assert tab.filter.value == "all" and len(tab.order) == len(st.stems)
         tab.source.value = "telepathy"
+        tab.flush()
         assert tab.settings.source == "annotation" and tab.source.value == "annotation"
         tab.alpha.value = 7.0
+        tab.flush()
         assert tab.settings.alpha == 0.6
         tab.slider.value = 10 ** 6  # past the end: the last frame, no IndexError
+        tab.flush()
         assert tab.stem == st.stems[-1]
     finally:
         app.stop()
@@ -244,9 +248,11 @@ def test_a_filter_with_one_match_and_the_slider_past_it(data):
         tab = app.session()
         st.set_review("00002", "accepted")
         tab.filter.value = "accepted"
+        tab.flush()
         tab.refresh_order()
         assert tab.order == [st.find("00002")] and tab.stem == "00002"
         tab.slider.value = 1  # the slider's max is 1 even with one match
+        tab.flush()
         assert tab.stem == "00002"
     finally:
         app.stop()

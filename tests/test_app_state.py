@@ -119,11 +119,14 @@ def test_server_panels_navigate_review_and_toggle_pnl(data):
         st.set_review(tab.stem, "accepted")
         assert "1 of 5 reviewed" in tab.progress_text.content  # the change reached the tab
         tab.filter.value = "accepted"
+        tab.flush()
         tab.refresh_order()
         assert tab.order == [tab.index]
         tab.filter.value = "all"
+        tab.flush()
         tab.refresh_order()
         tab.pnl.value = False
+        tab.flush()
         assert "PnL set: 0 lines" in tab.card.content
         tab.goto(st.find("bad"))
         assert "error" in tab.card.content and tab._frustum is None
@@ -224,6 +227,7 @@ def test_drag_end_recalibrates_on_the_server(data):
         tab = app.session()
         tab.goto(st.find("00002"))
         tab.handles_mode.value = "keypoints"
+        tab.flush()
         view = tab.view()
         assert len(tab._handles) == view.observations.n_keypoints and set(tab._handles) == {("kp", int(k)) for k in view.observations.kp_ids}
         stem, cam = tab._shown

@@ -9,9 +9,11 @@ validates ids and positions. A refused value is reverted and shown to that tab o
 
 from __future__ import annotations
 
+import asyncio
 import math
 import threading
 import time
+import traceback
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -88,7 +90,8 @@ class Session:
         self._handles: dict[tuple, object] = {}  # what ("kp", id) / ("line", class, i) -> transform controls
         self._handle_frame: dict[tuple, tuple] = {}  # what -> (stem, camera) the handle is placed with
         self._dragging: dict[tuple, tuple | None] = {}  # drags in progress: what -> (stem, camera) at start
-        self._edits = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pnlviz-tab-edits")
+        #: everything this tab asks for runs here, one action at a time, in the order it was sent
+        self._queue = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pnlviz-tab")
         self._shown: tuple[str, object] | None = None  # (stem, camera) of the image plane on screen
         self._closed = False
         self._build_gui()
@@ -117,6 +120,34 @@ class Session:
         except OSError as exc:
             self.notify("not saved", f"the edits folder cannot be written: {exc.strerror or exc}")
         self.show()
+
+    # ------------------------------------------------------------------ ordering
+    def _ordered(self, fn: Callable):
+        """``fn(event)`` as a viser callback that keeps the browser's order: viser awaits ``async``
+        callbacks on its event loop in the order the messages came (its thread pool runs plain
+        ones in any order: "accepted" then "rejected" could end "accepted"); this one only puts
+        the call on the tab's queue."""
+
+        async def queued(event) -> None:
+            if not self._closed:
+                self._queue.submit(self._run, lambda: fn(event))
+
+        return queued
+
+    def flush(self, timeout: float = 30.0) -> None:
+        """Wait until every action sent to this tab so far has run (for scripts and tests: a value
+        set from Python reaches the queue through viser's event loop)."""
+        loop = self.app.server.get_event_loop()
+        asyncio.run_coroutine_threadsafe(asyncio.sleep(0), loop).result(timeout)
+        self._queue.submit(lambda: None).result(timeout)
+
+    def _run(self, action: Callable[[], None]) -> None:
+        """One queued action; an unexpected error is printed and shown, and the tab goes on."""
+        try:
+            action()
+        except Exception as exc:  # noqa: BLE001 - the queue would swallow it silently
+            traceback.print_exc()
+            self.notify("internal error", f"{type(exc).__name__}: {exc}")
 
     # ------------------------------------------------------------------ GUI
     def _choice(self, handle, options, fallback: str) -> str:
@@ -179,10 +210,11 @@ class Session:
         for label, key, modifier, action in keys:
             description = f"{modifier.replace('cmd/ctrl', 'Ctrl').replace('+shift', '+Shift')}+{key}" if modifier else key
             command = gui.add_command(label, hotkey=key, modifier=modifier, description=description)
-            command.on_trigger(lambda _, action=action: action())
+            command.on_trigger(self._ordered(lambda _, action=action: action()))
 
     def _bind_navigation(self) -> None:
         @self.slider.on_update
+        @self._ordered
         def _(_) -> None:
             try:
                 pos = int(self.slider.value)
@@ -190,40 +222,48 @@ class Session:
                 pos = 0
             with self._lock:
                 pos = int(np.clip(pos, 0, len(self.order) - 1))
-                self.goto(self.order[pos], from_slider=True)
+                if self.order[pos] != self.index:  # not an echo of step() or goto() moving the slider
+                    self.goto(self.order[pos], from_slider=True)
 
         @self.nav.on_click
+        @self._ordered
         def _(event) -> None:
             if event.target.value in ("previous", "next"):
                 self.step(-1 if event.target.value == "previous" else 1)
 
         @self.jump.on_update
+        @self._ordered
         def _(_) -> None:
             idx = self.state.find(str(self.jump.value)[:200])
             if idx is not None:
                 self.goto(idx)
 
         @self.filter.on_update
+        @self._ordered
         def _(_) -> None:
             self._choice(self.filter, FILTERS, "all")
             self.refresh_order()
 
         @self.sort.on_update
+        @self._ordered
         def _(_) -> None:
             self._choice(self.sort, SORTS, "index")
             self.refresh_order()
 
         @self.cam_button.on_click
+        @self._ordered
         def _(_) -> None:
             self.camera_view()
 
     def _bind_settings(self) -> None:
         @self.pnl.on_update
+        @self._ordered
         def _(_) -> None:
             self.settings = replace(self.settings, pnl=bool(self.pnl.value))
             self.show()
 
         @self.alpha.on_update
+        @self._ordered
         def _(_) -> None:
             try:
                 self.settings = replace(self.settings, alpha=float(self.alpha.value))
@@ -233,6 +273,7 @@ class Session:
             self.show()
 
         @self.source.on_update
+        @self._ordered
         def _(_) -> None:
             self.settings = replace(self.settings, source=self._choice(self.source, self.sources, self.settings.source))
             self.show()
@@ -242,9 +283,10 @@ class Session:
                 setattr(self.layers, name, bool(box.value))
                 self.show()
 
-            box.on_update(on_layer)
+            box.on_update(self._ordered(on_layer))
 
         @self.handles_mode.on_update
+        @self._ordered
         def _(_) -> None:
             self._choice(self.handles_mode, HANDLE_MODES, "off")
             self.show()
@@ -253,6 +295,7 @@ class Session:
         st = self.state
 
         @self.history.on_click
+        @self._ordered
         def _(event) -> None:
             stem = self.stem
             if event.target.value == "undo":
@@ -261,11 +304,13 @@ class Session:
                 self._guarded(lambda: st.redo(stem))
 
         @self.kp_hide.on_click
+        @self._ordered
         def _(_) -> None:
             stem, kid = self.stem, self.kp_id.value
             self._guarded(lambda: st.hide_keypoint(stem, kid))
 
         @self.export.on_click
+        @self._ordered
         def _(_) -> None:
             from pnlviz.app.export import export_zip_bytes
 
@@ -274,6 +319,7 @@ class Session:
                                                save_immediately=True)
 
         @self.scene.on_click(modifier="shift")
+        @self._ordered
         def _(event) -> None:
             with self._lock:
                 shown = self._shown
@@ -286,6 +332,7 @@ class Session:
                 self._guarded(lambda: st.move_keypoint(stem, kid, *uv))
 
         @self.review.on_click
+        @self._ordered
         def _(event) -> None:
             value, stem = event.target.value, self.stem
             if value in REVIEW_STATES + ("clear",):
@@ -353,7 +400,7 @@ class Session:
     def _drag_callback(self, what: tuple):
         """An ``async`` callback: viser awaits those on its event loop in the order the browser sent
         them, so a drag's start is always seen before its end. It only records the phases; the edit
-        itself runs on this tab's edit thread, one after the other in the order they were made."""
+        itself runs on this tab's queue, one after the other in the order they were made."""
 
         async def on_update(event) -> None:
             if event.phase == "start":
@@ -363,7 +410,8 @@ class Session:
                 began_on = self._dragging.pop(what, None) or self._handle_frame.get(what)
                 if began_on is not None and not self._closed:
                     stem, cam = began_on
-                    self._edits.submit(self.release, stem, what, cam, np.array(event.target.position, float))
+                    position = np.array(event.target.position, float)
+                    self._queue.submit(self._run, lambda: self.release(stem, what, cam, position))
 
         return on_update
 
@@ -486,4 +534,4 @@ class Session:
         already released still go through."""
         with self._lock:
             self._closed = True
-        self._edits.shutdown(wait=False)
+        self._queue.shutdown(wait=False)

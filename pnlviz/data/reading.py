@@ -56,6 +56,8 @@ def bad_name_error(source: str) -> DataError:
 
 def _reason(e: BaseException) -> str:
     text = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
+    if isinstance(e, RuntimeError) and "encrypted" in str(text):
+        return "the member is encrypted (not supported)"
     return str(text) or type(e).__name__
 
 

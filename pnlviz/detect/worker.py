@@ -6,7 +6,9 @@ and a detector thread competes with the app for the GIL and both cores. In the c
 on ``threads`` threads (1 by default) at a lower priority, so detection never starves the app.
 
 torch-free on import. The child is started on first use (``spawn``: nothing of the parent's
-threads is inherited) and builds :meth:`pnlviz.detect.run.Detector.from_weights` once.
+threads is inherited), builds :meth:`pnlviz.detect.run.Detector.from_weights` once, and answers
+one request at a time over a pipe. It ends when asked (:meth:`DetectorProcess.close`), when its
+parent exits, or when its parent is killed.
 """
 
 from __future__ import annotations
@@ -15,8 +17,6 @@ import multiprocessing
 import os
 import threading
 import time
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 from pnlviz.detect.default import DEFAULT_MODEL, read_sidecar
@@ -24,11 +24,9 @@ from pnlviz.detect.default import DEFAULT_MODEL, read_sidecar
 #: how much lower the child's scheduling priority is than the parent's (``os.nice``)
 NICENESS = 10
 
-_DETECTOR = None  # the child's Detector, built by its first job
-
 
 class DetectorProcessError(RuntimeError):
-    """The detector process died or could not start."""
+    """The detector process died, could not start, or failed on a frame."""
 
 
 class DetectorLoadError(ValueError):
@@ -36,57 +34,63 @@ class DetectorLoadError(ValueError):
     in the parent with the child's message, so the parent needs no torch to unpickle it."""
 
 
-def _child_init(threads: int, parent: int) -> None:
+# ------------------------------------------------------------------------------ the child
+def _child_main(conn, args: tuple, threads: int, parent: int) -> None:
+    """Build the detector on the first request, then answer requests until told to stop."""
     os.environ["OMP_NUM_THREADS"] = str(threads)
     try:
         os.nice(NICENESS)
     except OSError:  # not permitted here: run at the same priority
         pass
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
+    detector = None
+    while True:
+        try:
+            kind, payload = conn.recv()
+        except (EOFError, OSError):  # the parent is gone
+            return
+        if kind == "stop":
+            return
+        try:
+            if detector is None:
+                detector = _build(args, threads)
+            result = dict(detector.calibration) if kind == "load" else detector.detect(payload)
+            conn.send(("ok", result))
+        except DetectorLoadError as exc:
+            conn.send(("load-error", str(exc)))
+        except Exception as exc:  # noqa: BLE001 - sent as text: its class may need torch to unpickle
+            conn.send(("error", f"{type(exc).__name__}: {exc}"))
+
+
+def _build(args: tuple, threads: int):
+    weights_kp, weights_lines, kw = args
+    try:
+        import torch
+
+        from pnlviz.detect.run import Detector
+
+        torch.set_num_threads(threads)
+        return Detector.from_weights(weights_kp, weights_lines, **kw)
+    except Exception as exc:  # noqa: BLE001 - a checkpoint error, no model, a broken install
+        raise DetectorLoadError(str(exc)) from None
 
 
 def _exit_with_parent(parent: int) -> None:
-    """End the child when its parent is gone (killed, or stopped without closing us)."""
+    """End the child when its parent is gone (killed, or exited without closing it)."""
     while os.getppid() == parent:
         time.sleep(0.5)
     os._exit(0)
 
 
-def _child_detector(weights_kp, weights_lines, kw):
-    global _DETECTOR
-    if _DETECTOR is None:
-        import torch
-
-        from pnlviz.detect.run import Detector
-
-        torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "1")))
-        _DETECTOR = Detector.from_weights(weights_kp, weights_lines, **kw)
-    return _DETECTOR
-
-
-def _child_load(weights_kp, weights_lines, kw) -> dict:
-    try:
-        det = _child_detector(weights_kp, weights_lines, kw)
-    except Exception as exc:  # noqa: BLE001 - its class may need torch to unpickle: send the message
-        raise DetectorLoadError(str(exc)) from None
-    return dict(det.calibration)
-
-
-def _child_detect(weights_kp, weights_lines, kw, images):
-    _child_load(weights_kp, weights_lines, kw)  # builds the detector on the first call
-    try:
-        return _DETECTOR.detect(images)
-    except Exception as exc:  # noqa: BLE001 - sent as a message, as in _child_load
-        raise DetectorProcessError(f"{type(exc).__name__}: {exc}") from None
-
-
+# ------------------------------------------------------------------------------ the parent
 class DetectorProcess:
     """``Detector.from_weights(weights_kp, weights_lines, **kw)`` in a child process.
 
     :meth:`detect` blocks the calling thread until the child answers (frames are sent as arrays,
     detections come back as :class:`pnlviz.data.Predictions`); calls are served one at a time.
     :meth:`load` builds the detector now and raises its error (a checkpoint that does not fit,
-    no default model) in the caller. Thread-safe; :meth:`close` ends the child.
+    no default model) in the caller; :meth:`warm_up` does the same without waiting.
+    Thread-safe; :meth:`close` ends the child.
     """
 
     def __init__(self, weights_kp: Path | None = None, weights_lines: Path | None = None, *, threads: int = 1,
@@ -94,13 +98,13 @@ class DetectorProcess:
         self._args = (weights_kp, weights_lines, kw)
         self.threads = max(1, int(threads))
         self.light = weights_kp is None and weights_lines is None
-        self._pool: ProcessPoolExecutor | None = None
+        self._proc = self._conn = None
         self._lock = threading.Lock()
         self._calibration: dict | None = None
 
     @property
     def started(self) -> bool:
-        return self._pool is not None
+        return self._proc is not None and self._proc.is_alive()
 
     @property
     def calibration(self) -> dict:
@@ -110,41 +114,67 @@ class DetectorProcess:
             return dict(read_sidecar(DEFAULT_MODEL).get("calibration") or {})
         return dict(self._calibration or {})
 
-    def _submit(self, fn, *args):
+    def _start(self) -> None:
+        ctx = multiprocessing.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_child_main, args=(child, self._args, self.threads, os.getpid()),
+                                 daemon=True, name="pnlviz-detector")
+        self._proc.start()
+        child.close()
+
+    def _call(self, kind: str, payload=None):
         with self._lock:
-            if self._pool is None:
-                ctx = multiprocessing.get_context("spawn")
-                self._pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_child_init,
-                                                 initargs=(self.threads, os.getpid()))
-            pool = self._pool
-        try:
-            return pool.submit(fn, *self._args, *args).result()
-        except BrokenProcessPool as exc:
-            with self._lock:
-                if self._pool is pool:  # the next call starts a fresh child
-                    self._pool = None
-            raise DetectorProcessError(f"the detector process stopped ({exc})") from None
+            if not self.started:
+                self._start()
+            proc, conn = self._proc, self._conn
+            try:
+                conn.send((kind, payload))
+                while not conn.poll(0.5):
+                    if not proc.is_alive():
+                        raise EOFError
+                status, value = conn.recv()
+            except (EOFError, OSError):
+                if self._proc is proc:  # the next call starts a fresh child
+                    self._proc = self._conn = None
+                raise DetectorProcessError(f"the detector process stopped (exit code {proc.exitcode})") from None
+        if status == "load-error":
+            raise DetectorLoadError(value)
+        if status == "error":
+            raise DetectorProcessError(value)
+        return value
 
     def load(self) -> None:
         """Start the child and build the detector in it; its errors are raised here."""
-        self._calibration = self._submit(_child_load)
+        self._calibration = self._call("load")
 
     def warm_up(self) -> None:
-        """Start the child and build the detector in it, without waiting (an error shows on the
-        first :meth:`detect`)."""
-        threading.Thread(target=self._quiet_load, daemon=True, name="detector-warm-up").start()
+        """:meth:`load` in a background thread (an error then shows on the first :meth:`detect`)."""
+        def quiet_load():
+            try:
+                self.load()
+            except (DetectorLoadError, DetectorProcessError):
+                pass
 
-    def _quiet_load(self) -> None:
-        try:
-            self.load()
-        except (DetectorLoadError, DetectorProcessError):
-            pass
+        threading.Thread(target=quiet_load, daemon=True, name="detector-warm-up").start()
 
     def detect(self, images_bgr) -> list:
-        return self._submit(_child_detect, list(images_bgr))
+        return self._call("detect", list(images_bgr))
 
     def close(self) -> None:
-        with self._lock:
-            pool, self._pool = self._pool, None
-        if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+        """End the child: it finishes the frame it is on, if any, for at most two seconds."""
+        proc, conn = self._proc, self._conn
+        self._proc = self._conn = None
+        if proc is None:
+            return
+        if self._lock.acquire(timeout=0.5):  # not while a request is being sent on the pipe
+            try:
+                conn.send(("stop", None))
+            except (OSError, ValueError):
+                pass
+            finally:
+                self._lock.release()
+        proc.join(timeout=2.0)
+        if proc.is_alive():
+            proc.terminate()
+            proc.join(timeout=2.0)
+        conn.close()
