@@ -35,12 +35,12 @@ import cv2
 import numpy as np
 
 from pnlviz.calib.observations import Observations
+from pnlviz.calib.problem import FrameData
 from pnlviz.calib.refine import CameraProblem, RefineParams
+from pnlviz.calib.voting import SUBSETS, best, subset_mask, truncated_score
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.homography import camera_from_ground_homography
-
-SUBSETS = ("full", "main", "ground")
 
 
 @dataclass(frozen=True)
@@ -161,6 +161,8 @@ def camera_from_plane_homography(H: np.ndarray, plane: str, width: int, height: 
     cam = camera_from_ground_homography(H, width, height)
     if cam is None:
         return None
+    if plane == "ground":  # its local frame is the world's
+        return cam
     B, origin = _plane_frame(plane, model)
     # back to the world frame: x_cam = R_l (B (X - o) - C_l) = (R_l B) (X - (o + B^T C_l))
     return cam.with_pose(cam.R @ B, origin + B.T @ cam.C)
@@ -182,26 +184,17 @@ def _kp_errors(cam: Camera, obs: Observations) -> np.ndarray:
     return np.where(z > 1e-3, err, np.inf)
 
 
-def _subset_mask(obs: Observations, subset: str) -> np.ndarray:
-    if subset == "full":
-        return np.ones(obs.n_keypoints, bool)
-    if subset == "main":
-        return obs.kp_main.copy()
-    if subset == "ground":
-        return obs.ground.copy()
-    raise ValueError(f"unknown keypoint subset {subset!r}")
-
-
-def make_candidates(obs: Observations, params: CalibParams, model: FieldModel) -> list[Candidate]:
+def make_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
     """Step 1: per (subset, threshold), the camera decomposed from a RANSAC plane homography and
     its inliers over the subset, non-planar points included. Identical inlier sets are kept once."""
+    obs, model = data.obs, data.model
     W, H = obs.width, obs.height
     seen: set[tuple] = set()
     out: list[Candidate] = []
     thresholds = {params.px(t, W): t for t in params.ransac_thresholds}
     done: set[bytes] = set()
     for subset in params.subsets:
-        mask = _subset_mask(obs, subset)
+        mask = subset_mask(obs, subset)
         if mask.sum() < params.min_points or mask.tobytes() in done:
             continue  # too small, or the same points as an earlier subset (e.g. no goal keypoints)
         done.add(mask.tobytes())
@@ -241,18 +234,25 @@ def make_candidates(obs: Observations, params: CalibParams, model: FieldModel) -
     return out
 
 
-def refine_candidate(c: Candidate, obs: Observations, params: CalibParams, model: FieldModel) -> Candidate | None:
+def refine_candidate(c: Candidate, data: FrameData, params: CalibParams) -> Candidate | None:
     """Focal length and pose of a candidate refined on its inliers (all three planes), with one
     re-selection of the inliers among the subset's keypoints."""
-    sub = obs.subset(_subset_mask(obs, c.subset))
-    sub.lines, sub.circles = {}, {}  # candidates come from keypoints alone; lines join in PnL
+    obs = data.obs
+    in_subset = subset_mask(obs, c.subset)
+    sub = obs.subset(in_subset)
     quick = RefineParams(refine_focal=True, max_iter=20, tol=1e-6)
+
+    def solve(start: Camera, inliers: np.ndarray) -> Camera:  # keypoints alone; lines join in PnL
+        use = np.zeros(obs.n_keypoints, bool)
+        use[np.flatnonzero(in_subset)[inliers]] = True
+        return CameraProblem(start, data, quick, use_keypoints=use, lines=(), circles=()).solve()[0]
+
     inl = np.isin(sub.kp_ids, c.inliers)
-    cam, _ = CameraProblem(c.camera, sub, quick, model, use_keypoints=inl).solve()
+    cam = solve(c.camera, inl)
     err = _kp_errors(cam, sub)
     inl2 = err < params.px(c.threshold, obs.width)
     if inl2.sum() >= params.min_points and not np.array_equal(inl2, inl):
-        cam, _ = CameraProblem(cam, sub, quick, model, use_keypoints=inl2).solve()
+        cam = solve(cam, inl2)
         inl = inl2
         err = _kp_errors(cam, sub)
     if _sane(cam, params):
@@ -277,11 +277,12 @@ def _align_rays(cam_dirs: np.ndarray, world_dirs: np.ndarray) -> np.ndarray:
     return U @ D @ Vt
 
 
-def prior_candidates(obs: Observations, params: CalibParams, model: FieldModel) -> list[Candidate]:
+def prior_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
     """Cameras for frames with too few keypoints for a homography: start from typical broadcast
     positions and fields of view, rotate so that two keypoints (or line intersections) line up,
     and fit focal length and pose to every observation (keypoints, lines, circles). Mirrored
     positions (y < 0) are covered by the evaluator's left/right symmetry of the labels."""
+    obs = data.obs
     if obs.n_keypoints < 2 or not (obs.lines or obs.circles):
         return []
     W, H = obs.width, obs.height
@@ -302,32 +303,30 @@ def prior_candidates(obs: Observations, params: CalibParams, model: FieldModel) 
             cam0 = Camera(f, f, W / 2, H / 2, R, C, W, H)
             if np.any(cam0.to_camera(obs.kp_xyz[[i, j]])[:, 2] <= 0):
                 continue
-            cam, info = CameraProblem(cam0, obs, RefineParams(alpha=0.5, loss="soft_l1", f_scale=tau, max_iter=40),
-                                      model).solve()
+            cam, _ = CameraProblem(cam0, data, RefineParams(alpha=0.5, loss="soft_l1", f_scale=tau, max_iter=40)).solve()
             if _sane(cam, params):
                 continue
             err = _kp_errors(cam, obs)
             inl = err < params.px(params.ransac_thresholds[-1], W)
             out.append(Candidate("prior", float(params.ransac_thresholds[-1]), "ground", cam, obs.kp_ids[inl],
                                  float(np.sqrt(np.mean(np.minimum(err, 1e3) ** 2)))))
-            r = CameraProblem(cam, obs, RefineParams(alpha=0.5), model).residuals()
+            r = CameraProblem(cam, data, RefineParams(alpha=0.5)).residuals()
             if np.sqrt(np.mean(r * r)) < params.px(params.prior_good_rms, W):
                 return out  # good enough: every observation fits within a few pixels
     return out
 
 
 # ------------------------------------------------------------------------------ voting
-def vote(cands: list[Candidate], obs: Observations, params: CalibParams, model: FieldModel) -> Candidate | None:
-    """Step 2: truncated-quadratic score of each candidate on all observations; lowest wins."""
+def vote(cands: list[Candidate], data: FrameData, params: CalibParams) -> Candidate | None:
+    """Step 2: truncated-quadratic score of each candidate on all observations (its residuals,
+    lines and points weighted alike); lowest wins."""
     if not cands:
         return None
-    tau = params.px(params.vote_tau, obs.width)
-    rank = {s: i for i, s in enumerate(SUBSETS)}
-    problem = CameraProblem(cands[0].camera, obs, RefineParams(alpha=0.5), model)  # residuals at any camera
+    tau = params.px(params.vote_tau, data.obs.width)
+    problem = CameraProblem(cands[0].camera, data, RefineParams(alpha=0.5))  # residuals at any camera
     for c in cands:
-        r = problem.residuals(c.camera)
-        c.score = float(np.sum(np.minimum(r * r, tau * tau)))
-    return min(cands, key=lambda c: (round(c.score, 6), rank.get(c.subset, 9), c.threshold))
+        c.score = truncated_score(problem.residuals(c.camera), tau)
+    return best(cands)
 
 
 # ------------------------------------------------------------------------------ residual reports
@@ -335,28 +334,30 @@ def point_residuals(cam: Camera, obs: Observations) -> dict[int, float]:
     return {int(i): float(e) for i, e in zip(obs.kp_ids, _kp_errors(cam, obs))}
 
 
-def line_residuals(cam: Camera, obs: Observations, model: FieldModel) -> dict[str, float]:
+def line_residuals(cam: Camera, data: FrameData) -> dict[str, float]:
     """Largest distance (px) of a class's observed points to its projection (lines and circles)."""
-    noky = Observations(obs.width, obs.height, lines=obs.lines, circles=obs.circles)
-    per_class = CameraProblem(cam, noky, RefineParams(alpha=1.0), model).class_residuals()
+    no_keypoints = np.zeros(data.obs.n_keypoints, bool)
+    per_class = CameraProblem(cam, data, RefineParams(alpha=1.0), use_keypoints=no_keypoints).class_residuals()
     return {name: float(np.max(r)) for name, r in per_class.items()}
 
 
 # ------------------------------------------------------------------------------ PnL
-def pnl_refine(cam: Camera, obs: Observations, params: CalibParams, model: FieldModel,
-               *, refine_focal: bool = False, refine_k1: bool = False, loss: str = "linear") -> tuple[Camera, list[str]]:
-    """Step 3 (and 4 with ``refine_focal``/``refine_k1``): refine against gated points and lines."""
+def pnl_refine(cam: Camera, data: FrameData, params: CalibParams, *, refine_focal: bool = False,
+               refine_k1: bool = False, loss: str = "linear", line_errors: dict[str, float] | None = None,
+               point_errors: dict[int, float] | None = None) -> tuple[Camera, list[str]]:
+    """Step 3 (and 4 with ``refine_focal``/``refine_k1``): refine against gated points and lines.
+    ``line_errors`` / ``point_errors``: the residuals of ``cam``, when already known."""
+    obs = data.obs
     gate_l = params.px(params.line_gate_px, obs.width)
     gate_p = params.px(params.point_gate_px, obs.width)
-    lres = line_residuals(cam, obs, model)
-    lines = {k: v for k, v in obs.lines.items() if lres.get(k, np.inf) < gate_l}
-    circles = {k: v for k, v in obs.circles.items() if lres.get(k, np.inf) < gate_l}
-    kp_ok = _kp_errors(cam, obs) < gate_p
-    gated = Observations(obs.width, obs.height, obs.kp_ids[kp_ok], obs.kp_xy[kp_ok], obs.kp_xyz[kp_ok],
-                         obs.kp_sets[kp_ok], obs.kp_main[kp_ok], lines, circles)
+    lres = line_residuals(cam, data) if line_errors is None else line_errors
+    lines = [k for k in obs.lines if lres.get(k, np.inf) < gate_l]
+    circles = [k for k in obs.circles if lres.get(k, np.inf) < gate_l]
+    kp_err = _kp_errors(cam, obs) if point_errors is None else np.array([point_errors[int(i)] for i in obs.kp_ids])
+    kp_ok = kp_err < gate_p
     rp = RefineParams(alpha=params.alpha, refine_focal=refine_focal, refine_k1=refine_k1, loss=loss,
                       f_scale=params.px(params.final_f_scale, obs.width), tol=params.tol)
-    prob = CameraProblem(cam, gated, rp, model)
+    prob = CameraProblem(cam, data, rp, use_keypoints=kp_ok, lines=lines, circles=circles)
     if prob.n_res < prob.n_free + 1:
         return cam, []
     new, _ = prob.solve()
@@ -368,42 +369,44 @@ def pnl_refine(cam: Camera, obs: Observations, params: CalibParams, model: Field
 # ------------------------------------------------------------------------------ the whole frame
 def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: FieldModel | None = None) -> CalibrationResult:
     """Calibrate one frame. Never raises on bad geometry: failures come back with a reason."""
-    model = model or load_field_model()
+    data = FrameData.build(obs, model or load_field_model())
     needed = 2 if params.prior_search and (obs.lines or obs.circles) else params.min_points
     if obs.n_keypoints < needed:
         return CalibrationResult(None, failure=f"too few keypoints ({obs.n_keypoints} < {needed})")
-    raw = make_candidates(obs, params, model)
+    raw = make_candidates(data, params)
     # vote on the decomposed cameras, refine the best few, vote again among the refined ones
-    vote(raw, obs, params, model)
+    vote(raw, data, params)
     raw.sort(key=lambda c: c.score)
-    cands = [r for r in (refine_candidate(c, obs, params, model) for c in raw[: params.refine_top]) if r is not None]
+    cands = [r for r in (refine_candidate(c, data, params) for c in raw[: params.refine_top]) if r is not None]
     if not cands and params.prior_search:
-        cands = prior_candidates(obs, params, model)
-    best = vote(cands, obs, params, model)
+        cands = prior_candidates(data, params)
+    winner = vote(cands, data, params)
     # the evidence: every decomposed candidate (first vote), then the refined ones (second vote)
     table = [{"stage": stage, "subset": c.subset, "threshold": c.threshold, "plane": c.plane,
-              "inliers": len(c.inliers), "rms": c.rms, "score": c.score, "won": c is best}
+              "inliers": len(c.inliers), "rms": c.rms, "score": c.score, "won": c is winner}
              for stage, group in (("candidate", raw), ("refined", cands)) for c in group]
-    if best is None:
-        planes = plane_masks(obs.kp_xyz, model)
+    if winner is None:
+        planes = plane_masks(obs.kp_xyz, data.model)
         counts = ", ".join(f"{p} {int(m.sum())}" for p, m in planes.items())
         return CalibrationResult(None, candidates=table,
                                  failure=f"degenerate geometry: no plane with {params.min_points} consistent keypoints ({counts})")
-    result = CalibrationResult(best.camera, initial_camera=best.camera, subset=best.subset, threshold=best.threshold,
-                               plane=best.plane, inliers=best.inliers, candidates=table)
-    result.point_residuals_initial = point_residuals(best.camera, obs)
-    result.line_residuals_initial = line_residuals(best.camera, obs, model)
-    cam = best.camera
+    result = CalibrationResult(winner.camera, initial_camera=winner.camera, subset=winner.subset,
+                               threshold=winner.threshold, plane=winner.plane, inliers=winner.inliers, candidates=table)
+    result.point_residuals_initial = point_residuals(winner.camera, obs)
+    result.line_residuals_initial = line_residuals(winner.camera, data)
+    cam = winner.camera
     if params.pnl and (obs.lines or obs.circles):
         # one refinement: the paper's PnL (pose, K fixed) or, by default, PnL over pose + focal + k1
         intrinsics = params.refine_focal or params.refine_k1
-        cam, result.pnl_lines = pnl_refine(cam, obs, params, model, refine_focal=params.refine_focal,
+        cam, result.pnl_lines = pnl_refine(cam, data, params, refine_focal=params.refine_focal,
                                            refine_k1=params.refine_k1,
-                                           loss=params.final_loss if intrinsics else "linear")
+                                           loss=params.final_loss if intrinsics else "linear",
+                                           line_errors=result.line_residuals_initial,
+                                           point_errors=result.point_residuals_initial)
     result.camera = cam
     result.point_residuals = point_residuals(cam, obs)
-    result.line_residuals = line_residuals(cam, obs, model)
-    inlier_residuals = [result.point_residuals[int(i)] for i in obs.kp_ids[np.isin(obs.kp_ids, best.inliers)]]
+    result.line_residuals = line_residuals(cam, data)
+    inlier_residuals = [result.point_residuals[int(i)] for i in obs.kp_ids[np.isin(obs.kp_ids, winner.inliers)]]
     if not inlier_residuals:
         result.camera = None
         result.failure = "no keypoint agrees with the camera (no inliers)"

@@ -29,10 +29,10 @@ norm and the third homogeneous coordinate positive for points in front of the ca
 down) then has ``det(H) > 0``; a candidate with ``det(H) < 0`` would be the mirror image of the
 pitch (a camera under the ground, or left/right-swapped labels) and is rejected.
 
-Why the residuals are written here and not by a library: ``scipy.optimize.least_squares`` does
-the solving, but the line residual (the distance to the image of a model segment, with its
-overshoot beyond the segment's ends, as :mod:`pnlviz.calib.refine` measures it for cameras) and
-its Jacobian are vectorised numpy code that no library offers.
+The residuals are the camera's (:mod:`pnlviz.calib.problem`: keypoints, the distance to the
+image of each model segment with its overshoot beyond the ends, the distance to mapped arcs) with
+the homography model of :mod:`pnlviz.calib.models`, solved by the same solver
+(:mod:`pnlviz.calib.solver`).
 """
 
 from __future__ import annotations
@@ -41,19 +41,16 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
+from pnlviz.calib.models import HomographyModel
 from pnlviz.calib.observations import Observations
-from pnlviz.calib.refine import closest_on_polyline
+from pnlviz.calib.problem import FrameData, Problem
+from pnlviz.calib.solver import SolverParams, levenberg_marquardt
+from pnlviz.calib.voting import SUBSETS, best, subset_mask, truncated_score
 from pnlviz.field.model import FieldModel, load_field_model
 
 __all__ = ["SUBSETS", "HomographyParams", "HomographyResult", "estimate_homography", "refine_homography_pnl",
            "HomographyProblem", "template_homography", "normalize_visible"]
-
-SUBSETS = ("full", "main", "ground")
-
-#: Scale of the field coordinates inside the solver (metres -> ~unit), for a well-conditioned chart.
-_FIELD_SCALE = 1.0 / 50.0
 
 
 @dataclass(frozen=True)
@@ -73,7 +70,7 @@ class HomographyParams:
     point_gate_px: float | None = None  #: a keypoint joins PnL when this close to its initial projection (default gate_px)
     circles: bool = True  #: ground circles take part in voting and PnL
     circle_step: float = 0.25  #: metres between samples of mapped circles
-    max_iter: int = 100  #: function evaluations of the PnL solver, per parameter
+    max_iter: int = 100  #: iterations of the PnL solver
 
     def px(self, value: float, width: float) -> float:
         return value * width / 960.0
@@ -146,173 +143,36 @@ def normalize_visible(H: np.ndarray, X: np.ndarray | None = None) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ residuals
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis (broadcasting), without ``np.cross``'s overhead."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
 def _hom(xy: np.ndarray) -> np.ndarray:
     return np.hstack([np.asarray(xy, float).reshape(-1, 2), np.ones((len(xy), 1))])
 
 
 class HomographyProblem:
-    """Residuals (and their Jacobian) of a ground homography against :class:`Observations`.
+    """The residuals of a ground homography against :class:`Observations` (or their
+    :class:`FrameData`): ground keypoints, the straight classes on the ground and (optionally)
+    the circles, as :class:`pnlviz.calib.problem.Problem` with the homography model (its
+    parameters: ``M <- M (I + P)``, ``H = M diag(s, s, 1)``, s = 1/50 m)."""
 
-    Only the ground plane: keypoints with z = 0, straight classes whose model plane is the ground,
-    and (optionally) the circles. Field points are held in normalised homogeneous coordinates
-    ``Xn = Tn (X, Y, 1)`` with ``Tn = diag(s, s, 1)``, s = 1/50 m. The chart around a start ``H0``
-    is ``H(P) = A (I + P) Tn`` with ``A = H0 Tn^-1`` and ``P`` a 3x3 matrix with ``P[2, 2] = 0``:
-    eight parameters, well scaled, no entry of H singled out (``H[2, 2] = 1`` breaks down when the
-    field origin lies near the camera's horizon line).
-
-    Residuals, pixels: keypoints 2 per point (projection - detection), weighted
-    ``sqrt(1 - alpha)``; straight classes 2 per observed point, the signed distance to the image
-    of the infinite model line ``l = (H a) x (H b)`` (= ``cof(H) (a x b)``, i.e. ``H^-T L`` up to
-    scale, valid also when an end lies beyond the horizon) and how far the point lies beyond the
-    mapped segment's ends along it (0 between them; only when both ends are in front of the
-    camera), weighted ``sqrt(alpha)``; circles 1 per observed point, the distance to the mapped
-    arc as a dense polyline, weighted ``sqrt(alpha)``. When only one kind is present its weight is 1.
-    """
-
-    def __init__(self, obs: Observations, alpha: float = 0.6, model: FieldModel | None = None, *,
-                 use_keypoints: np.ndarray | None = None, lines: dict | None = None, circles: dict | None = None,
-                 circle_step: float = 0.25):
-        model = model or load_field_model()
-        self.alpha = alpha
-        self.Tn = np.diag([_FIELD_SCALE, _FIELD_SCALE, 1.0])
-        self.Tn_inv = np.diag([1 / _FIELD_SCALE, 1 / _FIELD_SCALE, 1.0])
-        mask = obs.ground if use_keypoints is None else (use_keypoints & obs.ground)
-        self.kp_ids = obs.kp_ids[mask]
-        self.kp_X = obs.kp_xyz[mask, :2]
-        self.kp_Xn = _hom(self.kp_X * _FIELD_SCALE)
-        self.kp_xy = obs.kp_xy[mask]
-        lines = obs.lines if lines is None else lines
-        circles = obs.circles if circles is None else circles
-        ends_a, ends_b, pts, self.line_slices = [], [], [], {}
-        n = 0
-        for name, p in lines.items():
-            seg = model.lines.get(name)
-            if seg is None or seg.plane != "ground" or len(p) == 0:
-                continue
-            p = np.asarray(p, float).reshape(-1, 2)
-            ends_a.append(np.repeat(seg.start[None, :2], len(p), 0))
-            ends_b.append(np.repeat(seg.end[None, :2], len(p), 0))
-            pts.append(p)
-            self.line_slices[name] = slice(n, n + len(p))
-            n += len(p)
-        self.line_a = _hom(np.vstack(ends_a) * _FIELD_SCALE) if ends_a else np.zeros((0, 3))
-        self.line_b = _hom(np.vstack(ends_b) * _FIELD_SCALE) if ends_b else np.zeros((0, 3))
-        self.line_q = np.vstack(pts) if pts else np.zeros((0, 2))
-        self.circle_items = []
-        for name, p in circles.items():
-            arc = model.circles.get(name)
-            if arc is None or abs(arc.center[2]) > 1e-9 or len(p) == 0:
-                continue
-            k = max(8, int(np.radians(arc.end_deg - arc.start_deg) * arc.radius / circle_step))
-            world = arc.point_at(np.linspace(np.radians(arc.start_deg), np.radians(arc.end_deg), k + 1))[:, :2]
-            self.circle_items.append((name, _hom(world * _FIELD_SCALE), np.asarray(p, float).reshape(-1, 2)))
-        n_circle = sum(len(p) for _, _, p in self.circle_items)
-        self.n_res = 2 * len(self.kp_xy) + 2 * len(self.line_q) + n_circle
-        has_curves = len(self.line_q) + n_circle > 0
-        self.w_pt = np.sqrt(1 - alpha) if has_curves else 1.0
-        self.w_ln = np.sqrt(alpha) if len(self.kp_xy) else 1.0
-
-    # ------------------------------------------------------------------ pieces
-    @staticmethod
-    def _dehom_jac(xh: np.ndarray) -> np.ndarray:
-        """d(x/w, y/w)/d(x, y, w), (N, 2, 3)."""
-        w = xh[:, 2]
-        D = np.zeros((len(xh), 2, 3))
-        D[:, 0, 0] = D[:, 1, 1] = 1 / w
-        D[:, 0, 2] = -xh[:, 0] / w**2
-        D[:, 1, 2] = -xh[:, 1] / w**2
-        return D
-
-    @staticmethod
-    def _dxh(A: np.ndarray, Xn: np.ndarray) -> np.ndarray:
-        """d(A (I + P) Xn)/dP, (N, 3, 8): column (i, j) is A[:, i] Xn[j], (2, 2) left out."""
-        d = np.einsum("ri,nj->nrij", A, Xn).reshape(len(Xn), 3, 9)
-        return d[:, :, :8]
-
-    def eval(self, A: np.ndarray, P: np.ndarray | None = None, jac: bool = False):
-        """Weighted residuals at ``H = A (I + P) Tn`` and, with ``jac``, d/d(P without P22) (n, 8)."""
-        M = A if P is None else A @ (np.eye(3) + P)
-        res, J = [], []
-        if len(self.kp_xy):
-            xh = self.kp_Xn @ M.T
-            uv = xh[:, :2] / xh[:, 2:]
-            res.append(self.w_pt * (uv - self.kp_xy).ravel())
-            if jac:
-                J.append(self.w_pt * (self._dehom_jac(xh) @ self._dxh(A, self.kp_Xn)).reshape(-1, 8))
-        if len(self.line_q):
-            pa_h, pb_h = self.line_a @ M.T, self.line_b @ M.T
-            l = _cross(pa_h, pb_h)
-            q = self.line_q
-            nrm = np.maximum(np.sqrt(l[:, 0] ** 2 + l[:, 1] ** 2), 1e-300)
-            lq = l[:, 0] * q[:, 0] + l[:, 1] * q[:, 1] + l[:, 2]
-            res.append(self.w_ln * lq / nrm)
-            front = (pa_h[:, 2] > 0) & (pb_h[:, 2] > 0)
-            wa, wb = np.where(front, pa_h[:, 2], 1.0), np.where(front, pb_h[:, 2], 1.0)
-            pa, pb = pa_h[:, :2] / wa[:, None], pb_h[:, :2] / wb[:, None]
-            v = pb - pa
-            L = np.maximum(np.sqrt(np.sum(v * v, axis=1)), 1e-12)
-            u = v / L[:, None]
-            s = np.sum((q - pa) * u, axis=1)
-            before, after = front & (s < 0), front & (s > L)
-            res.append(self.w_ln * np.where(before, -s, np.where(after, s - L, 0.0)))
-            if jac:
-                da, db = self._dxh(A, self.line_a), self._dxh(A, self.line_b)  # (N, 3, 8)
-                # d(pa x pb) = da x pb + pa x db, written with cross-product matrices
-                dl = _cross(da.transpose(0, 2, 1), pb_h[:, None, :]) + _cross(pa_h[:, None, :], db.transpose(0, 2, 1))
-                qh = np.hstack([q, np.ones((len(q), 1))])
-                dd_dl = qh / nrm[:, None] - (lq / nrm**3)[:, None] * np.stack([l[:, 0], l[:, 1], np.zeros(len(l))], 1)
-                J.append(self.w_ln * np.einsum("nk,njk->nj", dd_dl, dl))
-                # overshoot: s = (q - pa).u; ds/dpa = -u - Pw/L, ds/dpb = Pw/L with w = q - pa and
-                # P = I - u u^T; the L of (s - L) adds dL/dpb = u, dL/dpa = -u
-                w_ = q - pa
-                Pw = w_ - np.sum(w_ * u, axis=1)[:, None] * u
-                sign = np.where(before, -1.0, np.where(after, 1.0, 0.0))[:, None]
-                aft = after.astype(float)[:, None]
-                dr_pa = sign * (-u - Pw / L[:, None]) + aft * u
-                dr_pb = sign * (Pw / L[:, None]) - aft * u
-                Ja = np.einsum("nk,nkj->nj", dr_pa, self._dehom_jac(np.where(front[:, None], pa_h, 1.0)) @ da)
-                Jb = np.einsum("nk,nkj->nj", dr_pb, self._dehom_jac(np.where(front[:, None], pb_h, 1.0)) @ db)
-                J.append(self.w_ln * (Ja + Jb))
-        for _, world, pts in self.circle_items:
-            xh = world @ M.T
-            front = xh[:, 2] > 0
-            if front.sum() < 2:
-                res.append(np.full(len(pts), 1e3))
-                if jac:
-                    J.append(np.zeros((len(pts), 8)))
-                continue
-            xf = xh[front]
-            poly = xf[:, :2] / xf[:, 2:]
-            dist, j, t, d = closest_on_polyline(pts, poly)
-            res.append(self.w_ln * dist)
-            if jac:
-                Jp = self._dehom_jac(xf) @ self._dxh(A, world[front])  # (S, 2, 8)
-                unit = d / np.maximum(dist, 1e-12)[:, None]
-                Jc = (1 - t)[:, None, None] * Jp[j] + t[:, None, None] * Jp[j + 1]
-                J.append(-self.w_ln * np.einsum("nk,nkj->nj", unit, Jc))
-        r = np.concatenate(res) if res else np.zeros(0)
-        if not jac:
-            return r
-        return r, (np.vstack(J) if J else np.zeros((0, 8)))
-
-    # ------------------------------------------------------------------ public helpers
-    def chart(self, H: np.ndarray) -> np.ndarray:
-        """``A`` of the chart around ``H`` (field metres -> pixels)."""
-        return np.asarray(H, float) @ self.Tn_inv
-
-    def homography(self, A: np.ndarray, P: np.ndarray | None = None) -> np.ndarray:
-        M = A if P is None else A @ (np.eye(3) + P)
-        return M @ self.Tn
+    def __init__(self, obs: Observations | FrameData, alpha: float = 0.6, model: FieldModel | None = None, *,
+                 use_keypoints: np.ndarray | None = None, lines=None, circles=None, circle_step: float = 0.25):
+        data = obs if isinstance(obs, FrameData) else FrameData.build(obs, model or load_field_model())
+        self.model = HomographyModel()
+        self.problem = Problem(self.model, data, alpha, keypoints=use_keypoints, lines=lines, circles=circles,
+                               ground_only=True, circle_step=circle_step)
+        prob = self.problem
+        self.kp_ids, self.kp_xy = prob.kp_ids, prob.kp_xy
+        self.kp_X = data.obs.kp_xyz[prob.kp_mask, :2]
+        self.line_q, self.circle_items, self.n_res = prob.line_pts, prob.circle_items, prob.n_res
 
     def residuals(self, H: np.ndarray) -> np.ndarray:
-        return self.eval(self.chart(H))
+        return self.problem.residuals(self.model.start(H))
+
+    def solve(self, H0: np.ndarray, params: SolverParams) -> np.ndarray:
+        """``H0`` refined (the starting H when there are fewer residuals than parameters)."""
+        if self.n_res < self.model.n_params:
+            return np.asarray(H0, float)
+        M, _ = levenberg_marquardt(self.problem.evaluate, self.model.retract, self.model.start(H0), params)
+        return self.model.homography(M)
 
     def keypoint_distances(self, H: np.ndarray) -> np.ndarray:
         """Pixel distance of each ground keypoint to its mapping (inf behind the camera)."""
@@ -324,22 +184,7 @@ class HomographyProblem:
 
     def class_distances(self, H: np.ndarray) -> dict[str, np.ndarray]:
         """Unweighted distances (px) of each line/circle class's observed points."""
-        saved = self.w_pt, self.w_ln
-        self.w_pt = self.w_ln = 1.0
-        try:
-            r = self.residuals(H)
-        finally:
-            self.w_pt, self.w_ln = saved
-        start = 2 * len(self.kp_xy)
-        n = len(self.line_q)
-        perp, over = r[start:start + n], r[start + n:start + 2 * n]
-        dist = np.sqrt(perp**2 + over**2)
-        out = {name: dist[s] for name, s in self.line_slices.items()}
-        start += 2 * n
-        for name, _, pts in self.circle_items:
-            out[name] = np.abs(r[start:start + len(pts)])
-            start += len(pts)
-        return out
+        return self.problem.class_distances(self.model.start(H))
 
     def observation_distances(self, H: np.ndarray) -> np.ndarray:
         """Every ground observation's pixel distance: keypoints, then line and circle points."""
@@ -350,15 +195,6 @@ class HomographyProblem:
 
 
 # ------------------------------------------------------------------------------ candidates
-def _subset_mask(obs: Observations, subset: str) -> np.ndarray:
-    g = obs.ground
-    if subset == "full" or subset == "ground":
-        return g.copy()
-    if subset == "main":
-        return g & obs.kp_main
-    raise ValueError(f"unknown keypoint subset {subset!r}")
-
-
 def _problem_with(H: np.ndarray, X: np.ndarray, xy: np.ndarray) -> str | None:
     """Why ``H`` (fitted to field points ``X`` -> pixels ``xy``) is unusable, or None."""
     if H is None or H.shape != (3, 3) or not np.all(np.isfinite(H)):
@@ -424,23 +260,20 @@ def _map(H: np.ndarray, X: np.ndarray) -> np.ndarray:
         return h[:, :2] / h[:, 2:]
 
 
-def _polish(H: np.ndarray, obs: Observations, inliers: np.ndarray, model: FieldModel) -> np.ndarray:
+#: the polish of the voted homography on its inlier keypoints, and the PnL refinement
+_POLISH = SolverParams(max_iter=50, tol=1e-12)
+
+
+def _polish(H: np.ndarray, obs: Observations | FrameData, inliers: np.ndarray, model: FieldModel) -> np.ndarray:
     """Levenberg-Marquardt on the reprojection error of the inliers, in float64 (OpenCV's own
     refinement in ``findHomography`` works on float32 points, ~1e-7 relative)."""
-    use = np.isin(obs.kp_ids, inliers)
-    prob = HomographyProblem(obs, 0.0, model, use_keypoints=use, lines={}, circles={})
+    kp_ids = obs.obs.kp_ids if isinstance(obs, FrameData) else obs.kp_ids
+    prob = HomographyProblem(obs, 0.0, model, use_keypoints=np.isin(kp_ids, inliers), lines=(), circles=())
     if prob.n_res < 8:
         return H
-    A = prob.chart(H)
-
-    def unpack(p):
-        return np.append(p, 0.0).reshape(3, 3)
-
-    sol = least_squares(lambda p: prob.eval(A, unpack(p)), np.zeros(8), jac=lambda p: prob.eval(A, unpack(p), jac=True)[1],
-                        method="lm", x_scale="jac", max_nfev=200)
-    H1 = prob.homography(A, unpack(sol.x))
-    if not np.all(np.isfinite(H1)) or _problem_with(H1, prob.kp_X, prob.kp_xy) or sol.cost > 0.5 * float(
-            np.sum(prob.eval(A) ** 2)):
+    H1 = prob.solve(H, _POLISH)
+    if (not np.all(np.isfinite(H1)) or _problem_with(H1, prob.kp_X, prob.kp_xy)
+            or np.sum(prob.residuals(H1) ** 2) > np.sum(prob.residuals(H) ** 2)):
         return H
     return normalize_visible(H1, prob.kp_X)
 
@@ -449,7 +282,7 @@ def make_candidates(obs: Observations, params: HomographyParams) -> list[_Candid
     """Step 1: one homography per (subset, threshold) with a distinct inlier set."""
     out, seen, masks = [], set(), []
     for subset in params.subsets:
-        mask = _subset_mask(obs, subset)
+        mask = subset_mask(obs, subset, ground_only=True)
         if mask.sum() < params.min_points or any(np.array_equal(mask, m) for m in masks):
             continue  # the same points as an earlier subset give the same (deterministic) RANSAC fits
         masks.append(mask)
@@ -470,62 +303,44 @@ def make_candidates(obs: Observations, params: HomographyParams) -> list[_Candid
 
 def vote(cands: list[_Candidate], prob: HomographyProblem, tau: float) -> _Candidate | None:
     """Step 2: truncated-quadratic score on every ground observation; lowest wins (``full`` on ties)."""
-    if not cands:
-        return None
-    rank = {s: i for i, s in enumerate(SUBSETS)}
     for c in cands:
-        d = prob.observation_distances(c.H)
-        c.score = float(np.sum(np.minimum(d * d, tau * tau)))
-    return min(cands, key=lambda c: (round(c.score, 6), rank.get(c.subset, 9), c.threshold))
+        c.score = truncated_score(prob.observation_distances(c.H), tau)
+    return best(cands)
 
 
 # ------------------------------------------------------------------------------ PnL
-def refine_homography_pnl(H: np.ndarray, obs: Observations, alpha: float = 0.6, gate_px: float = 20.0, *,
+def refine_homography_pnl(H: np.ndarray, obs: Observations | FrameData, alpha: float = 0.6, gate_px: float = 20.0, *,
                           point_gate_px: float | None = None, circles: bool = True, scale_gates: bool = True,
                           model: FieldModel | None = None, circle_step: float = 0.25,
-                          max_nfev: int | None = None) -> tuple[np.ndarray, list[str]]:
+                          max_iter: int = 100) -> tuple[np.ndarray, list[str]]:
     """The paper's PnL refinement for a ground homography: the 8 degrees of freedom of ``H``
     (field metres -> pixels of ``obs``) against ``alpha * lines + (1 - alpha) * points``.
 
     Gating by the starting ``H``: a ground line (or circle, with ``circles``) joins when every
     observed point of it lies within ``gate_px`` of its mapped segment (arc); a ground keypoint
     joins when within ``point_gate_px`` (default ``gate_px``) of its mapping. Gates are pixels at
-    960 px width scaled with ``obs.width`` (``scale_gates=False``: pixels of ``obs`` as given).
-    Solved with ``scipy.optimize.least_squares`` (Levenberg-Marquardt, analytic Jacobian) on the
-    chart of :class:`HomographyProblem`.
+    960 px width scaled with the image width (``scale_gates=False``: pixels as given).
 
     Returns ``(H, joined classes)``; the starting ``H`` (normalised) and ``[]`` when too few
     residuals join or the solution is unusable (an observed point crossing the horizon, a
     mirrored or singular H).
     """
-    model = model or load_field_model()
-    k = obs.width / 960.0 if scale_gates else 1.0
+    data = obs if isinstance(obs, FrameData) else FrameData.build(obs, model or load_field_model())
+    o = data.obs
+    k = o.width / 960.0 if scale_gates else 1.0
     gate_l = gate_px * k
     gate_p = (gate_px if point_gate_px is None else point_gate_px) * k
-    H0 = np.asarray(H, float)
-    full = HomographyProblem(obs, alpha, model, circles=obs.circles if circles else {}, circle_step=circle_step)
-    H0 = normalize_visible(H0, full.kp_X if len(full.kp_X) else None)
-    per_class = full.class_distances(H0)
-    joined = {name for name, d in per_class.items() if len(d) and np.all(d < gate_l)}
-    kp_ok = np.zeros(obs.n_keypoints, bool)
-    kp_ok[np.flatnonzero(obs.ground)] = full.keypoint_distances(H0) < gate_p
-    prob = HomographyProblem(obs, alpha, model, use_keypoints=kp_ok,
-                             lines={k_: v for k_, v in obs.lines.items() if k_ in joined},
-                             circles={k_: v for k_, v in obs.circles.items() if k_ in joined and circles},
-                             circle_step=circle_step)
+    full = HomographyProblem(data, alpha, circles=None if circles else (), circle_step=circle_step)
+    H0 = normalize_visible(np.asarray(H, float), full.kp_X if len(full.kp_X) else None)
+    joined = {name for name, d in full.class_distances(H0).items() if len(d) and np.all(d < gate_l)}
+    kp_ok = np.zeros(o.n_keypoints, bool)
+    kp_ok[np.flatnonzero(full.problem.kp_mask)] = full.keypoint_distances(H0) < gate_p
+    prob = HomographyProblem(data, alpha, use_keypoints=kp_ok, lines=[n for n in o.lines if n in joined],
+                             circles=[n for n in o.circles if n in joined and circles], circle_step=circle_step)
     if prob.n_res < 9:
         return H0, []
-    A = prob.chart(H0)
-
-    def unpack(p):
-        return np.append(p, 0.0).reshape(3, 3)
-
-    sol = least_squares(lambda p: prob.eval(A, unpack(p)), np.zeros(8), jac=lambda p: prob.eval(A, unpack(p), jac=True)[1],
-                        method="lm", x_scale="jac", max_nfev=max_nfev or 100 * 8)
-    if not np.all(np.isfinite(sol.x)):
-        return H0, []
-    # the chart starts at the sign-normalised H0 and moves continuously, so the sign carries over
-    H1 = prob.homography(A, unpack(sol.x))
+    # the model starts at the sign-normalised H0 and moves continuously, so the sign carries over
+    H1 = prob.solve(H0, SolverParams(max_iter=max_iter, tol=1e-12))
     H1 = H1 / np.linalg.norm(H1)
     pts = np.vstack([prob.line_q] + [p for _, _, p in prob.circle_items])
     if not np.all(np.isfinite(H1)) or np.linalg.det(H1) <= 0 or not _in_front(H1, prob.kp_X, pts):
@@ -587,31 +402,31 @@ def estimate_homography(obs: Observations, params: HomographyParams | None = Non
     n_ground = int(obs.ground.sum())
     if n_ground < params.min_points:
         return HomographyResult(None, W, Hh, failure=f"too few ground keypoints ({n_ground} < {params.min_points})")
-    prob = HomographyProblem(obs, 0.5, model, circles=obs.circles if params.circles else {},
-                             circle_step=params.circle_step)
+    data = FrameData.build(obs, model)
+    prob = HomographyProblem(data, 0.5, circles=None if params.circles else (), circle_step=params.circle_step)
     cands = make_candidates(obs, params)
-    best = vote(cands, prob, params.px(params.vote_tau, W))
+    winner = vote(cands, prob, params.px(params.vote_tau, W))
     table = [{"subset": c.subset, "threshold": c.threshold, "inliers": len(c.inliers), "rms": c.rms, "score": c.score}
              for c in cands]
-    if best is None:
+    if winner is None:
         return HomographyResult(None, W, Hh, candidates=table,
                                 failure=f"degenerate geometry: no homography from {n_ground} ground keypoints "
                                         "(collinear, or no 4 consistent ones)")
-    best.H = _polish(best.H, obs, best.inliers, model)
-    res = HomographyResult(best.H, W, Hh, initial_H=best.H, subset=best.subset, threshold=best.threshold,
-                           inliers=best.inliers, candidates=table)
-    res.point_residuals_initial = _point_report(prob, best.H)
-    res.line_residuals_initial = _class_report(prob, best.H)
-    H = best.H
+    winner.H = _polish(winner.H, data, winner.inliers, model)
+    res = HomographyResult(winner.H, W, Hh, initial_H=winner.H, subset=winner.subset, threshold=winner.threshold,
+                           inliers=winner.inliers, candidates=table)
+    res.point_residuals_initial = _point_report(prob, winner.H)
+    res.line_residuals_initial = _class_report(prob, winner.H)
+    H = winner.H
     if params.pnl and (obs.lines or obs.circles):
-        H, res.pnl_lines = refine_homography_pnl(H, obs, params.alpha, params.gate_px,
+        H, res.pnl_lines = refine_homography_pnl(H, data, params.alpha, params.gate_px,
                                                  point_gate_px=params.point_gate_px, circles=params.circles,
                                                  model=model, circle_step=params.circle_step,
-                                                 max_nfev=params.max_iter * 8)
+                                                 max_iter=params.max_iter)
     res.H = H
     res.point_residuals = _point_report(prob, H)
     res.line_residuals = _class_report(prob, H)
-    inl = np.array([res.point_residuals[int(i)] for i in best.inliers])
+    inl = np.array([res.point_residuals[int(i)] for i in winner.inliers])
     rms = float(np.sqrt(np.mean(inl**2))) if len(inl) else np.inf
     if not rms <= params.px(params.max_rms, W):
         res.H = None

@@ -24,6 +24,16 @@ import numpy as np
 MIN_DEPTH = 1e-3
 
 
+def _frozen_zeros(n: int) -> np.ndarray:
+    z = np.zeros(n)
+    z.setflags(write=False)
+    return z
+
+
+#: shared read-only defaults: no lens distortion
+_NO_RADIAL, _NO_TANGENTIAL, _NO_THIN_PRISM = _frozen_zeros(6), _frozen_zeros(2), _frozen_zeros(4)
+
+
 def _rz(a: float) -> np.ndarray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -78,17 +88,26 @@ class Camera:
     C: np.ndarray  # (3,) camera centre in world metres
     width: float
     height: float
-    radial: np.ndarray = field(default_factory=lambda: np.zeros(6))
-    tangential: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    thin_prism: np.ndarray = field(default_factory=lambda: np.zeros(4))
+    radial: np.ndarray = field(default_factory=lambda: _NO_RADIAL)
+    tangential: np.ndarray = field(default_factory=lambda: _NO_TANGENTIAL)
+    thin_prism: np.ndarray = field(default_factory=lambda: _NO_THIN_PRISM)
 
     def __post_init__(self):
         for name, shape in (("R", (3, 3)), ("C", (3,)), ("radial", (6,)), ("tangential", (2,)), ("thin_prism", (4,))):
-            arr = np.array(getattr(self, name), dtype=float)
+            value = getattr(self, name)
+            if isinstance(value, np.ndarray) and value.base is None and not value.flags.writeable and value.dtype == float:
+                if value.shape != shape:
+                    raise ValueError(f"Camera.{name} must have shape {shape}, got {value.shape}")
+                continue  # already a frozen array (another camera's): shared, never changed
+            arr = np.array(value, dtype=float)
             if arr.shape != shape:
                 raise ValueError(f"Camera.{name} must have shape {shape}, got {arr.shape}")
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
+        # which lens terms are set, for a fast distortion on the common cases (not a field)
+        rest = ((self.tangential is not _NO_TANGENTIAL and self.tangential.any())
+                or (self.thin_prism is not _NO_THIN_PRISM and self.thin_prism.any()) or self.radial[1:].any())
+        object.__setattr__(self, "_lens", "full" if rest else "k1" if self.radial[0] != 0.0 else "none")
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -162,7 +181,7 @@ class Camera:
 
     @property
     def has_distortion(self) -> bool:
-        return bool(np.any(self.radial) or np.any(self.tangential) or np.any(self.thin_prism))
+        return self._lens != "none"
 
     @property
     def opencv_dist_coeffs(self) -> np.ndarray:
@@ -186,10 +205,12 @@ class Camera:
 
     def distort(self, xn: np.ndarray) -> np.ndarray:
         """Apply the lens model to normalised image points (N, 2)."""
-        if not self.has_distortion:
+        if self._lens == "none":
             return xn
         x, y = xn[:, 0], xn[:, 1]
         r2 = x * x + y * y
+        if self._lens == "k1":  # what the general model gives with the other terms zero, exactly
+            return xn * (1 + r2 * self.radial[0])[:, None]
         k, p, s = self.radial, self.tangential, self.thin_prism
         num = 1 + r2 * (k[0] + r2 * (k[1] + r2 * k[2]))
         den = 1 + r2 * (k[3] + r2 * (k[4] + r2 * k[5]))
@@ -225,13 +246,12 @@ class Camera:
         Xc = self.to_camera(X)
         z = Xc[:, 2]
         ok = z > MIN_DEPTH
-        xn = np.full((len(Xc), 2), np.nan)
-        xn[ok] = Xc[ok, :2] / z[ok, None]
-        if distort:
-            xn[ok] = self.distort(xn[ok])
-        uv = np.empty_like(xn)
-        uv[:, 0] = xn[:, 0] * self.fx + self.cx
-        uv[:, 1] = xn[:, 1] * self.fy + self.cy
+        with np.errstate(all="ignore"):  # the points behind are computed too, then set to NaN
+            xn = Xc[:, :2] / z[:, None]
+            if distort:
+                xn = self.distort(xn)
+            uv = xn * (self.fx, self.fy) + (self.cx, self.cy)
+        uv[~ok] = np.nan
         return uv, z
 
     def pixel_rays(self, uv: np.ndarray) -> np.ndarray:

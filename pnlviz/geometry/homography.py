@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -25,6 +27,27 @@ def normalize_homography(H: np.ndarray) -> np.ndarray:
 def field_to_image_from_template(H_template: np.ndarray, template_to_field: np.ndarray) -> np.ndarray:
     """A WC14 homography (template yards -> image) as a field-metres -> image homography."""
     return np.asarray(H_template, float) @ np.linalg.inv(template_to_field)
+
+
+def nearest_rotation(r1: np.ndarray, r2: np.ndarray) -> np.ndarray:
+    """The rotation matrix nearest (Frobenius) to ``[r1, r2, r1 x r2]`` for unit vectors r1, r2
+    (3,) not parallel: the polar factor ``M (M^T M)^(-1/2)``, in closed form since ``M^T M`` is
+    ``[[1, c, 0], [c, 1, 0], [0, 0, 1 - c^2]]`` with ``c = r1 . r2`` (what an SVD gives, without one).
+
+    >>> R = nearest_rotation(np.array([1.0, 0.0, 0.0]), np.array([0.1, 1.0, 0.0]) / np.hypot(0.1, 1.0))
+    >>> bool(np.allclose(R @ R.T, np.eye(3)) and np.isclose(np.linalg.det(R), 1.0))
+    True
+    """
+    c = float(r1[0] * r2[0] + r1[1] * r2[1] + r1[2] * r2[2])
+    a, b = 1 / math.sqrt(1 + c), 1 / math.sqrt(1 - c)
+    R = np.empty((3, 3))
+    R[:, 0] = 0.5 * ((a + b) * r1 + (a - b) * r2)
+    R[:, 1] = 0.5 * ((a - b) * r1 + (a + b) * r2)
+    n = math.sqrt((1 + c) * (1 - c))
+    R[0, 2] = (r1[1] * r2[2] - r1[2] * r2[1]) / n
+    R[1, 2] = (r1[2] * r2[0] - r1[0] * r2[2]) / n
+    R[2, 2] = (r1[0] * r2[1] - r1[1] * r2[0]) / n
+    return R
 
 
 def camera_from_ground_homography(H_field_to_image: np.ndarray, width: float, height: float, *,
@@ -77,9 +100,7 @@ def camera_from_ground_homography(H_field_to_image: np.ndarray, width: float, he
     n1, n2 = np.linalg.norm(B[:, 0]), np.linalg.norm(B[:, 1])
     if not (n1 > 0 and n2 > 0):
         return None
-    r1, r2 = B[:, 0] / n1, B[:, 1] / n2
-    U, _, Vt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
-    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    R = nearest_rotation(B[:, 0] / n1, B[:, 1] / n2)
     t = B[:, 2] / np.sqrt(n1 * n2)
     C = -R.T @ t
     if C[2] > 0:  # the other sign of H: r1, r2 and t change sign, r3 does not

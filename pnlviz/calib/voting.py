@@ -1,0 +1,49 @@
+"""Candidates and the heuristic vote, shared by the camera and the homography pipelines (paper
+Sec. "Camera Parameters Estimation"): a candidate per keypoint subset and RANSAC threshold, each
+scored on *all* observations with a truncated quadratic; the lowest score wins, ``full`` on ties.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from pnlviz.calib.observations import Observations
+
+#: keypoint subsets, in the order that breaks ties: ``full`` (every keypoint), ``main`` (the
+#: line-line intersections of the annotation or detector), ``ground`` (keypoints with z = 0)
+SUBSETS = ("full", "main", "ground")
+
+
+def subset_mask(obs: Observations, subset: str, ground_only: bool = False) -> np.ndarray:
+    """Keypoints (N,) of a subset; with ``ground_only`` only those on the ground plane (for a
+    homography ``full`` and ``ground`` are then the same points)."""
+    if subset == "full":
+        mask = np.ones(obs.n_keypoints, bool)
+    elif subset == "main":
+        mask = obs.kp_main.copy()
+    elif subset == "ground":
+        mask = obs.ground.copy()
+    else:
+        raise ValueError(f"unknown keypoint subset {subset!r}; one of {SUBSETS}")
+    return mask & obs.ground if ground_only else mask
+
+
+def truncated_score(distances: np.ndarray, tau: float) -> float:
+    """``sum(min(d^2, tau^2))``: every observation counts, none by more than ``tau``."""
+    return float(np.sum(np.minimum(distances * distances, tau * tau)))
+
+
+class Scored(Protocol):
+    subset: str
+    threshold: float
+    score: float
+
+
+def best(candidates: list[Scored]) -> Scored | None:
+    """The lowest score (to 1e-6), then the earlier subset, then the smaller threshold."""
+    if not candidates:
+        return None
+    rank = {s: i for i, s in enumerate(SUBSETS)}
+    return min(candidates, key=lambda c: (round(c.score, 6), rank.get(c.subset, 9), c.threshold))

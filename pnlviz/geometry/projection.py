@@ -1,0 +1,119 @@
+"""Projections with their Jacobians, for the refinements in :mod:`pnlviz.calib`.
+
+The camera is the refinements' model: ``x_cam = R (X - C)``, pixels ``u = f x g + cx``,
+``v = a f y g + cy`` with ``(x, y)`` the normalised coordinates, ``g = 1 + k1 (x^2 + y^2)`` and
+the aspect ``a = fy / fx`` fixed. Derivatives are taken with respect to the 8 parameters
+``(dw (3), dC (3), log f, k1)``, the rotation updated on the left (``R <- exp([dw]x) R``), so the
+Jacobian is always taken at ``dw = 0``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: depth (metres) at which points are clamped before dividing: behind the camera they get a huge,
+#: smooth residual instead of a sign flip
+CLAMP_DEPTH = 1e-6
+N_CAMERA_PARAMS = 8
+
+
+def to_camera(X: np.ndarray, R: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Camera coordinates (N, 3) of world points (N, 3)."""
+    return (X - C) @ R.T
+
+
+def camera_point_jacobian(Xc: np.ndarray, R: np.ndarray, n_params: int = 6) -> np.ndarray:
+    """d(x_cam)/d(dw, dC) of camera-frame points (N, 3): ``[-[x_cam]x | -R]``, (N, 3, n_params)
+    (the columns past the sixth are zero: x_cam depends on the pose only)."""
+    J = np.zeros((len(Xc), 3, n_params))
+    x, y, z = Xc[:, 0], Xc[:, 1], Xc[:, 2]
+    J[:, 0, 1], J[:, 0, 2] = z, -y
+    J[:, 1, 0], J[:, 1, 2] = -z, x
+    J[:, 2, 0], J[:, 2, 1] = y, -x
+    J[:, :, 3:6] = -R
+    return J
+
+
+def project_k1(X: np.ndarray, R: np.ndarray, C: np.ndarray, f: float, aspect: float, cx: float, cy: float,
+               k1: float, jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Pixels (N, 2) of world points (N, 3) and, with ``jac``, d(pixels)/d(params) (N, 2, 8)."""
+    return camera_to_pixels(to_camera(X, R, C), R, f, aspect, cx, cy, k1, jac)
+
+
+#: the constant part of d(normalised point)/d(rotation step), see camera_to_pixels
+_DP_DW = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+
+
+def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float, aspect: float, cx: float, cy: float, k1: float,
+                     jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`project_k1` from camera coordinates ``Xc`` (N, 3) (``R`` is needed for the
+    Jacobian only); points behind the camera are clamped to :data:`CLAMP_DEPTH`."""
+    z = np.where(Xc[:, 2] > CLAMP_DEPTH, Xc[:, 2], CLAMP_DEPTH)
+    p = Xc[:, :2] / z[:, None]  # normalised (xn, yn)
+    r2 = p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1]
+    g = 1 + k1 * r2
+    focal = np.array([f, f * aspect])
+    uv = p * g[:, None] * focal + (cx, cy)
+    if not jac:
+        return uv, None
+    # d(normalised point)/d(dw, dC), with dXc = -[Xc]x dw - R dC:
+    #   dp/ddw = [[-xn yn, zr + xn^2, -yn], [-(zr + yn^2), xn yn, xn]] = p (-yn, xn, 0) + zr [[0, 1, 0], [-1, 0, 0]]
+    #   + (0, 0, (-yn, xn)), with zr = Xc_z / z (1 but for points clamped behind the camera);
+    #   dp/dC = (p R[2] - R[:2]) / z
+    n = len(Xc)
+    Jp = np.empty((n, 2, 6))
+    perp = np.empty((n, 3))
+    perp[:, 0], perp[:, 1], perp[:, 2] = -p[:, 1], p[:, 0], 0.0
+    Jp[:, :, :3] = p[:, :, None] * perp[:, None, :] + (Xc[:, 2] / z)[:, None, None] * _DP_DW
+    Jp[:, :, 2] += perp[:, :2]
+    Jp[:, :, 3:] = (p[:, :, None] * R[2] - R[:2]) / z[:, None, None]
+    # then the lens and the focal length: d(pixels)/dp = diag(f, f aspect) (g I + 2 k1 p p^T)
+    D = 2 * k1 * p[:, :, None] * p[:, None, :]
+    D[:, 0, 0] += g
+    D[:, 1, 1] += g
+    J = np.empty((n, 2, N_CAMERA_PARAMS))
+    J[:, :, :6] = (D * focal[None, :, None]) @ Jp
+    J[:, :, 6] = uv - (cx, cy)  # d/d log f
+    J[:, :, 7] = p * (r2[:, None] * focal)  # d/d k1
+    return uv, J
+
+
+def undistort_k1(pts: np.ndarray, f: float, aspect: float, cx: float, cy: float, k1: float,
+                 jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Undistorted normalised coordinates q (N, 2) of pixels (N, 2) and, with ``jac``,
+    dq/d(log f, k1) (N, 2, 2). ``q = x_d s`` with ``s (1 + k1 |x_d|^2 s^2) = 1``, solved by 8
+    fixed-point steps (k1 is small)."""
+    xd = np.empty((len(pts), 2))
+    xd[:, 0] = (pts[:, 0] - cx) / f
+    xd[:, 1] = (pts[:, 1] - cy) / (f * aspect)
+    rd2 = xd[:, 0] * xd[:, 0] + xd[:, 1] * xd[:, 1]
+    s = np.ones_like(rd2)
+    if k1 != 0.0:
+        c = k1 * rd2
+        for _ in range(8):
+            s = 1.0 / (1.0 + c * s * s)
+    q = xd * s[:, None]
+    if not jac:
+        return q, None
+    # implicit derivatives of s: F = s (1 + k1 rd2 s^2) - 1 = 0; d x_d / d log f = -x_d
+    dF_ds = 1 + 3 * k1 * rd2 * s * s
+    ds_drd2 = -k1 * s**3 / dF_ds
+    ds_dk1 = -rd2 * s**3 / dF_ds
+    Jq = np.empty((len(q), 2, 2))
+    Jq[:, :, 0] = -q - (2 * rd2 * ds_drd2)[:, None] * xd
+    Jq[:, :, 1] = xd * ds_dk1[:, None]
+    return q, Jq
+
+
+def dehomogenize(xh: np.ndarray, jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(x / w, y / w)`` (N, 2) of homogeneous points (N, 3) and, with ``jac``, its derivative
+    with respect to ``(x, y, w)`` (N, 2, 3)."""
+    w = xh[:, 2]
+    p = xh[:, :2] / w[:, None]
+    if not jac:
+        return p, None
+    D = np.zeros((len(xh), 2, 3))
+    D[:, 0, 0] = D[:, 1, 1] = 1 / w
+    D[:, 0, 2] = -p[:, 0] / w
+    D[:, 1, 2] = -p[:, 1] / w
+    return p, D
