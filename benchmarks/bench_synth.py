@@ -20,7 +20,7 @@ import numpy as np
 
 from pnlviz.synth.annotate import annotate
 from pnlviz.synth.cameras import sample_camera
-from pnlviz.synth.cli import parse_size
+from pnlviz.commands.common import parse_size
 from pnlviz.synth.render import render_frame
 from pnlviz.synth.writer import generate
 

@@ -24,8 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pnlviz.calib.calibrate import CalibParams, calibrate
-from pnlviz.calib.inputs import observations_from_predictions
+from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
 from pnlviz.data import open_dataset
 from pnlviz.detect.light import light_detector
 from pnlviz.detect.run import DEFAULT_MODEL, Detector
@@ -98,9 +97,9 @@ def main() -> None:
                 d = np.hypot(found[kid][0] - lab.x, found[kid][1] - lab.y)
                 hits5 += d <= 5
                 hits10 += d <= 10
-        res = calibrate(observations_from_predictions(pred, 960, 540), CalibParams().updated(det.calibration))
-        if res.ok:
-            cams[stem] = res.camera
+        fc = calibrate_frame(FrameInputs((960, 540), detections=pred), FrameSettings(detection_settings=det.calibration))
+        if fc.ok:
+            cams[stem] = fc.result.camera
     s = evaluate_dataset(data, cams, progress=False)
     print(f"held-out synthetic frames: {len(ds.stems)} (seed {args.seed}), detection {1e3 * np.median(times):.0f} ms/frame")
     print(f"PCK@5 {hits5 / max(total, 1):.3f}  PCK@10 {hits10 / max(total, 1):.3f}  ({total} visible keypoints)")

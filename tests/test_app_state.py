@@ -282,17 +282,17 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, m
     for stem in ("solo", "00000"):
         st.run_detector(stem)
     assert not st.needs_detection("solo") and len(st.detections_for("solo").keypoints) >= 4
-    import pnlviz.app.state as state_module
+    import pnlviz.calib.frame as frame_module
     from pnlviz.app.session import calibration_card
 
     used = {}
-    real = state_module.calibrate
+    real = frame_module.calibrate
 
-    def recording(obs, params):
+    def recording(obs, params, model=None):
         used[current] = params
-        return real(obs, params)
+        return real(obs, params, model)
 
-    monkeypatch.setattr(state_module, "calibrate", recording)
+    monkeypatch.setattr(frame_module, "calibrate", recording)
     for current in ("solo", "00000"):
         st.view(current)
     monkeypatch.undo()

@@ -319,17 +319,17 @@ def test_calibrate_complete_run_writes_the_same_bytes_as_the_zip_writer(tmp_path
 
 
 def test_calibrate_interrupted_keeps_the_frames_done(tmp_path, monkeypatch, capsys):
-    import pnlviz.calib.cli as calib_cli
+    import pnlviz.commands.calibrate as calib_cli
 
     d = copy_frames(tmp_path / "d", stems=("00000", "00001", "00002", "00003"), images=False)
-    real = calib_cli.calibrate_frame
+    real = calib_cli.calibrate_stem
 
     def fake(ds, stem, *a):
         if stem == "00002":
             raise KeyboardInterrupt
         return real(ds, stem, *a)
 
-    monkeypatch.setattr(calib_cli, "calibrate_frame", fake)
+    monkeypatch.setattr(calib_cli, "calibrate_stem", fake)
     out, report = tmp_path / "cams.zip", tmp_path / "r.jsonl"
     assert main(["calibrate", "--data", str(d), "--out", str(out), "--report", str(report), "--no-progress"]) == 130
     assert one_line(capsys.readouterr().err, "interrupted") == f"interrupted: kept 2 of 4 frames in {out}"
@@ -338,10 +338,10 @@ def test_calibrate_interrupted_keeps_the_frames_done(tmp_path, monkeypatch, caps
 
 
 def test_calibrate_a_camera_that_cannot_be_written_is_one_line(tmp_path, monkeypatch, capsys):
-    import pnlviz.calib.cli as calib_cli
+    import pnlviz.commands.calibrate as calib_cli
 
     d = copy_frames(tmp_path / "d", images=False)
-    real = calib_cli.calibrate_frame
+    real = calib_cli.calibrate_stem
 
     def fake(ds, stem, *a):
         stem, cam, report = real(ds, stem, *a)
@@ -349,7 +349,7 @@ def test_calibrate_a_camera_that_cannot_be_written_is_one_line(tmp_path, monkeyp
             cam = dict(cam, pan_degrees=float("nan"))
         return stem, cam, report
 
-    monkeypatch.setattr(calib_cli, "calibrate_frame", fake)
+    monkeypatch.setattr(calib_cli, "calibrate_stem", fake)
     out = tmp_path / "cams.zip"
     assert main(["calibrate", "--data", str(d), "--out", str(out), "--no-progress"]) == 0
     text = capsys.readouterr()

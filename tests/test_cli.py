@@ -78,21 +78,24 @@ def test_parse_size():
 
 
 def test_calibration_settings_defaults_then_detector_then_flags():
-    """frame_params: the defaults; the settings recorded with the detections on top; the command
-    line flags last (--no-k1, --no-pnl win)."""
+    """The defaults; the settings recorded with the detections on top, for frames calibrated
+    from detections; the command line flags last (--no-k1, --no-pnl win)."""
     import argparse
 
     from pnlviz.calib.calibrate import CalibParams
-    from pnlviz.calib.cli import add_calibrate_parser, frame_params
+    from pnlviz.calib.frame import calib_params
+    from pnlviz.commands.calibrate import add_calibrate_parser, frame_settings
 
     ap = argparse.ArgumentParser()
     add_calibrate_parser(ap.add_subparsers())
     base = ["calibrate", "--data", "d", "--out", "c.zip"]
-    assert frame_params(ap.parse_args(base)) == CalibParams()
-    settings = {"final_loss": "soft_l1", "ransac_thresholds": [5, 10]}
-    got = frame_params(ap.parse_args(base + ["--alpha", "0.3"]), settings)
+    assert calib_params(frame_settings(ap.parse_args(base)), "annotation") == CalibParams()
+    recorded = {"final_loss": "soft_l1", "ransac_thresholds": [5, 10]}
+    settings = frame_settings(ap.parse_args(base + ["--alpha", "0.3"]), recorded)
+    got = calib_params(settings, "detections")
     assert got == CalibParams(alpha=0.3, final_loss="soft_l1", ransac_thresholds=(5, 10)) and got.refine_k1
-    assert not frame_params(ap.parse_args(base + ["--no-k1"]), settings).refine_k1
-    assert not frame_params(ap.parse_args(base + ["--no-pnl"]), {"pnl": True}).pnl
+    assert calib_params(settings, "annotation") == CalibParams(alpha=0.3)  # an annotation: not the detector's
+    assert not calib_params(frame_settings(ap.parse_args(base + ["--no-k1"]), recorded), "detections").refine_k1
+    assert not calib_params(frame_settings(ap.parse_args(base + ["--no-pnl"]), {"pnl": True}), "detections").pnl
     with pytest.raises(ValueError, match="unknown calibration setting"):
-        frame_params(ap.parse_args(base), {"k_one": 0.1})
+        calib_params(frame_settings(ap.parse_args(base), {"k_one": 0.1}), "detections")

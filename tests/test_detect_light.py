@@ -147,7 +147,7 @@ def test_default_config_reads():
 def test_train_cli_smoke(tmp_path, capsys):
     import argparse
 
-    from pnlviz.detect.train_cli import add_train_parser
+    from pnlviz.commands.train import add_train_parser
 
     cfg = load_config().to_dict()
     cfg["data"]["size"] = list(SMOKE_SIZE)
@@ -175,7 +175,7 @@ def test_train_cli_smoke(tmp_path, capsys):
 def test_train_cli_rejects_bad_overrides(tmp_path, capsys):
     import argparse
 
-    from pnlviz.detect.train_cli import add_train_parser
+    from pnlviz.commands.train import add_train_parser
 
     parser = argparse.ArgumentParser()
     add_train_parser(parser.add_subparsers(dest="command"))

@@ -28,7 +28,7 @@ from pnlviz.labels import (
     labels_from_dict, labels_to_dict, line_extremities, lr_decision, mirror_annotation, training_targets,
     viewing_azimuth_deg,
 )
-from pnlviz.labels.cli import add_labels_parser, run_labels
+from pnlviz.commands.labels import add_labels_parser, run_labels
 from pnlviz.labels.fitting import fit_homography, orientation_ok, orientation_outliers
 
 W, H = 960, 540

@@ -52,7 +52,7 @@ def needs_shared():
 
 
 def run_cli(*argv) -> int:
-    from pnlviz.metrics.cli import add_eval_parser
+    from pnlviz.commands.evaluate import add_eval_parser
 
     parser = argparse.ArgumentParser()
     add_eval_parser(parser.add_subparsers())

@@ -18,7 +18,8 @@ from pnlviz.geometry.polylines import visible_pitch
 from pnlviz.synth import KINDS, annotate, annotation_to_json, generate, make_frame, render, sample_camera
 from pnlviz.synth.annotate import clicks_for_class, evaluation_camera, split_runs
 from pnlviz.synth.cameras import camera_problem
-from pnlviz.synth.cli import add_synth_parser, parse_size
+from pnlviz.commands.common import parse_size
+from pnlviz.commands.synth import add_synth_parser
 from pnlviz.synth.render import GROUND, ray_grid
 from pnlviz.synth.writer import OutputFolderError
 

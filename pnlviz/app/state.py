@@ -24,17 +24,17 @@ from pathlib import Path
 import numpy as np
 
 from pnlviz.app.edits import REVIEW_STATES, EditsStore, keypoint_ids
-from pnlviz.calib.calibrate import CalibParams, CalibrationResult, calibrate
-from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions
+from pnlviz.calib.calibrate import CalibParams, CalibrationResult
+from pnlviz.calib.frame import SOURCES, FrameInputs, FrameSettings, calibrate_frame, detection_settings_apply
 from pnlviz.calib.observations import Observations
+from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
 from pnlviz.data import DataError, open_dataset, read_predictions, read_predictions_info
 from pnlviz.data.annotations import annotation_to_json, parse_annotation
+from pnlviz.field.model import load_field_model
 from pnlviz.geometry.camera import Camera
 
 __all__ = ["AppState", "EditError", "FrameView", "REVIEW_STATES", "SOURCES", "Settings", "default_edits_dir"]
 
-SOURCES = ("annotation", "detections", "both")
-EVAL_SIZE = (960, 540)
 #: how far outside the frame a keypoint may be placed, as a fraction of its size (as the
 #: annotations' coordinate range allows: -0.5..1.5)
 PLACEMENT_MARGIN = 0.5
@@ -49,7 +49,7 @@ class Settings:
     """How a frame is calibrated: PnL on or off, its line weight, and the keypoint source."""
 
     pnl: bool = True
-    alpha: float = 0.6
+    alpha: float = DEFAULT_ALPHA
     source: str = "annotation"
 
     def __post_init__(self):
@@ -100,76 +100,6 @@ class FrameView:
         return self.reference_camera
 
 
-def _mirror_ids() -> dict[int, int]:
-    """Keypoint id -> the id at the point mirrored through the pitch centre ((x, y) -> (-x, -y))."""
-    from pnlviz.field.model import load_field_model
-
-    model = load_field_model()
-    ids = model.keypoint_ids
-    xyz = model.keypoint_xyz(ids)
-    out = {}
-    for i, p in zip(ids, xyz):
-        d = np.linalg.norm(xyz - p * [-1, -1, 1], axis=1)
-        j = int(np.argmin(d))
-        if d[j] < 1e-6:
-            out[int(i)] = int(ids[j])
-    return out
-
-
-def merge_observations(ann: Observations, det: Observations) -> Observations:
-    """Annotation and detections together. PnLCalib's networks name the sides so that the goal
-    nearest the camera is the left one, annotations name the true sides: when the detections
-    agree better with the annotation mirrored (keypoints with the same ids, median distance),
-    their ids and line classes are mirrored first. The annotation wins where both have a point."""
-    from pnlviz.field.names import MIRROR
-
-    mirror = _mirror_ids()
-    ann_xy = dict(zip(ann.kp_ids.tolist(), ann.kp_xy))
-    det_xy = dict(zip(det.kp_ids.tolist(), det.kp_xy))
-
-    def disagreement(mapping) -> float:
-        d = [np.linalg.norm(ann_xy[i] - det_xy[j]) for i, j in mapping.items() if i in ann_xy and j in det_xy]
-        return float(np.median(d)) if d else np.inf
-
-    if disagreement({i: mirror.get(i, -1) for i in ann_xy}) < disagreement({i: i for i in ann_xy}):
-        ids = np.array([mirror.get(int(i), int(i)) for i in det.kp_ids], int)
-        lines = {MIRROR[k]: v for k, v in det.lines.items()}
-        from pnlviz.field.model import load_field_model
-
-        det = Observations(det.width, det.height, ids, det.kp_xy, load_field_model().keypoint_xyz(ids, pnlcalib=True),
-                           det.kp_sets, det.kp_main, lines, det.circles)
-    keep = ~np.isin(det.kp_ids, ann.kp_ids)
-    return Observations(ann.width, ann.height, np.concatenate([ann.kp_ids, det.kp_ids[keep]]),
-                        np.vstack([ann.kp_xy, det.kp_xy[keep]]), np.vstack([ann.kp_xyz, det.kp_xyz[keep]]),
-                        np.concatenate([ann.kp_sets, det.kp_sets[keep]]), np.concatenate([ann.kp_main, det.kp_main[keep]]),
-                        {**det.lines, **ann.lines}, ann.circles)
-
-
-def apply_keypoint_edits(obs: Observations, overrides: dict) -> Observations:
-    """Observations with keypoint edits applied: ``{"id": [x, y]}`` moves or adds a keypoint (at
-    the catalogue position), ``{"id": null}`` removes it (not visible)."""
-    from pnlviz.field.model import load_field_model
-
-    model = load_field_model()
-    ids, xy = list(obs.kp_ids), [tuple(p) for p in obs.kp_xy]
-    sets, main = list(obs.kp_sets), list(obs.kp_main)
-    for key, value in overrides.items():
-        kid = int(key)
-        if kid in ids:
-            i = ids.index(kid)
-            for lst in (ids, xy, sets, main):
-                lst.pop(i)
-        if value is not None:
-            ids.append(kid)
-            xy.append((float(value[0]), float(value[1])))
-            group = model.keypoints[kid].group
-            sets.append(group)
-            main.append(group == "Kp")
-    ids_arr = np.array(ids, int)
-    return Observations(obs.width, obs.height, ids_arr, np.array(xy, float).reshape(-1, 2), model.keypoint_xyz(ids_arr),
-                        np.array(sets, dtype="<U3"), np.array(main, bool), obs.lines, obs.circles)
-
-
 #: what one undo step restores
 _UNDOABLE = ("annotation", "keypoints", "review")
 
@@ -188,6 +118,7 @@ class AppState:
     def __init__(self, data: Path, *, detections: Path | None = None, edits: Path | None = None,
                  size: tuple[int, int] = EVAL_SIZE, detector=None, source: str | None = None, writable: bool = True):
         self.data = Path(data)
+        self.model = load_field_model()
         self.ds = open_dataset(self.data)
         if not len(self.ds):
             raise DataError(str(self.data), "no frames (expected <stem>.jpg / <stem>.json files)")
@@ -316,16 +247,15 @@ class AppState:
         return img
 
     # ------------------------------------------------------------------ calibration
-    def applied_detection_settings(self, origin: str | None, settings: Settings) -> dict:
-        """The detector's calibration settings when they apply: observations from detections
-        alone, with PnL on (without PnL there is nothing they change)."""
-        return self.detection_settings if origin == "detections" and settings.pnl else {}
+    def frame_settings(self, settings: Settings) -> FrameSettings:
+        """A tab's choices, with the detector's own settings, as the engine takes them."""
+        return FrameSettings(pnl=settings.pnl, alpha=settings.alpha, source=settings.source,
+                             detection_settings=self.detection_settings)
 
-    def params(self, settings: Settings, origin: str | None = None) -> CalibParams:
-        """The calibration parameters for observations from ``origin`` (see :meth:`_observations`)."""
-        if not settings.pnl:
-            return CalibParams(pnl=False, refine_focal=False, refine_k1=False)
-        return CalibParams(alpha=settings.alpha).updated(self.applied_detection_settings(origin, settings))
+    def applied_detection_settings(self, origin: str | None, settings: Settings) -> dict:
+        """The detector's calibration settings when they apply (see
+        :func:`pnlviz.calib.frame.detection_settings_apply`)."""
+        return dict(detection_settings_apply(origin, self.frame_settings(settings)))
 
     def _key(self, stem: str, settings: Settings) -> tuple:
         rec = self.edits.get(stem)
@@ -353,10 +283,10 @@ class AppState:
         return [v for k, v in items if k[1] == settings and k == self._key(k[0], settings)]
 
     def _compute(self, stem: str, settings: Settings) -> FrameView:
+        """Read the frame's inputs (the only I/O here), then the engine's one path per frame."""
         from pnlviz.metrics.soccernet import evaluate_frame
 
         idx = self.index_of(stem)
-        t0 = time.perf_counter()
         try:
             image_error = self.image_problem(stem)  # shown, and the frame is calibrated as one without an image
             image = self.ds.frame(stem).has_image and image_error is None
@@ -366,48 +296,16 @@ class AppState:
             ref = Camera.from_soccernet(ref).scaled(*size) if ref is not None else None
         except DataError as exc:
             return FrameView(stem, idx, False, self.size, None, None, None, error=str(exc), settings=settings)
-        obs, origin = self._observations(stem, ann, size, settings)
-        if obs is None:
-            return FrameView(stem, idx, image, size, ann, None, None, error=image_error or "nothing to calibrate from",
-                             ms=1e3 * (time.perf_counter() - t0), reference_camera=ref, settings=settings)
-        try:
-            result = calibrate(obs, self.params(settings, origin))
-        except Exception as exc:  # shown in the panel; the rest of the dataset keeps working
-            return FrameView(stem, idx, image, size, ann, obs, None, error=f"internal error: {exc}", reference_camera=ref,
-                             origin=origin, settings=settings)
+        inputs = FrameInputs(size, ann, self.detections_for(stem), self.edits.get(stem).get("keypoints"))
+        fc = calibrate_frame(inputs, self.frame_settings(settings), self.model)
+        engine_error = fc.failure.message if fc.failure is not None and fc.failure.code in ("no_input", "internal") else None
         jac = {}
-        if result.ok and ann:
-            fr = evaluate_frame(result.camera.scaled(*EVAL_SIZE), ann)
+        if fc.ok and ann:
+            fr = evaluate_frame(fc.result.camera.scaled(*EVAL_SIZE), ann)
             jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
-        return FrameView(stem, idx, image, size, ann, obs, result, jac, error=image_error,
-                         ms=1e3 * (time.perf_counter() - t0), reference_camera=ref,
-                         detections=self.detections_for(stem), origin=origin, settings=settings)
-
-    def _observations(self, stem: str, ann, size, settings: Settings) -> tuple[Observations | None, str | None]:
-        """The observations to calibrate from and where they came from ("annotation",
-        "detections", "both", "edits" when only dragged keypoints exist, or None)."""
-        obs, origin = self._base_observations(stem, ann, size, settings.source)
-        overrides = self.edits.get(stem).get("keypoints")
-        if not overrides:
-            return obs, origin
-        if obs is None:
-            obs, origin = Observations(*size), "edits"
-        return apply_keypoint_edits(obs, overrides), origin
-
-    def _base_observations(self, stem: str, ann, size, source: str) -> tuple[Observations | None, str | None]:
-        W, H = size
-        pred = self.detections_for(stem)
-        use_ann = ann is not None and source in ("annotation", "both")
-        # a frame with no annotation falls back to its detections under "annotation"
-        use_det = pred is not None and (source in ("detections", "both") or not use_ann)
-        if use_ann and use_det:
-            return merge_observations(observations_from_annotation(ann, W, H)[0],
-                                      observations_from_predictions(pred, W, H)), "both"
-        if use_ann:
-            return observations_from_annotation(ann, W, H)[0], "annotation"
-        if use_det:
-            return observations_from_predictions(pred, W, H), "detections"
-        return None, None
+        return FrameView(stem, idx, image, size, ann, fc.observations, fc.result, jac, error=image_error or engine_error,
+                         ms=fc.ms, reference_camera=ref, detections=inputs.detections, origin=fc.origin,
+                         settings=settings)
 
     # ------------------------------------------------------------------ change notices
     def subscribe(self, callback: Callable[[str], None]) -> None:

@@ -38,9 +38,15 @@ from pnlviz.calib.observations import Observations
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.refine import CameraProblem, RefineParams
 from pnlviz.calib.voting import SUBSETS, best, subset_mask, truncated_score
+from pnlviz.conventions import DEFAULT_ALPHA, EVAL_WIDTH
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.homography import camera_from_ground_homography
+
+
+#: why a frame has no camera (``CalibrationResult.failure_code``); the engine adds "no_input"
+#: (nothing to calibrate from) and "internal" (a bug), the commands "bad_input" (unreadable files)
+FAILURE_CODES = ("too_few_keypoints", "degenerate", "no_inliers", "residual")
 
 
 @dataclass(frozen=True)
@@ -55,7 +61,7 @@ class CalibParams:
     min_hfov_deg: float = 1.0
     max_hfov_deg: float = 130.0
     pnl: bool = True  #: run the PnL refinement
-    alpha: float = 0.6  #: PnL weight of lines vs points (paper: 0.6)
+    alpha: float = DEFAULT_ALPHA  #: PnL weight of lines vs points (paper: 0.6)
     line_gate_px: float = 20.0  #: a line/circle joins PnL when all its points are this close to its projection
     point_gate_px: float = 20.0  #: a keypoint joins PnL when this close to its initial projection
     refine_focal: bool = True  #: PnL refines the focal length with the pose (the paper keeps K fixed)
@@ -68,7 +74,7 @@ class CalibParams:
     prior_good_rms: float = 3.0  #: stop the prior search at a camera fitting everything this well (px RMS)
 
     def px(self, value: float, width: float) -> float:
-        return value * width / 960.0
+        return value * width / EVAL_WIDTH
 
     def updated(self, overrides: Mapping[str, object] | None) -> "CalibParams":
         """These settings with ``overrides`` (field name -> value) applied; unknown names are a
@@ -111,7 +117,8 @@ class CalibrationResult:
     line_residuals: dict[str, float] = field(default_factory=dict)
     pnl_lines: list[str] = field(default_factory=list)
     candidates: list[dict] = field(default_factory=list)
-    failure: str | None = None
+    failure: str | None = None  #: why there is no camera, in words
+    failure_code: str | None = None  #: and as one of FAILURE_CODES
 
     @property
     def ok(self) -> bool:
@@ -372,7 +379,8 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
     data = FrameData.build(obs, model or load_field_model())
     needed = 2 if params.prior_search and (obs.lines or obs.circles) else params.min_points
     if obs.n_keypoints < needed:
-        return CalibrationResult(None, failure=f"too few keypoints ({obs.n_keypoints} < {needed})")
+        return CalibrationResult(None, failure=f"too few keypoints ({obs.n_keypoints} < {needed})",
+                                 failure_code="too_few_keypoints")
     raw = make_candidates(data, params)
     # vote on the decomposed cameras, refine the best few, vote again among the refined ones
     vote(raw, data, params)
@@ -388,7 +396,7 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
     if winner is None:
         planes = plane_masks(obs.kp_xyz, data.model)
         counts = ", ".join(f"{p} {int(m.sum())}" for p, m in planes.items())
-        return CalibrationResult(None, candidates=table,
+        return CalibrationResult(None, candidates=table, failure_code="degenerate",
                                  failure=f"degenerate geometry: no plane with {params.min_points} consistent keypoints ({counts})")
     result = CalibrationResult(winner.camera, initial_camera=winner.camera, subset=winner.subset,
                                threshold=winner.threshold, plane=winner.plane, inliers=winner.inliers, candidates=table)
@@ -408,11 +416,11 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
     result.line_residuals = line_residuals(cam, data)
     inlier_residuals = [result.point_residuals[int(i)] for i in obs.kp_ids[np.isin(obs.kp_ids, winner.inliers)]]
     if not inlier_residuals:
-        result.camera = None
+        result.camera, result.failure_code = None, "no_inliers"
         result.failure = "no keypoint agrees with the camera (no inliers)"
         return result
     rms = float(np.sqrt(np.mean(np.square(inlier_residuals))))
     if not rms <= params.px(params.max_rms, obs.width):
-        result.camera = None
+        result.camera, result.failure_code = None, "residual"
         result.failure = f"residual above the limit (inlier RMS {rms:.1f} px > {params.px(params.max_rms, obs.width):.1f})"
     return result

@@ -70,7 +70,7 @@ class Keypoint:
     pnlcalib_xyz: np.ndarray  # where PnLCalib's table puts it (equals xyz except id 52)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # compared and hashed by identity: per-model caches key on it
 class FieldModel:
     dimensions: dict
     lines: dict[str, Segment]

@@ -1,9 +1,9 @@
 """Metrics: the SoccerNet camera-calibration score (JaC@t, completeness CR, final score FS; equal
 to the official evaluator, see :mod:`pnlviz.metrics.soccernet`) and the WC14 / TS-WorldCup
 homography metrics (IoU part / whole, projection and reprojection errors, see
-:mod:`pnlviz.metrics.homography`). ``pnlviz eval`` lives in :mod:`pnlviz.metrics.cli`.
+:mod:`pnlviz.metrics.homography`). ``pnlviz eval`` lives in :mod:`pnlviz.commands.evaluate`.
 
-The names below are imported on first use, so that ``pnlviz.metrics.cli`` (and the command line)
+The names below are imported on first use, so that ``pnlviz.commands.evaluate`` (and the command line)
 starts without loading OpenCV.
 """
 

@@ -125,7 +125,7 @@ def run_eval(args) -> int:
 
         cameras, _ = read_cameras(args.pred, on_error=_report)
     if args.gt is not None:
-        from pnlviz.cli import open_input_dataset
+        from pnlviz.commands.common import open_input_dataset
         from pnlviz.metrics.soccernet import evaluate_dataset
 
         gt = open_input_dataset(args.gt)

@@ -10,14 +10,19 @@ import os
 import sys
 import time
 from collections import Counter
-from dataclasses import replace
 from pathlib import Path
 
-EVAL_SIZE = (960, 540)
+from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
+
+#: how the summary names each failure code
+FAILURE_LABELS = {"too_few_keypoints": "too few keypoints", "degenerate": "degenerate geometry",
+                  "no_inliers": "no keypoint agrees with the camera", "residual": "residual above the limit",
+                  "no_input": "nothing to calibrate from", "internal": "internal error",
+                  "bad_input": "unreadable input", "bad_output": "not written"}
 
 
 def add_calibrate_parser(sub) -> None:
-    from pnlviz.cli import parse_size
+    from pnlviz.commands.common import parse_size
 
     p = sub.add_parser("calibrate", help="calibrate every frame (from annotations or PnLCalib detections)",
                        description="Calibrate every frame of a dataset and write camera_<stem>.json files "
@@ -29,7 +34,8 @@ def add_calibrate_parser(sub) -> None:
                                                    "(preds.json) apply")
     p.add_argument("--out", required=True, type=Path, help="output camera zip")
     p.add_argument("--no-pnl", action="store_true", help="skip the PnL refinement (and the focal/k1 refinement)")
-    p.add_argument("--alpha", type=float, default=0.6, help="PnL weight of lines vs points (default 0.6)")
+    p.add_argument("--alpha", type=float, default=DEFAULT_ALPHA,
+                   help=f"PnL weight of lines vs points (default {DEFAULT_ALPHA})")
     p.add_argument("--no-k1", action="store_true", help="do not refine radial distortion k1")
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE,
                    help="image size for frames without an image (default 960x540)")
@@ -39,69 +45,62 @@ def add_calibrate_parser(sub) -> None:
     p.set_defaults(func=run_calibrate)
 
 
-def frame_params(args, detection_settings: dict | None = None):
-    """The calibration settings: the defaults, then the settings recorded with the detections
-    (``detection_settings``, from ``preds.json``), then the command-line flags."""
-    from pnlviz.calib.calibrate import CalibParams
+def frame_settings(args, detection_settings: dict | None = None):
+    """The engine's settings: the detector's (recorded beside its detections in ``preds.json``)
+    for frames calibrated from detections, then the command-line flags."""
+    from pnlviz.calib.frame import FrameSettings
 
-    params = CalibParams(alpha=args.alpha).updated(detection_settings)
-    if args.no_k1:
-        params = replace(params, refine_k1=False)
-    if args.no_pnl:
-        params = replace(params, pnl=False, refine_focal=False, refine_k1=False)
-    return params
+    return FrameSettings(pnl=not args.no_pnl, alpha=args.alpha, source="annotation",
+                         detection_settings=dict(detection_settings or {}),
+                         overrides={"refine_k1": False} if args.no_k1 else {})
 
 
-def calibrate_frame(ds, stem: str, prediction, size, params) -> tuple[str, dict | None, dict]:
-    """One frame: (stem, camera dict at 960x540 or None, report). Never raises on bad input."""
-    from pnlviz.calib.calibrate import calibrate
-    from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions
+def calibrate_stem(ds, stem: str, prediction, size, settings) -> tuple[str, dict | None, dict]:
+    """One frame: read its inputs, run the engine's one path (:func:`pnlviz.calib.frame.calibrate_frame`):
+    (stem, camera dict at 960x540 or None, report). Never raises on bad input."""
+    from pnlviz.calib.frame import FrameInputs, calibrate_frame
     from pnlviz.data import DataError
 
-    t0 = time.perf_counter()
     report: dict = {"stem": stem}
     try:
-        W, H = ds.image_size(stem) or size
-        if prediction is not None:
-            obs = observations_from_predictions(prediction, W, H)
-        else:
-            ann = ds.annotation(stem)
-            if ann is None:
-                report["failure"] = "no annotation"
-                return stem, None, report
-            obs, _ = observations_from_annotation(ann, W, H)
+        size = ds.image_size(stem) or size if stem in ds else size
+        ann = ds.annotation(stem) if prediction is None and stem in ds else None
     except DataError as exc:
-        report["failure"] = f"skipped: {exc}"
+        report.update(failure=f"skipped: {exc}", failure_code="bad_input")
         return stem, None, report
-    try:
-        result = calibrate(obs, params)
-    except Exception as exc:  # a bug must not end a 23k-frame batch: report the frame and go on
-        report["failure"] = f"internal error: {type(exc).__name__}: {exc}"
+    if prediction is None and ann is None:
+        report.update(failure="no annotation", failure_code="no_input")
         return stem, None, report
+    fc = calibrate_frame(FrameInputs(size, ann, prediction), settings)
+    if fc.failure is not None:
+        report.update(failure=fc.failure.message, failure_code=fc.failure.code)
+    if fc.result is None:
+        return stem, None, report
+    res = fc.result
     report.update({
-        "ms": round(1e3 * (time.perf_counter() - t0), 2), "keypoints": int(obs.n_keypoints),
-        "subset": result.subset, "threshold": result.threshold, "plane": result.plane,
-        "inliers": [int(i) for i in result.inliers], "pnl_lines": result.pnl_lines, "failure": result.failure,
-        "point_residuals": {str(k): round(v, 3) for k, v in result.point_residuals.items()},
-        "line_residuals_initial": {k: round(v, 3) for k, v in result.line_residuals_initial.items()},
-        "line_residuals": {k: round(v, 3) for k, v in result.line_residuals.items()},
+        "ms": round(fc.ms, 2), "keypoints": int(fc.observations.n_keypoints), "origin": fc.origin,
+        "subset": res.subset, "threshold": res.threshold, "plane": res.plane,
+        "inliers": [int(i) for i in res.inliers], "pnl_lines": res.pnl_lines,
+        "point_residuals": {str(k): round(v, 3) for k, v in res.point_residuals.items()},
+        "line_residuals_initial": {k: round(v, 3) for k, v in res.line_residuals_initial.items()},
+        "line_residuals": {k: round(v, 3) for k, v in res.line_residuals.items()},
     })
-    if not result.ok:
+    if not res.ok:
         return stem, None, report
-    return stem, result.camera.scaled(*EVAL_SIZE).to_soccernet(), report
+    return stem, res.camera.scaled(*EVAL_SIZE).to_soccernet(), report
 
 
 class _Worker:
     """Picklable per-frame job for process pools (the dataset re-opens lazily in each worker)."""
 
-    def __init__(self, ds, predictions, size, params):
-        self.ds, self.predictions, self.size, self.params = ds, predictions, size, params
+    def __init__(self, ds, predictions, size, settings):
+        self.ds, self.predictions, self.size, self.settings = ds, predictions, size, settings
 
     def __call__(self, stem):
         pred = None if self.predictions is None else self.predictions.get(stem)
         if self.predictions is not None and pred is None:
-            return stem, None, {"stem": stem, "failure": "no detections for this frame"}
-        return calibrate_frame(self.ds, stem, pred, self.size, self.params)
+            return stem, None, {"stem": stem, "failure": "no detections for this frame", "failure_code": "no_input"}
+        return calibrate_stem(self.ds, stem, pred, self.size, self.settings)
 
 
 def _ignore_sigint() -> None:
@@ -131,12 +130,15 @@ def _frames(ds, predictions) -> list[str]:
     return [s for s in ds.stems if s in predictions] + [s for s in sort_stems(predictions) if s not in known]
 
 
-def _detection_params(args):
-    """(settings recorded beside the detections, CalibParams); DataError/ValueError for a bad file."""
+def _detection_settings(args):
+    """(settings recorded beside the detections, the engine's settings); DataError/ValueError
+    (an unknown setting) for a bad file."""
+    from pnlviz.calib.calibrate import CalibParams
     from pnlviz.data import read_predictions_info
 
-    settings = (read_predictions_info(args.detections).get("calibration") or {}) if args.detections else {}
-    return settings, frame_params(args, settings)
+    recorded = (read_predictions_info(args.detections).get("calibration") or {}) if args.detections else {}
+    CalibParams().updated(recorded)  # unknown names fail here, not on every frame
+    return recorded, frame_settings(args, recorded)
 
 
 def run_calibrate(args) -> int:
@@ -144,7 +146,7 @@ def run_calibrate(args) -> int:
 
     from tqdm import tqdm
 
-    from pnlviz.cli import open_input_dataset, print_skipped
+    from pnlviz.commands.common import open_input_dataset, print_skipped
     from pnlviz.data import DataError, LineStream, ZipStream, predictions_info_path, read_predictions
     from pnlviz.data.cameras import camera_member, camera_zip_order
 
@@ -156,17 +158,17 @@ def run_calibrate(args) -> int:
         print(f"{args.data}: no frame to calibrate", file=sys.stderr)
         return 1
     try:  # the detector's settings, recorded beside its prediction zip by pnlviz detect
-        settings, params = _detection_params(args)
+        recorded, settings = _detection_settings(args)
     except (DataError, ValueError) as exc:
         print(f"error: {predictions_info_path(args.detections)}: {exc}", file=sys.stderr)
         return 2
-    if settings:
+    if recorded:
         print(f"calibration settings of the detector ({predictions_info_path(args.detections).name}): "
-              + ", ".join(f"{k}={v}" for k, v in settings.items()))
-    job = _Worker(ds, predictions, args.size, params)
+              + ", ".join(f"{k}={v}" for k, v in recorded.items()))
+    job = _Worker(ds, predictions, args.size, settings)
     workers = (os.cpu_count() or 1) if args.workers == 0 else max(1, args.workers)
     order = {s: i for i, s in enumerate(stems)}
-    failures: list[str] = []
+    failures: list[tuple[str, str]] = []  # (code, message) of the frames without a camera
     interrupted = False
     t0 = time.perf_counter()
     bar = tqdm(total=len(stems), desc="calibrate", unit="frame", disable=args.no_progress or None)
@@ -187,9 +189,10 @@ def run_calibrate(args) -> int:
                     try:  # written at once: an interrupted or failing batch keeps it
                         cams.add(*camera_member(stem, cam, args.out))
                     except DataError as exc:
-                        cam, report["failure"] = None, f"skipped: not written: {exc}"
+                        cam = None
+                        report.update(failure=f"skipped: not written: {exc}", failure_code="bad_output")
                 if cam is None:
-                    failures.append(report.get("failure") or "")
+                    failures.append((report.get("failure_code") or "failed", report.get("failure") or ""))
                 if reports is not None:
                     reports.add(json.dumps(report), key=order[stem])
                 bar.update()
@@ -202,9 +205,10 @@ def run_calibrate(args) -> int:
         return 130
     print(f"calibrated {len(cams)}/{len(stems)} frames in {elapsed:.1f} s "
           f"({1e3 * elapsed / len(stems):.1f} ms/frame with {workers} worker(s)) -> {args.out}")
-    for reason, n in Counter(f.split(" (")[0] for f in failures).most_common():
-        print(f"  {n:5d} not calibrated: {reason}")
-    print_skipped([f for f in failures if f.startswith("skipped")], prefix="  ")
+    for code, n in Counter(code for code, _ in failures).most_common():
+        example = next(message for c, message in failures if c == code)
+        print(f"  {n:5d} not calibrated: {FAILURE_LABELS.get(code, code)}" + (f" (e.g. {example})" if n > 1 else f" ({example})"))
+    print_skipped([m for c, m in failures if c in ("bad_input", "bad_output")], prefix="  ")
     if not len(cams):
         print(f"error: no frame calibrated: {args.out} holds no camera", file=sys.stderr)
         return 1

@@ -10,7 +10,7 @@ from pathlib import Path
 
 
 def add_detect_parser(sub) -> None:
-    from pnlviz.cli import parse_size
+    from pnlviz.commands.common import parse_size
 
     p = sub.add_parser("detect", help="keypoint + line-extremity detection (torch, CPU) -> prediction zip",
                        description="Run PnLCalib-compatible networks on every image of a dataset and write a "
@@ -75,7 +75,7 @@ def run_detect(args) -> int:
     import torch
     from tqdm import tqdm
 
-    from pnlviz.cli import open_input_dataset, print_skipped
+    from pnlviz.commands.common import open_input_dataset, print_skipped
     from pnlviz.data import DataError, ZipStream, write_predictions_info
     from pnlviz.data.predictions import prediction_member, prediction_zip_order
     from pnlviz.detect.checkpoint import CheckpointError

@@ -13,7 +13,7 @@ from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from pnlviz.cli import parse_size
+from pnlviz.commands.common import parse_size
 
 DEFAULT_SIZE = (960, 540)
 
@@ -30,9 +30,9 @@ def _label_one(stem: str) -> tuple[str, str, object]:
     annotation, ``("skipped", message)`` for a bad input file, ``("failed", message)`` otherwise."""
     from pnlviz.data.errors import DataError
 
-    from .extremities import line_extremities
-    from .keypoints import keypoints_from_annotation
-    from .writer import write_labels
+    from pnlviz.labels.extremities import line_extremities
+    from pnlviz.labels.keypoints import keypoints_from_annotation
+    from pnlviz.labels.writer import write_labels
 
     ds, params = _STATE["dataset"], _STATE["params"]
     try:
@@ -78,10 +78,10 @@ def add_labels_parser(subparsers) -> argparse.ArgumentParser:
 def run_labels(args) -> int:
     from tqdm import tqdm
 
-    from pnlviz.cli import open_input_dataset
+    from pnlviz.commands.common import open_input_dataset
     from pnlviz.data import DataError, OutputError, check_output
 
-    from .types import SETS, LabelParams
+    from pnlviz.labels.types import SETS, LabelParams
 
     out_dir = Path(args.out)
     try:

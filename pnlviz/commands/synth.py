@@ -1,20 +1,13 @@
-"""``pnlviz synth``: synthetic broadcast frames with exact ground-truth cameras and annotations.
-
-Wiring into the main command line::
-
-    from pnlviz.synth.cli import add_synth_parser
-    add_synth_parser(subparsers)          # sets func=run_synth on the sub-command
-    args = parser.parse_args(); sys.exit(args.func(args))
-"""
+"""``pnlviz synth``: synthetic broadcast frames with exact ground-truth cameras and annotations."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from pnlviz.cli import parse_size  # one WxH parser for every command
+from pnlviz.commands.common import parse_size  # one WxH parser for every command
 
-__all__ = ["add_synth_parser", "parse_size", "run_synth"]
+__all__ = ["add_synth_parser", "run_synth"]
 
 
 def _positive_int(text: str) -> int:
@@ -61,7 +54,7 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
 
 def run_synth(args: argparse.Namespace) -> int:
     """Run ``pnlviz synth``; returns the process exit code."""
-    from .writer import OutputFolderError, generate
+    from pnlviz.synth.writer import OutputFolderError, generate
 
     try:
         summary = generate(args.out, args.n, args.seed, size=tuple(args.size), start_index=args.start_index,
@@ -72,15 +65,3 @@ def run_synth(args: argparse.Namespace) -> int:
     print(f"wrote {summary.frames} frames to {summary.out_dir} in {summary.seconds:.1f} s "
           f"({summary.frames_per_second:.2f} frames/s)")
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry point (``python -m pnlviz.synth.cli``) until the main CLI wires it."""
-    parser = argparse.ArgumentParser(prog="pnlviz")
-    add_synth_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    return args.func(args)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

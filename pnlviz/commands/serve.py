@@ -9,7 +9,7 @@ from pathlib import Path
 
 
 def add_serve_parser(sub) -> None:
-    from pnlviz.cli import parse_size
+    from pnlviz.commands.common import parse_size
 
     p = sub.add_parser("serve", help="the web app: inspect calibrations, review frames",
                        description="Serve the pnlviz app (viser) on a dataset; without --data, the bundled "
@@ -110,7 +110,7 @@ def _interrupt(signum, frame) -> None:
 
 
 def add_export_parser(sub) -> None:
-    from pnlviz.cli import parse_size
+    from pnlviz.commands.common import parse_size
 
     p = sub.add_parser("export", help="export corrected training labels (as the app's export button)",
                        description="Write the corrected labels of a dataset and its edits: SoccerNet annotations, "

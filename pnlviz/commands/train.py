@@ -12,8 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-#: where ``pnlviz detect`` and the app look for the default model (the repository's assets)
-DEFAULT_OUT = Path(__file__).resolve().parents[2] / "assets" / "models" / "light.pt"
+from pnlviz.detect.default import DEFAULT_MODEL as DEFAULT_OUT  # where pnlviz detect and the app look
 
 
 def add_train_parser(subparsers) -> None:
@@ -59,17 +58,3 @@ def run_train(args) -> int:
     print(f"trained {result.epochs_done:.2f} epochs, {result.steps} steps in {result.seconds:.0f} s{note}; "
           f"final loss {result.final_loss:.6f} -> {result.path}")
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    import argparse
-
-    ap = argparse.ArgumentParser(prog="pnlviz-train")
-    sub = ap.add_subparsers(dest="command", required=True)
-    add_train_parser(sub)
-    args = ap.parse_args(["train", *(argv if argv is not None else sys.argv[1:])])
-    return args.func(args)
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,0 +1,73 @@
+"""The ``pnlviz`` command line: one module per command, the engine's functions behind them.
+Commands import their heavy dependencies lazily so that the command line starts fast (no torch,
+no viser unless a command needs them)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from pnlviz.commands.calibrate import add_calibrate_parser
+from pnlviz.commands.common import parse_size
+from pnlviz.commands.detect import add_detect_parser
+from pnlviz.commands.evaluate import add_eval_parser
+from pnlviz.commands.labels import add_labels_parser
+from pnlviz.commands.serve import add_export_parser, add_serve_parser
+from pnlviz.commands.sheet import add_sheet_parser
+from pnlviz.commands.synth import add_synth_parser
+from pnlviz.commands.train import add_train_parser
+from pnlviz.commands.validate import add_validate_parser
+
+__all__ = ["build_parser", "main", "parse_size"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from pnlviz import __version__
+
+    parser = argparse.ArgumentParser(prog="pnlviz", description="PnLCalib soccer field registration: "
+                                     "synthetic data, labels, calibration and an inspection app.")
+    parser.add_argument("--version", action="version", version=f"pnlviz {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    add_serve_parser(sub)
+    add_synth_parser(sub)
+    add_labels_parser(sub)
+    add_detect_parser(sub)
+    add_train_parser(sub)
+    add_calibrate_parser(sub)
+    add_eval_parser(sub)
+    add_export_parser(sub)
+    add_validate_parser(sub)
+    add_sheet_parser(sub)
+    return parser
+
+
+def _printable_streams() -> None:
+    """File names that are not valid UTF-8 (surrogate escapes) print as ``\\udcff`` instead of
+    ending the command with UnicodeEncodeError after its work is done."""
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
+
+
+def main(argv: list[str] | None = None) -> int:
+    _printable_streams()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    from pnlviz.data.errors import DataError
+    from pnlviz.data.outputs import OutputError
+
+    try:
+        return int(args.func(args) or 0)
+    except OutputError as exc:  # an output over an input or inside a dataset: a usage error
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except DataError as exc:  # a bad input file: one line, no traceback
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+

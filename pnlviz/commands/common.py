@@ -1,0 +1,36 @@
+"""What every command shares: the WxH option parser, and how batch commands open their dataset
+and report the files they skip (one line each)."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"960x540"`` -> (960, 540), with an argparse error on anything else (every command's --size)."""
+    m = re.match(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 960x540, got {text!r}")
+    w, h = int(m.group(1)), int(m.group(2))
+    if not (16 <= w <= 16384 and 16 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"image size {w}x{h} out of range (16..16384 per side)")
+    return w, h
+
+
+def print_skipped(lines, prefix: str = "skipped: ") -> None:
+    """Print problems to stderr, one line each (DataErrors or strings)."""
+    for line in lines:
+        print(f"{prefix}{line}", file=sys.stderr)
+
+
+def open_input_dataset(path):
+    """Open the dataset of a batch command: its rejected files (bad names, duplicates) are printed,
+    one line each; a dataset without any frame is a DataError (nothing to do)."""
+    from pnlviz.data import open_dataset
+
+    ds = open_dataset(path)
+    print_skipped(ds.rejected)
+    ds.require_frames()
+    return ds
