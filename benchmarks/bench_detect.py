@@ -53,13 +53,14 @@ def measure(name: str, size: tuple[int, int], threads: int, full_warmup: bool) -
             dt = time.perf_counter() - t
     else:
         from pnlviz.detect.light import LightNet
+        from pnlviz.detect.run import Detector
 
         net = LightNet().eval()
         params = sum(p.numel() for p in net.parameters())
         if name == "light_480":
             W, H = 480, 272
         if name == "light_detect":
-            det = net.detector((W, H))
+            det = Detector.for_light_net(net, (W, H))
             img = (np.random.default_rng(0).random((540, 960, 3)) * 255).astype(np.uint8)
             det.detect([img])
             t = time.perf_counter()

@@ -26,8 +26,7 @@ import numpy as np
 
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
 from pnlviz.data import open_dataset
-from pnlviz.detect.light import light_detector
-from pnlviz.detect.run import DEFAULT_MODEL, Detector
+from pnlviz.detect.run import DEFAULT_MODEL, Detector, light_detector
 from pnlviz.labels import LabelParams, keypoints_from_annotation, line_extremities
 from pnlviz.metrics.soccernet import evaluate_dataset
 from pnlviz.synth import generate

@@ -409,6 +409,7 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
 
     from pnlviz.app.scene import HANDLE_SCALE
     from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.session import KeypointHandle
     from pnlviz.app.state import AppState
 
     data = frames(tmp / "tabs", cameras=True)
@@ -436,8 +437,8 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
             for n, kid in enumerate(dragged):
                 page, session = tabs[n % 2]
                 box = page.locator("canvas").first.bounding_box()
-                pos = np.asarray(session._handles[("kp", kid)].position, float)
-                cam = session._handle_frame[("kp", kid)][1]
+                pos = np.asarray(session._handles[KeypointHandle(kid)].position, float)
+                cam = session._handle_frame[KeypointHandle(kid)][1]
                 x0, y0 = screen_point(session.client, box, pos + 0.5 * HANDLE_SCALE * cam.R[0])  # on the x arrow
                 x1, y1 = screen_point(session.client, box, pos + 0.9 * HANDLE_SCALE * cam.R[0])
                 step = np.array([x1 - x0, y1 - y0]) / max(np.hypot(x1 - x0, y1 - y0), 1e-9)

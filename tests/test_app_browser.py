@@ -349,6 +349,7 @@ def test_two_tabs_dragging_on_one_frame_keep_every_edit(data, browser):
     import numpy as np
 
     from pnlviz.app.scene import HANDLE_SCALE
+    from pnlviz.app.session import KeypointHandle
 
     app = start(data)
     try:
@@ -368,8 +369,8 @@ def test_two_tabs_dragging_on_one_frame_keep_every_edit(data, browser):
         for n, kid in enumerate(dragged):
             page, session = tabs[n % 2]
             box = page.locator("canvas").first.bounding_box()
-            pos = np.asarray(session._handles[("kp", kid)].position, float)
-            cam = session._handle_frame[("kp", kid)][1]
+            pos = np.asarray(session._handles[KeypointHandle(kid)].position, float)
+            cam = session._handle_frame[KeypointHandle(kid)][1]
             x0, y0 = _screen_point(session.client, box, pos + 0.5 * HANDLE_SCALE * cam.R[0])
             page.mouse.move(x0, y0)
             page.mouse.down()

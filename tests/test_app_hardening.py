@@ -68,6 +68,7 @@ def test_concurrent_edits_from_threads_all_land_on_their_frames(data):
 def test_two_tabs_on_two_frames_never_touch_each_other(data):
     from pnlviz.app.scene import pixel_to_plane
     from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.session import KeypointHandle
 
     st = AppState(data)
     app = PnlvizApp(st, port=_free_port())
@@ -81,7 +82,7 @@ def test_two_tabs_on_two_frames_never_touch_each_other(data):
         kid = int(a.view().observations.kp_ids[0])
         target = SimpleNamespace(position=pixel_to_plane(cam, (321.0, 123.0)))
         b.goto(st.find("00002"))  # the other tab moves while the drag is in the air
-        a.on_drag(SimpleNamespace(phase="end", target=target), stem, ("kp", kid), cam)
+        a.on_drag(SimpleNamespace(phase="end", target=target), stem, KeypointHandle(kid), cam)
         assert stem == "00003" and a.stem == "00003" and b.stem == "00002"
         np.testing.assert_allclose(st.edits.get("00003")["keypoints"][str(kid)], [321.0, 123.0], atol=1e-6)
         assert st.edits.get("00002") == {} and st.edits.get("00001") == {}

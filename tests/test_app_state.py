@@ -220,6 +220,7 @@ def test_drag_end_recalibrates_on_the_server(data):
 
     from pnlviz.app.scene import pixel_to_plane
     from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.session import KeypointHandle
 
     st = AppState(data)
     app = PnlvizApp(st, port=_free_port())
@@ -229,15 +230,15 @@ def test_drag_end_recalibrates_on_the_server(data):
         tab.handles_mode.value = "keypoints"
         tab.flush()
         view = tab.view()
-        assert len(tab._handles) == view.observations.n_keypoints and set(tab._handles) == {("kp", int(k)) for k in view.observations.kp_ids}
+        assert set(tab._handles) == {KeypointHandle(int(k)) for k in view.observations.kp_ids}
         stem, cam = tab._shown
         before = view.result.camera.C.copy()
         kid = int(view.observations.kp_ids[0])
         target = SimpleNamespace(position=pixel_to_plane(cam, (300.0, 200.0)))
-        tab.on_drag(SimpleNamespace(phase="update", target=target), stem, ("kp", kid), cam)
+        tab.on_drag(SimpleNamespace(phase="update", target=target), stem, KeypointHandle(kid), cam)
         assert "keypoints" not in st.edits.get("00002")  # only the release counts
         tab.goto(st.find("00001"))  # the tab moves on before the release...
-        tab.on_drag(SimpleNamespace(phase="end", target=target), stem, ("kp", kid), cam)
+        tab.on_drag(SimpleNamespace(phase="end", target=target), stem, KeypointHandle(kid), cam)
         saved = json.loads((st.edits.frames / "00002.json").read_text())  # ...which still lands on 00002
         np.testing.assert_allclose(saved["keypoints"][str(kid)], [300.0, 200.0], atol=1e-6)
         assert "keypoints" not in st.edits.get("00001")

@@ -4,7 +4,6 @@ import json
 import zipfile
 
 import numpy as np
-import pytest
 
 from pnlviz.calib.calibrate import CalibParams, calibrate
 from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions

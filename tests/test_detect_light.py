@@ -9,7 +9,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from pnlviz.detect.light import LightNet, light_detector, load_light, read_sidecar  # noqa: E402
+from pnlviz.detect.light import LightNet, load_light, read_sidecar  # noqa: E402
+from pnlviz.detect.run import light_detector  # noqa: E402
 from pnlviz.detect.train import (FrameCache, TrainConfig, focal_heatmap_loss, load_config, loss_fn,  # noqa: E402
                                  masked_mse, peak_pixels, train)
 

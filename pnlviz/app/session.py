@@ -17,6 +17,7 @@ import traceback
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,6 +31,30 @@ HANDLE_MODES = ("off", "keypoints", "line points")
 LAYERS = ("annotation", "keypoints", "ids", "initial_pitch", "refined_pitch", "residuals", "reference_pitch",
           "detected_lines")
 KEYPOINT_CHOICES = tuple(str(i) for i in range(1, 74))
+
+
+class KeypointHandle(NamedTuple):
+    """A drag handle on a keypoint."""
+
+    kid: int
+
+    @property
+    def path(self) -> str:
+        return f"/frame/handles/kp/{self.kid}"
+
+
+class LinePointHandle(NamedTuple):
+    """A drag handle on point ``index`` of an annotated line or circle."""
+
+    cls: str
+    index: int
+
+    @property
+    def path(self) -> str:
+        return f"/frame/handles/line/{self.cls.strip().replace(' ', '_')}/{self.index}"
+
+
+HandleTarget = KeypointHandle | LinePointHandle
 
 
 def calibration_card(view: FrameView, state: AppState) -> str:
@@ -87,9 +112,9 @@ class Session:
         self.grabs = self.releases = 0  # handle drags started and released in this tab
         self._lock = threading.RLock()
         self._frustum = self._rays = None
-        self._handles: dict[tuple, object] = {}  # what ("kp", id) / ("line", class, i) -> transform controls
-        self._handle_frame: dict[tuple, tuple] = {}  # what -> (stem, camera) the handle is placed with
-        self._dragging: dict[tuple, tuple | None] = {}  # drags in progress: what -> (stem, camera) at start
+        self._handles: dict[HandleTarget, object] = {}  # what -> its transform controls
+        self._handle_frame: dict[HandleTarget, tuple] = {}  # what -> (stem, camera) the handle is placed with
+        self._dragging: dict[HandleTarget, tuple | None] = {}  # drags in progress: what -> (stem, camera) at start
         #: everything this tab asks for runs here, one action at a time, in the order it was sent
         self._queue = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pnlviz-tab")
         self._shown: tuple[str, object] | None = None  # (stem, camera) of the image plane on screen
@@ -371,12 +396,12 @@ class Session:
         (a handle keeps its identity across redraws, so a drag in progress is never cut short by a
         redraw that another tab's edit caused; the handle being dragged is left where the hand is)."""
         mode = self.handles_mode.value
-        targets: dict[tuple, np.ndarray] = {}  # what -> uv
+        targets: dict[HandleTarget, np.ndarray] = {}  # what -> uv
         if cam is not None and mode == "keypoints" and view.observations is not None:
-            targets = {("kp", int(k)): p for k, p in zip(view.observations.kp_ids, view.observations.kp_xy)}
+            targets = {KeypointHandle(int(k)): p for k, p in zip(view.observations.kp_ids, view.observations.kp_xy)}
         elif cam is not None and mode == "line points" and view.annotation:
             W, H = view.size
-            targets = {("line", name, i): p * [W - 1, H - 1] for name, pts in view.annotation.items()
+            targets = {LinePointHandle(name, i): p * [W - 1, H - 1] for name, pts in view.annotation.items()
                        for i, p in enumerate(pts)}
         for what in [w for w in self._handles if w not in targets and w not in self._dragging]:
             self._handles.pop(what).remove()
@@ -389,7 +414,7 @@ class Session:
             handle = self._handles.get(what)
             if handle is None:
                 handle = self.scene.add_transform_controls(
-                    f"/frame/handles/{'/'.join(map(str, what))}", scale=HANDLE_SCALE, disable_rotations=True,
+                    what.path, scale=HANDLE_SCALE, disable_rotations=True,
                     disable_sliders=True, active_axes=(True, True, False), depth_test=False, wxyz=wxyz,
                     position=pixel_to_plane(cam, uv))
                 handle.on_update(self._drag_callback(what))
@@ -397,7 +422,7 @@ class Session:
             elif what not in self._dragging:
                 handle.wxyz, handle.position = wxyz, pixel_to_plane(cam, uv)
 
-    def _drag_callback(self, what: tuple):
+    def _drag_callback(self, what: HandleTarget):
         """An ``async`` callback: viser awaits those on its event loop in the order the browser sent
         them, so a drag's start is always seen before its end. It only records the phases; the edit
         itself runs on this tab's queue, one after the other in the order they were made."""
@@ -415,12 +440,12 @@ class Session:
 
         return on_update
 
-    def on_drag(self, event, stem: str, what: tuple, cam) -> None:
+    def on_drag(self, event, stem: str, what: HandleTarget, cam) -> None:
         """A drag event of the handle ``what`` placed on ``stem`` with ``cam``: the release edits."""
         if event.phase == "end":
             self.release(stem, what, cam, event.target.position)
 
-    def release(self, stem: str, what: tuple, cam, position) -> None:
+    def release(self, stem: str, what: HandleTarget, cam, position) -> None:
         """A handle was released at ``position`` (on the image plane of ``cam``): the edit goes to
         ``stem``, the frame the drag began on, whatever this tab shows now."""
         self.releases += 1
@@ -428,10 +453,10 @@ class Session:
         t0 = time.perf_counter()
 
         def edit() -> None:
-            if what[0] == "kp":
-                self.state.move_keypoint(stem, what[1], *uv)
+            if isinstance(what, KeypointHandle):
+                self.state.move_keypoint(stem, what.kid, *uv)
             else:
-                self.state.move_line_point(stem, what[1], what[2], *uv)
+                self.state.move_line_point(stem, what.cls, what.index, *uv)
             self.state.view(stem, self.settings)  # recalibrate now, to time it
             self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
 

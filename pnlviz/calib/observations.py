@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pnlviz.field.model import FieldModel, load_field_model
-from pnlviz.field.names import CIRCLE_CLASSES, STRAIGHT_CLASSES
 
 
 @dataclass
@@ -61,14 +60,3 @@ class Observations:
         """The same observations with only the keypoints in ``mask``."""
         return Observations(self.width, self.height, self.kp_ids[mask], self.kp_xy[mask], self.kp_xyz[mask],
                             self.kp_sets[mask], self.kp_main[mask], self.lines, self.circles)
-
-    def scaled(self, width: int, height: int) -> "Observations":
-        s = np.array([width / self.width, height / self.height])
-        return Observations(width, height, self.kp_ids, self.kp_xy * s, self.kp_xyz, self.kp_sets, self.kp_main,
-                            {k: v * s for k, v in self.lines.items()}, {k: v * s for k, v in self.circles.items()})
-
-
-def check_classes(lines: dict, circles: dict) -> None:
-    bad = [k for k in lines if k not in STRAIGHT_CLASSES] + [k for k in circles if k not in CIRCLE_CLASSES]
-    if bad:
-        raise ValueError(f"not straight/circle classes: {bad}")

@@ -4,7 +4,6 @@ official evaluator accepts."""
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys

@@ -28,7 +28,7 @@ handled with explicit interpolation targets, so any input size works (e.g. 960x5
 runs once per input: the view called first computes both heads and the other view picks up the
 cached result when it is called with the same tensor (as ``Detector.heatmaps`` does).
 
-``light_detector(path)`` builds a ``Detector`` from a checkpoint written by
+``pnlviz.detect.run.light_detector(path)`` builds a ``Detector`` from a checkpoint written by
 :mod:`pnlviz.detect.train` (its JSON sidecar gives the input size the model was trained at).
 """
 
@@ -44,7 +44,7 @@ from torch import nn
 from pnlviz.detect.default import read_sidecar, sidecar_path  # noqa: F401 (torch-free; re-exported)
 from pnlviz.detect.hrnet import KEYPOINT_CHANNELS, LINE_CHANNELS
 
-__all__ = ["LightNet", "HeadView", "light_detector", "load_light", "read_sidecar", "sidecar_path"]
+__all__ = ["LightNet", "HeadView", "load_light", "read_sidecar", "sidecar_path"]
 
 ENCODER_WIDTHS = (16, 24, 48, 80, 128)
 ENCODER_BLOCKS = (0, 1, 2, 2, 2)
@@ -168,14 +168,6 @@ class LightNet(nn.Module):
     def line_head_module(self) -> "HeadView":
         return HeadView(self, "lines")
 
-    def detector(self, input_size: tuple[int, int] = (960, 540), **kw):
-        """A :class:`pnlviz.detect.run.Detector` running this network (eval mode) for both heads."""
-        from pnlviz.detect.run import Detector
-
-        self.eval()
-        kw.setdefault("centre_aligned_resize", True)  # trained on frames rendered at its input size
-        return Detector(self.kp_head_module(), self.line_head_module(), input_size=tuple(input_size), **kw)
-
 
 class HeadView(nn.Module):
     """One head of a :class:`LightNet` as a network of its own (``forward(x) -> heatmaps``)."""
@@ -197,22 +189,3 @@ def load_light(weights: str | Path) -> LightNet:
     from pnlviz.detect.checkpoint import load_checkpoint
 
     return load_checkpoint(LightNet(), weights).eval()
-
-
-def light_detector(weights: str | Path, input_size: tuple[int, int] | None = None, **kw):
-    """A ``Detector`` on a light checkpoint. ``input_size`` defaults to the size it was trained at,
-    the peak thresholds (``kp_threshold``, ``line_threshold``), the sub-pixel refinement
-    (``refine``) and the calibration settings for its detections (``calibration``) to the ones
-    tuned for it, all from the sidecar (else 960x540 and the Detector's defaults)."""
-    side = read_sidecar(weights)
-    if input_size is None:
-        size = side.get("input_size")
-        input_size = tuple(int(v) for v in size) if size else (960, 540)
-    tuned = {"kp_threshold": side.get("kp_threshold"), "line_threshold": side.get("line_threshold"),
-             "refine": side.get("peak_refine"), "calibration": side.get("calibration")}
-    for name, value in tuned.items():  # what the caller leaves at None comes from the sidecar
-        if kw.get(name) is None:
-            kw.pop(name, None)
-            if value is not None:
-                kw[name] = value
-    return load_light(weights).detector(input_size, **kw)

@@ -16,7 +16,8 @@ import torch
 
 from pnlviz.data.predictions import Predictions
 from pnlviz.detect.checkpoint import load_checkpoint
-from pnlviz.detect.default import DEFAULT_MODEL  # noqa: F401 (re-exported; from_weights reads it here)
+from pnlviz.detect.default import DEFAULT_MODEL, read_sidecar
+from pnlviz.detect.light import load_light
 from pnlviz.detect.hrnet import PnLCalibNet, keypoint_net, line_net
 from pnlviz.detect.peaks import extract_predictions
 
@@ -62,8 +63,6 @@ class Detector:
                 raise NoModelError(f"no detector weights: pass --weights-kp and/or --weights-lines (PnLCalib's "
                                    f"SV_kp / SV_lines load as they are), or train the default model with "
                                    f"`pnlviz train` ({DEFAULT_MODEL} is missing)")
-            from pnlviz.detect.light import light_detector
-
             return light_detector(DEFAULT_MODEL, **kw)
         kp = line = None
         if weights_kp is not None:
@@ -71,6 +70,13 @@ class Detector:
         if weights_lines is not None:
             line = load_checkpoint(line_net(), weights_lines).eval()
         return cls(kp, line, **kw)
+
+    @classmethod
+    def for_light_net(cls, net, input_size: tuple[int, int] = DEFAULT_INPUT_SIZE, **kw) -> "Detector":
+        """A detector running a :class:`pnlviz.detect.light.LightNet` (eval mode) for both heads."""
+        net.eval()
+        kw.setdefault("centre_aligned_resize", True)  # trained on frames rendered at its input size
+        return cls(net.kp_head_module(), net.line_head_module(), input_size=tuple(input_size), **kw)
 
     def _tensor(self, images_bgr: list[np.ndarray]) -> torch.Tensor:
         W, H = self.input_size
@@ -114,3 +120,22 @@ def undo_centre_aligned_resize(pred: Predictions, input_size, frame_size) -> Pre
     keypoints = {k: (*f(x, y), p) for k, (x, y, p) in pred.keypoints.items()}
     lines = {k: (*f(x1, y1), p1, *f(x2, y2), p2) for k, (x1, y1, p1, x2, y2, p2) in pred.lines.items()}
     return Predictions(keypoints=keypoints, lines=lines)
+
+
+def light_detector(weights: str | Path, input_size: tuple[int, int] | None = None, **kw) -> Detector:
+    """A ``Detector`` on a light checkpoint. ``input_size`` defaults to the size it was trained at,
+    the peak thresholds (``kp_threshold``, ``line_threshold``), the sub-pixel refinement
+    (``refine``) and the calibration settings for its detections (``calibration``) to the ones
+    tuned for it, all from the sidecar (else 960x540 and the Detector's defaults)."""
+    side = read_sidecar(weights)
+    if input_size is None:
+        size = side.get("input_size")
+        input_size = tuple(int(v) for v in size) if size else DEFAULT_INPUT_SIZE
+    tuned = {"kp_threshold": side.get("kp_threshold"), "line_threshold": side.get("line_threshold"),
+             "refine": side.get("peak_refine"), "calibration": side.get("calibration")}
+    for name, value in tuned.items():  # what the caller leaves at None comes from the sidecar
+        if kw.get(name) is None:
+            kw.pop(name, None)
+            if value is not None:
+                kw[name] = value
+    return Detector.for_light_net(load_light(weights), input_size, **kw)

@@ -294,8 +294,6 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
           cache: FrameCache | None = None) -> TrainResult:
     """Train a LightNet with ``config`` and save it to ``out`` (+ sidecar). ``minutes`` bounds the
     training time (rendering excluded): the loop stops after the step that crosses it and saves."""
-    from tqdm import tqdm
-
     out = Path(out)
     log = log or (lambda s: None)
     if config.threads:
@@ -308,28 +306,50 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
     render_s = time.perf_counter() - t_render
     if len(cache) == 0:
         raise ValueError("no training frames")
-
     net = LightNet()
     net.train()
+    run = _train_loop(net, cache, config, None if minutes is None else float(minutes) * 60.0, progress, log)
+    torch.set_flush_denormal(False)  # back to torch's default for the rest of the process
+    net.eval()
+    save_checkpoint(net, out)
+    info = _provenance(config, cache, net, run, render_s)
+    write_sidecar(out, info)
+    per_step = run.seconds / max(1, run.steps)
+    log(f"saved {out} (+ {sidecar_path(out).name}); final loss {info['final_loss']:.6f}, "
+        f"{run.seconds:.0f} s, {per_step:.3f} s/step")
+    return TrainResult(out, run.history, info["final_loss"], run.epochs_done, run.steps, run.seconds, per_step,
+                       run.stopped)
+
+
+@dataclass
+class _Run:
+    """What the training loop did."""
+
+    history: list[float]  #: mean loss of each epoch
+    steps: int
+    stopped: bool  #: by the time budget
+    epochs_done: float
+    step_times: list[float]
+    seconds: float
+    batch_size: int
+
+
+def _train_loop(net: LightNet, cache: FrameCache, config: TrainConfig, budget: float | None, progress: bool,
+                log: Callable[[str], None]) -> _Run:
+    """Adam with a cosine learning rate over ``config.epochs`` epochs of shuffled batches, until
+    ``budget`` seconds have passed (None: no limit)."""
+    from tqdm import tqdm
+
     opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     bs = max(1, min(int(config.batch_size), len(cache)))
     steps_per_epoch = math.ceil(len(cache) / bs)
     total_steps = max(1, steps_per_epoch * int(config.epochs))
-
-    def lr_at(step: int) -> float:
-        c = 0.5 * (1 + math.cos(math.pi * min(step, total_steps) / total_steps))
-        return config.lr_final + (config.lr - config.lr_final) * c
-
     rng = np.random.default_rng(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
-    budget = None if minutes is None else float(minutes) * 60.0
     flip_p = float((config.augment or {}).get("flip", 0.0))
-    history: list[float] = []
-    step_times: list[float] = []
-    step, stopped = 0, False
+    run = _Run([], 0, False, 0.0, [], 0.0, bs)
     t0 = time.perf_counter()
     bar = tqdm(total=total_steps, desc="train", unit="step", disable=not progress)
-    epochs_done = 0.0
     for epoch in range(int(config.epochs)):
         order = rng.permutation(len(cache))
         losses = []
@@ -340,32 +360,35 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
             flips = rng.random(len(idx)) < flip_p if flip_p > 0 else None
             x, kp_t, kp_m, ln_t, ln_m = _batch(cache, idx, tuple(config.input_size), config.sigma, flips)
             x = augment(x, config.augment or {}, gen)
+            cosine = 0.5 * (1 + math.cos(math.pi * min(run.steps, total_steps) / total_steps))
             for g in opt.param_groups:
-                g["lr"] = lr_at(step)
+                g["lr"] = config.lr_final + (config.lr - config.lr_final) * cosine
             loss = loss_fn(net, x, kp_t, kp_m, ln_t, ln_m, config.loss)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-            step += 1
-            step_times.append(time.perf_counter() - t_step)
+            run.steps += 1
+            run.step_times.append(time.perf_counter() - t_step)
             losses.append(float(loss.detach()))
             bar.update(1)
             bar.set_postfix(epoch=epoch + 1, loss=f"{losses[-1]:.5f}")
             if budget is not None and time.perf_counter() - t0 >= budget:
-                stopped = True
+                run.stopped = True
                 break
-        history.append(float(np.mean(losses)))
-        epochs_done = epoch + len(losses) / steps_per_epoch
-        log(f"epoch {epoch + 1}/{config.epochs}: loss {history[-1]:.6f} "
-            f"({time.perf_counter() - t0:.0f} s, {step} steps)")
-        if stopped:
+        run.history.append(float(np.mean(losses)))
+        run.epochs_done = epoch + len(losses) / steps_per_epoch
+        log(f"epoch {epoch + 1}/{config.epochs}: loss {run.history[-1]:.6f} "
+            f"({time.perf_counter() - t0:.0f} s, {run.steps} steps)")
+        if run.stopped:
             break
     bar.close()
-    torch.set_flush_denormal(False)  # back to torch's default for the rest of the process
-    seconds = time.perf_counter() - t0
-    net.eval()
-    save_checkpoint(net, out)
-    info = {
+    run.seconds = time.perf_counter() - t0
+    return run
+
+
+def _provenance(config: TrainConfig, cache: FrameCache, net: LightNet, run: _Run, render_s: float) -> dict:
+    """The sidecar written next to the weights: what was trained, on what, how long."""
+    return {
         "model": "LightNet",
         "module": "pnlviz.detect.light",
         "input_size": list(config.input_size),
@@ -378,23 +401,19 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
         "data": {"generator": "pnlviz.synth.make_frame", "seed": config.data_seed, "frames": len(cache),
                  "size": list(config.size)},
         "epochs_planned": int(config.epochs),
-        "epochs": round(epochs_done, 3),
-        "steps": step,
+        "epochs": round(run.epochs_done, 3),
+        "steps": run.steps,
         "frames": len(cache),
-        "loss_history": [round(v, 7) for v in history],
-        "final_loss": history[-1] if history else None,
-        "stopped_by_time_budget": stopped,
-        "train_seconds": round(seconds, 1),
+        "loss_history": [round(v, 7) for v in run.history],
+        "final_loss": run.history[-1] if run.history else None,
+        "stopped_by_time_budget": run.stopped,
+        "train_seconds": round(run.seconds, 1),
         "render_seconds": round(render_s, 1),
-        "seconds_per_step": round(seconds / max(1, step), 4),
-        "seconds_per_step_median": round(float(np.median(step_times)), 4) if step_times else None,
-        "batch_size": bs,
+        "seconds_per_step": round(run.seconds / max(1, run.steps), 4),
+        "seconds_per_step_median": round(float(np.median(run.step_times)), 4) if run.step_times else None,
+        "batch_size": run.batch_size,
         "parameters": sum(p.numel() for p in net.parameters()),
         "torch": torch.__version__,
         "python": platform.python_version(),
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
-    write_sidecar(out, info)
-    log(f"saved {out} (+ {sidecar_path(out).name}); final loss {info['final_loss']:.6f}, "
-        f"{seconds:.0f} s, {seconds / max(1, step):.3f} s/step")
-    return TrainResult(out, history, info["final_loss"], epochs_done, step, seconds, seconds / max(1, step), stopped)

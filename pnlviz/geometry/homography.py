@@ -67,11 +67,8 @@ def camera_from_ground_homography(H_field_to_image: np.ndarray, width: float, he
     the visible pitch in front of the camera.
 
     A homography has 8 degrees of freedom and this camera 7, so a measured homography (e.g. a
-    hand-annotated WC14 one) is not exactly a camera's; the closed form then spreads the mismatch
-    unevenly (tens of pixels at 1280 x 720 on WC14). ``refine=True`` polishes f, R and C by
-    nonlinear least squares (``scipy.optimize.least_squares``) on the image distance between
-    ``H`` and the camera over a 16 x 9 grid of pixels whose back-projection through ``H`` lies in
-    front of the camera. An exact camera homography is a fixed point of the refinement.
+    hand-annotated WC14 one) is not exactly a camera's: the closed form then spreads the mismatch
+    unevenly; ``refine=True`` polishes f, R and C against ``H`` (:func:`_refine_to_homography`).
     """
     from pnlviz.geometry.camera import Camera
 
@@ -109,26 +106,36 @@ def camera_from_ground_homography(H_field_to_image: np.ndarray, width: float, he
     if not (np.all(np.isfinite(C)) and C[2] < 0):
         return None
     if refine:
-        import cv2
-        from scipy.optimize import least_squares
-
-        # ground points seen at a grid of pixels, through H (the sign of H is irrelevant here)
-        gu, gv = np.meshgrid(np.linspace(0, width, 16), np.linspace(0, height, 9))
-        uv = np.stack([gu.ravel(), gv.ravel()], axis=1)
-        X = apply_homography(np.linalg.inv(H), uv)
-        Xc = (np.hstack([X, np.zeros((len(X), 1))]) - C) @ R.T
-        keep = np.isfinite(X).all(axis=1) & (Xc[:, 2] > 0)
-        if keep.sum() >= 4:
-            X, uv = X[keep], uv[keep]
-            scale = max(width, height)
-
-            def residuals(p):
-                Rk = cv2.Rodrigues(p[1:4])[0] @ R
-                xc = (np.hstack([X, np.zeros((len(X), 1))]) - p[4:7]) @ Rk.T
-                fk = f * np.exp(p[0])
-                return (np.stack([fk * xc[:, 0] / xc[:, 2] + cx, fk * xc[:, 1] / xc[:, 2] + cy], 1) - uv).ravel() / scale
-
-            sol = least_squares(residuals, np.r_[0.0, 0.0, 0.0, 0.0, C], x_scale=np.r_[1e-2, 1e-2, 1e-2, 1e-2, 1.0, 1.0, 1.0])
-            if sol.success and np.all(np.isfinite(sol.x)) and sol.x[6] < 0:
-                f, R, C = f * np.exp(sol.x[0]), cv2.Rodrigues(sol.x[1:4])[0] @ R, sol.x[4:7]
+        f, R, C = _refine_to_homography(H, f, R, C, width, height)
     return Camera(f, f, cx, cy, R, C, float(width), float(height))
+
+
+def _refine_to_homography(H: np.ndarray, f: float, R: np.ndarray, C: np.ndarray, width: float, height: float):
+    """``(f, R, C)`` refined by nonlinear least squares on the image distance between ``H`` and the
+    camera over a 16 x 9 grid of pixels whose back-projection through ``H`` lies in front of the
+    camera (unchanged when fewer than 4 do, or when the solver fails)."""
+    import cv2
+    from scipy.optimize import least_squares
+
+    cx, cy = width / 2.0, height / 2.0
+    # ground points seen at a grid of pixels, through H (the sign of H is irrelevant here)
+    gu, gv = np.meshgrid(np.linspace(0, width, 16), np.linspace(0, height, 9))
+    uv = np.stack([gu.ravel(), gv.ravel()], axis=1)
+    X = apply_homography(np.linalg.inv(H), uv)
+    Xc = (np.hstack([X, np.zeros((len(X), 1))]) - C) @ R.T
+    keep = np.isfinite(X).all(axis=1) & (Xc[:, 2] > 0)
+    if keep.sum() < 4:
+        return f, R, C
+    X, uv = X[keep], uv[keep]
+    scale = max(width, height)
+
+    def residuals(p):
+        Rk = cv2.Rodrigues(p[1:4])[0] @ R
+        xc = (np.hstack([X, np.zeros((len(X), 1))]) - p[4:7]) @ Rk.T
+        fk = f * np.exp(p[0])
+        return (np.stack([fk * xc[:, 0] / xc[:, 2] + cx, fk * xc[:, 1] / xc[:, 2] + cy], 1) - uv).ravel() / scale
+
+    sol = least_squares(residuals, np.r_[0.0, 0.0, 0.0, 0.0, C], x_scale=np.r_[1e-2, 1e-2, 1e-2, 1e-2, 1.0, 1.0, 1.0])
+    if sol.success and np.all(np.isfinite(sol.x)) and sol.x[6] < 0:
+        return f * np.exp(sol.x[0]), cv2.Rodrigues(sol.x[1:4])[0] @ R, sol.x[4:7]
+    return f, R, C

@@ -143,7 +143,6 @@ class _Builder:
         self.lines: dict[str, _Line] = {}
         self.conics: dict[str, _Conic] = {}
         self.labels: dict[int, tuple[np.ndarray, str]] = {}  # id -> (xy, set)
-        self.gains: dict = {}
         self.suspect: set[str] = set()
 
     # ---------------------------------------------------------------- helpers
@@ -273,7 +272,6 @@ class _Builder:
                     gain = conic_candidates_gain(c.pts, cands, line=self.lines[pair.line].line)
                 else:
                     gain = conic_candidates_gain(c.pts, cands, external=self.labels[pair.external][0])
-                self.gains[id(pair)] = gain
                 usable &= gain <= self.p.max_conic_noise_gain
             out.append((pair, cands, usable))
         return out

@@ -28,6 +28,7 @@ instead of aliasing. The work per marking is limited to windows around its proje
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -37,13 +38,14 @@ import numpy as np
 from pnlviz.field.model import load_field_model
 from pnlviz.geometry.camera import Camera
 
-from .scene import HALF_LENGTH, Scene, sample_scene
+from .scene import HALF_LENGTH, HALF_WIDTH, Scene, sample_scene
 
 SKY, GROUND, BOARD, STAND = 0, 1, 2, 3
 F32 = np.float32
 SPOT_RADIUS = 0.11
 POST_RADIUS = 0.06
-GOAL_HALF_WIDTH = 3.66
+GOAL_HALF_WIDTH = load_field_model().dimensions["goal_width"] / 2
+GOAL_HEIGHT = load_field_model().dimensions["goal_height"]
 #: Ground hits are clamped to this camera depth (metres) so that rays at the horizon stay finite.
 FAR = 1.0e6
 
@@ -110,13 +112,14 @@ def _interval(x: np.ndarray, lo: float, hi: float, p: np.ndarray) -> np.ndarray:
     return np.clip(np.minimum(x + 0.5 * p, hi) - np.maximum(x - 0.5 * p, lo), 0.0, None) / p
 
 
-_FRUSTUM_CACHE: list = [None, None]
+_LAST_FRUSTUM = threading.local()  # per thread: (camera, bounds) of the last call
 
 
 def _frustum_bounds(camera: Camera) -> tuple[float, float]:
     """Half extents (a, b) of the image in undistorted normalised coordinates, with a margin."""
-    if _FRUSTUM_CACHE[0] is camera:
-        return _FRUSTUM_CACHE[1]
+    last = getattr(_LAST_FRUSTUM, "value", None)
+    if last is not None and last[0] is camera:
+        return last[1]
     W, H = camera.width, camera.height
     s = np.linspace(0.0, 1.0, 33)
     border = np.concatenate([np.stack([s * W, np.zeros_like(s)], 1), np.stack([s * W, np.full_like(s, H)], 1),
@@ -124,7 +127,7 @@ def _frustum_bounds(camera: Camera) -> tuple[float, float]:
     xd = np.stack([(border[:, 0] - camera.cx) / camera.fx, (border[:, 1] - camera.cy) / camera.fy], axis=1)
     xn = camera.undistort(xd)
     bounds = (float(np.abs(xn[:, 0]).max()) * 1.1 + 0.01, float(np.abs(xn[:, 1]).max()) * 1.1 + 0.01)
-    _FRUSTUM_CACHE[:] = [camera, bounds]
+    _LAST_FRUSTUM.value = (camera, bounds)
     return bounds
 
 
@@ -383,7 +386,7 @@ def _ground_colour(camera: Camera, scene: Scene, d: tuple, t_ground: np.ndarray)
     # Grass: stripes along x inside the mowed area, a world-space noise texture.
     stripe = _stripes(X, g.stripe_width, g.stripe_phase, pX)
     stripe *= F32(g.stripe_contrast)
-    stripe[(np.abs(X) > HALF_LENGTH + 2.5) | (np.abs(Y) > 36.5)] = 0
+    stripe[(np.abs(X) > HALF_LENGTH + 2.5) | (np.abs(Y) > HALF_WIDTH + 2.5)] = 0
     mx = np.mod(X * F32(1.0 / g.texture_scale) + F32(g.texture_offset[0]), F32(512.0))
     my = np.mod(Y * F32(1.0 / g.texture_scale) + F32(g.texture_offset[1]), F32(512.0))
     tex = cv2.remap(_grass_tile(), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
@@ -662,7 +665,7 @@ def _goal_sprites(scene: Scene, camera: Camera) -> list:
     for sign in (-1.0, 1.0):
         gx = sign * HALF_LENGTH
         bx = gx + sign * 2.0
-        gw, gh = GOAL_HALF_WIDTH, 2.44
+        gw, gh = GOAL_HALF_WIDTH, GOAL_HEIGHT
         xs = (min(gx, bx), max(gx, bx))
         items = [
             ((bx, 0.0, -gh / 2), ("net", 0, bx, {1: (-gw, gw), 2: (-gh, 0.0)}, net, op)),

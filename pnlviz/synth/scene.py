@@ -13,9 +13,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from pnlviz.field.model import load_field_model
 from pnlviz.geometry.camera import Camera
 
-HALF_LENGTH, HALF_WIDTH = 52.5, 34.0
+_DIMENSIONS = load_field_model().dimensions
+HALF_LENGTH, HALF_WIDTH = _DIMENSIONS["pitch_length"] / 2, _DIMENSIONS["pitch_width"] / 2
 
 
 def hsv_to_bgr(h: float, s: float, v: float) -> np.ndarray:

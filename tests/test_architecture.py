@@ -1,0 +1,138 @@
+"""The shape of the code (docs/architecture.md): no import cycle, rooms import only the rooms they
+may, no engine function over 60 lines, no block of more than 10 lines written twice."""
+
+import ast
+import io
+import keyword
+import sys
+import tokenize
+from collections import defaultdict
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "scripts"))
+
+from import_graph import cycles, import_graph, room_graph  # noqa: E402
+
+#: what each room may import (besides itself), as docs/architecture.md draws it
+ALLOWED = {
+    "pnlviz": set(),
+    "pnlviz.conventions": set(),
+    "pnlviz.field": {"pnlviz"},
+    "pnlviz.geometry": {"pnlviz.field"},
+    "pnlviz.data": {"pnlviz.field"},
+    "pnlviz.labels": {"pnlviz.field", "pnlviz.geometry", "pnlviz.data"},
+    "pnlviz.metrics": {"pnlviz.field", "pnlviz.geometry", "pnlviz.data"},
+    "pnlviz.calib": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.labels"},
+    "pnlviz.synth": {"pnlviz.field", "pnlviz.geometry", "pnlviz.data"},
+    "pnlviz.detect": {"pnlviz.data", "pnlviz.labels", "pnlviz.synth"},
+    "pnlviz.viz": {"pnlviz.field", "pnlviz.geometry"},
+    "pnlviz.app": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.calib",
+                   "pnlviz.metrics", "pnlviz.viz", "pnlviz.detect"},
+    "pnlviz.commands": {"pnlviz", "pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data",
+                        "pnlviz.labels", "pnlviz.metrics", "pnlviz.calib", "pnlviz.synth", "pnlviz.detect",
+                        "pnlviz.viz", "pnlviz.app"},
+    "pnlviz.cli": {"pnlviz.commands"},
+    "pnlviz.__main__": {"pnlviz.commands"},
+}
+#: rooms whose functions are the engine (the app's GUI and the commands' argument handling aside)
+ENGINE = ("field", "geometry", "data", "labels", "metrics", "calib", "synth", "detect", "viz.py", "conventions.py")
+MAX_FUNCTION_LINES = 60
+MAX_REPEATED_LINES = 10
+
+
+def test_the_import_graph_sees_lazy_imports():
+    graph = import_graph()
+    assert "pnlviz.commands.calibrate" in graph["pnlviz.commands"]
+    assert "pnlviz.calib.frame" in graph["pnlviz.commands.calibrate"]  # imported inside a function there
+
+
+def test_no_import_cycle_between_modules_or_rooms():
+    graph = import_graph()
+    assert cycles(graph) == []
+    assert cycles(room_graph(graph)) == []
+
+
+def test_rooms_import_only_what_they_may():
+    rooms = room_graph(import_graph())
+    assert set(rooms) == set(ALLOWED), "a room was added or removed: say what it may import"
+    extra = {r: sorted(deps - ALLOWED[r]) for r, deps in rooms.items() if deps - ALLOWED[r]}
+    assert extra == {}
+
+
+def _engine_files():
+    for name in ENGINE:
+        path = REPO / "pnlviz" / name
+        yield from (sorted(path.rglob("*.py")) if path.is_dir() else [path])
+
+
+def test_no_engine_function_over_60_lines():
+    long = []
+    for path in _engine_files():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                if n > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(REPO)}:{node.lineno} {node.name} ({n} lines)")
+    assert long == []
+
+
+def _shapes(path: Path) -> list[tuple[int, str]]:
+    """(line number, shape) of each code line: names, numbers and strings replaced by
+    placeholders (keywords kept), comments, docstrings, blank lines and imports left out."""
+    lines = defaultdict(list)
+    docstrings = {n.body[0].lineno for n in ast.walk(ast.parse(path.read_text()))
+                  if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and n.body
+                  and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+    for tok in tokenize.generate_tokens(io.StringIO(path.read_text()).readline):
+        if tok.type in (tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT):
+            continue
+        if tok.type == tokenize.NAME and not keyword.iskeyword(tok.string):
+            text = "N"
+        elif tok.type == tokenize.NUMBER:
+            text = "0"
+        elif tok.type == tokenize.STRING:
+            text = "S"
+        else:
+            text = tok.string
+        lines[tok.start[0]].append(text)
+    out = []
+    for number, toks in sorted(lines.items()):
+        shape = " ".join(toks)
+        data_only = "N" not in toks and not any(t[:1].isalpha() or t[:1] == "_" for t in toks if t not in ("S", "0"))
+        if number in docstrings or toks[0] in ("import", "from") or data_only:  # data (lists of names) is not code
+            continue
+        out.append((number, shape))
+    return out
+
+
+def repeated_blocks(paths, root: Path) -> list[str]:
+    """Runs of 11 code lines of the same shape in two files (see :func:`_shapes`)."""
+    seen, repeats = {}, []
+    for path in paths:
+        name = str(path.relative_to(root))
+        shapes = _shapes(path)
+        for i in range(len(shapes) - MAX_REPEATED_LINES):
+            window = tuple(s for _, s in shapes[i:i + MAX_REPEATED_LINES + 1])
+            if window in seen and not seen[window].startswith(f"{name}:"):
+                repeats.append(f"{name}:{shapes[i][0]} ~ {seen[window]}")
+            seen.setdefault(window, f"{name}:{shapes[i][0]}")
+    return repeats
+
+
+def test_the_repeated_block_check_finds_a_renamed_copy(tmp_path):
+    def function(name: str, var: str) -> str:
+        body = [f"    {var}{i} = {var}{i - 1} * {i} + len('{var}')" for i in range(1, 13)]
+        return "\n".join([f"def {name}({var}0):", *body, f"    return {var}12", ""])
+
+    (tmp_path / "a.py").write_text(function("f", "x"))
+    (tmp_path / "b.py").write_text(function("g", "y"))  # the same shape with other names
+    (tmp_path / "c.py").write_text("def h(z):\n" + "".join(f"    z = z + {i}\n" for i in range(5)))
+    found = repeated_blocks(sorted(tmp_path.glob("*.py")), tmp_path)
+    assert found and all(line.startswith("b.py:") and "a.py:" in line for line in found)
+
+
+def test_no_block_of_more_than_10_lines_written_twice():
+    """Runs of 11 code lines with the same shape (the same lines, or the same with other names,
+    numbers and strings), anywhere in pnlviz/."""
+    assert repeated_blocks(sorted((REPO / "pnlviz").rglob("*.py")), REPO) == []
