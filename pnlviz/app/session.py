@@ -40,7 +40,7 @@ class KeypointHandle(NamedTuple):
 
     @property
     def path(self) -> str:
-        return f"/frame/handles/kp/{self.kid}"
+        return f"handles/kp/{self.kid}"
 
 
 class LinePointHandle(NamedTuple):
@@ -51,7 +51,7 @@ class LinePointHandle(NamedTuple):
 
     @property
     def path(self) -> str:
-        return f"/frame/handles/line/{self.cls.strip().replace(' ', '_')}/{self.index}"
+        return f"handles/line/{self.cls.strip().replace(' ', '_')}/{self.index}"
 
 
 HandleTarget = KeypointHandle | LinePointHandle
@@ -119,6 +119,9 @@ class Session:
         self._queue = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pnlviz-tab")
         self._shown: tuple[str, object] | None = None  # (stem, camera) of the image plane on screen
         self._closed = False
+        #: where this tab's scene nodes live: a client's own scene, or (without a browser, on the
+        #: server's shared scene) a branch of its own
+        self._nodes = "/frame" if client is not None else f"/frame/session-{id(self):x}"
         self._build_gui()
 
     @property
@@ -376,16 +379,24 @@ class Session:
             return
         self._shown = (view.stem, cam)
         W, H = view.size
-        fov_y = 2 * math.atan((H / 2) / cam.fy)
-        self._frustum = self.scene.add_camera_frustum(
-            "/frame/camera", fov=fov_y, aspect=W / H, scale=FRUSTUM_SCALE, image=image, format="jpeg",
-            jpeg_quality=85, wxyz=camera_wxyz(cam.R), position=cam.C, color=(255, 190, 40))
+        fov_y, wxyz = 2 * math.atan((H / 2) / cam.fy), camera_wxyz(cam.R)
+        if self._frustum is None:
+            self._frustum = self.scene.add_camera_frustum(
+                f"{self._nodes}/camera", fov=fov_y, aspect=W / H, scale=FRUSTUM_SCALE, image=image, format="jpeg",
+                jpeg_quality=85, wxyz=wxyz, position=cam.C, color=(255, 190, 40))
+        else:  # the same scene node, updated in place
+            f = self._frustum
+            f.fov, f.aspect, f.image, f.wxyz, f.position = fov_y, W / H, image, wxyz, cam.C
         obs = view.observations
         if obs is not None and obs.n_keypoints:
             seg = np.stack([np.repeat(cam.C[None], obs.n_keypoints, 0), obs.kp_xyz], axis=1)
             cols = np.array([SET_BGR.get(str(s), (255, 255, 255))[::-1] for s in obs.kp_sets], np.uint8)
-            self._rays = self.scene.add_line_segments("/frame/rays", seg, np.repeat(cols[:, None], 2, 1), thickness=1.5,
-                                                      thickness_units="screen")
+            cols = np.repeat(cols[:, None], 2, 1)
+            if self._rays is None:
+                self._rays = self.scene.add_line_segments(f"{self._nodes}/rays", seg, cols, thickness=1.5,
+                                                          thickness_units="screen")
+            else:
+                self._rays.points, self._rays.colors = seg, cols
         elif self._rays is not None:  # no keypoints on this frame: no rays from the previous one
             self._rays.remove()
             self._rays = None
@@ -414,7 +425,7 @@ class Session:
             handle = self._handles.get(what)
             if handle is None:
                 handle = self.scene.add_transform_controls(
-                    what.path, scale=HANDLE_SCALE, disable_rotations=True,
+                    f"{self._nodes}/{what.path}", scale=HANDLE_SCALE, disable_rotations=True,
                     disable_sliders=True, active_axes=(True, True, False), depth_test=False, wxyz=wxyz,
                     position=pixel_to_plane(cam, uv))
                 handle.on_update(self._drag_callback(what))
