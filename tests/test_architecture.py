@@ -46,9 +46,11 @@ def test_the_geometry_helpers_doctests_hold():
 
     import pnlviz.geometry.distance
     import pnlviz.geometry.homography
+    import pnlviz.geometry.projection
     import pnlviz.geometry.so3
 
-    for module in (pnlviz.geometry.so3, pnlviz.geometry.distance, pnlviz.geometry.homography):
+    for module in (pnlviz.geometry.so3, pnlviz.geometry.distance, pnlviz.geometry.homography,
+                   pnlviz.geometry.projection):
         result = doctest.testmod(module)
         assert result.attempted > 0 and result.failed == 0, module.__name__
 

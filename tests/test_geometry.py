@@ -205,3 +205,17 @@ def test_fit_line_is_total_least_squares():
     # a vertical line, where y-on-x regression would fail
     l = fit_line(np.array([[5.0, 0], [5, 10], [5, 20]]))
     np.testing.assert_allclose(abs(l[0]), 1) and np.testing.assert_allclose(abs(l[2]), 5)
+
+
+def test_public_helpers_check_their_shapes_on_entry():
+    from pnlviz.calib.frame import FrameInputs
+    from pnlviz.geometry.distance import closest_on_polyline
+    from pnlviz.geometry.projection import project_k1
+
+    with pytest.raises(ValueError, match="polyline"):
+        closest_on_polyline(np.zeros((3, 2)), np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="X \\(N, 3\\)"):
+        project_k1(np.zeros((4, 2)), np.eye(3), np.zeros(3), 1000.0, 1.0, 480.0, 270.0, 0.0)
+    with pytest.raises(ValueError, match="frame size"):
+        FrameInputs((0, 540))
+    assert closest_on_polyline([[0.0, 1.0]], [[0.0, 0.0], [2.0, 0.0]]).distance.tolist() == [1.0]

@@ -37,6 +37,11 @@ class FrameInputs:
     detections: object | None = None
     keypoint_edits: Mapping[str, KeypointEdit] | None = None
 
+    def __post_init__(self):
+        W, H = self.size
+        if not (int(W) == W and int(H) == H and W >= 2 and H >= 2):
+            raise ValueError(f"a frame size is two whole numbers >= 2 (W, H), got {self.size!r}")
+
 
 @dataclass(frozen=True)
 class FrameSettings:

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pnlviz.geometry.distance import closest_on_polyline
+from pnlviz.geometry.distance import closest
 from pnlviz.geometry.so3 import cross
 
 
@@ -114,7 +114,7 @@ def polyline_block(poly: np.ndarray, pts: np.ndarray,
     """Distance of observed points ``pts`` (M, 2) to a projected polyline ``poly`` (S, 2), one
     residual per point. ``vertex_jacobian(indices)`` gives d(vertex)/d(params) (n, 2, P) of the
     vertices asked for (only the ends of the closest segments are)."""
-    c = closest_on_polyline(pts, poly)
+    c = closest(pts, poly)
     if vertex_jacobian is None:
         return Block(c.distance, None)
     used, inverse = np.unique(np.concatenate([c.segment, c.segment + 1]), return_inverse=True)

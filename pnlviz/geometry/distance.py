@@ -24,6 +24,15 @@ def closest_on_polyline(pts: np.ndarray, poly: np.ndarray) -> Closest:
     >>> float(c.distance[0]), int(c.segment[0]), float(c.t[0])
     (2.0, 0, 0.25)
     """
+    pts, poly = np.asarray(pts, float), np.asarray(poly, float)
+    if pts.ndim != 2 or pts.shape[1] != 2 or poly.ndim != 2 or poly.shape[1] != 2 or len(poly) < 2:
+        raise ValueError(f"closest_on_polyline: points (M, 2) and a polyline (S >= 2, 2) expected, got "
+                         f"{pts.shape} and {poly.shape}")
+    return closest(pts, poly)
+
+
+def closest(pts: np.ndarray, poly: np.ndarray) -> Closest:
+    """:func:`closest_on_polyline` without the checks (for the refinements' inner loop)."""
     a, b = poly[:-1], poly[1:]
     ab = b - a
     L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-18)

@@ -36,7 +36,15 @@ def camera_point_jacobian(Xc: np.ndarray, R: np.ndarray, n_params: int = 6) -> n
 
 def project_k1(X: np.ndarray, R: np.ndarray, C: np.ndarray, f: float, aspect: float, cx: float, cy: float,
                k1: float, jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
-    """Pixels (N, 2) of world points (N, 3) and, with ``jac``, d(pixels)/d(params) (N, 2, 8)."""
+    """Pixels (N, 2) of world points (N, 3) and, with ``jac``, d(pixels)/d(params) (N, 2, 8).
+
+    >>> uv, J = project_k1(np.array([[0.0, 0.0, 10.0]]), np.eye(3), np.zeros(3), 1000.0, 1.0, 480.0, 270.0, 0.0, True)
+    >>> uv.tolist(), J.shape
+    ([[480.0, 270.0]], (1, 2, 8))
+    """
+    X, R, C = np.asarray(X, float), np.asarray(R, float), np.asarray(C, float)
+    if X.ndim != 2 or X.shape[1] != 3 or R.shape != (3, 3) or C.shape != (3,):
+        raise ValueError(f"project_k1: X (N, 3), R (3, 3), C (3,) expected, got {X.shape}, {R.shape}, {C.shape}")
     return camera_to_pixels(to_camera(X, R, C), R, f, aspect, cx, cy, k1, jac)
 
 
