@@ -47,6 +47,7 @@ from pnlviz.calib.observations import Observations
 from pnlviz.calib.problem import FrameData, Problem
 from pnlviz.calib.solver import SolverParams, levenberg_marquardt
 from pnlviz.calib.voting import SUBSETS, best, subset_mask, truncated_score
+from pnlviz.conventions import DEFAULT_ALPHA
 from pnlviz.field.model import FieldModel, load_field_model
 
 __all__ = ["SUBSETS", "HomographyParams", "HomographyResult", "estimate_homography", "refine_homography_pnl",
@@ -65,7 +66,7 @@ class HomographyParams:
     vote_tau: float = 10.0  #: truncation of the voting score, pixels
     max_rms: float = 15.0  #: a homography whose inlier RMS (px) is above this is a failure
     pnl: bool = False  #: run the PnL refinement after the vote
-    alpha: float = 0.6  #: PnL weight of lines vs points (paper: 0.6)
+    alpha: float = DEFAULT_ALPHA  #: PnL weight of lines vs points (paper: 0.6)
     gate_px: float = 20.0  #: a line joins PnL when all its points are this close to the initial mapped segment
     point_gate_px: float | None = None  #: a keypoint joins PnL when this close to its initial projection (default gate_px)
     circles: bool = True  #: ground circles take part in voting and PnL
@@ -153,7 +154,7 @@ class HomographyProblem:
     the circles, as :class:`pnlviz.calib.problem.Problem` with the homography model (its
     parameters: ``M <- M (I + P)``, ``H = M diag(s, s, 1)``, s = 1/50 m)."""
 
-    def __init__(self, obs: Observations | FrameData, alpha: float = 0.6, model: FieldModel | None = None, *,
+    def __init__(self, obs: Observations | FrameData, alpha: float = DEFAULT_ALPHA, model: FieldModel | None = None, *,
                  use_keypoints: np.ndarray | None = None, lines=None, circles=None, circle_step: float = 0.25):
         data = obs if isinstance(obs, FrameData) else FrameData.build(obs, model or load_field_model())
         self.model = HomographyModel()
@@ -309,8 +310,8 @@ def vote(cands: list[_Candidate], prob: HomographyProblem, tau: float) -> _Candi
 
 
 # ------------------------------------------------------------------------------ PnL
-def refine_homography_pnl(H: np.ndarray, obs: Observations | FrameData, alpha: float = 0.6, gate_px: float = 20.0, *,
-                          point_gate_px: float | None = None, circles: bool = True, scale_gates: bool = True,
+def refine_homography_pnl(H: np.ndarray, obs: Observations | FrameData, alpha: float = DEFAULT_ALPHA,
+                          gate_px: float = 20.0, *, point_gate_px: float | None = None, circles: bool = True, scale_gates: bool = True,
                           model: FieldModel | None = None, circle_step: float = 0.25,
                           max_iter: int = 100) -> tuple[np.ndarray, list[str]]:
     """The paper's PnL refinement for a ground homography: the 8 degrees of freedom of ``H``

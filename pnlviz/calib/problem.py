@@ -17,6 +17,7 @@ import numpy as np
 
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.residuals import Block, point_block, polyline_block, segment_block
+from pnlviz.conventions import DEFAULT_ALPHA
 from pnlviz.field.model import FieldModel
 
 #: the residual of each point of a circle seen from behind (no arc in front to measure against)
@@ -138,7 +139,7 @@ class Problem:
     (see :meth:`FrameData.layout`): every candidate camera of a vote shares it.
     """
 
-    def __init__(self, model, data: FrameData, alpha: float = 0.6, *, keypoints: np.ndarray | None = None,
+    def __init__(self, model, data: FrameData, alpha: float = DEFAULT_ALPHA, *, keypoints: np.ndarray | None = None,
                  lines=None, circles=None, ground_only: bool = False, circle_step: float = 0.5):
         self.model, self.data = model, data
         lay = data.layout(model.lift, keypoints, lines, circles, ground_only, circle_step)

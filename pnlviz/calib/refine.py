@@ -25,13 +25,14 @@ from pnlviz.calib.models import CameraModel
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.problem import FrameData, Problem
 from pnlviz.calib.solver import SolverParams, levenberg_marquardt
+from pnlviz.conventions import DEFAULT_ALPHA
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
 
 
 @dataclass(frozen=True)
 class RefineParams:
-    alpha: float = 0.6  #: weight of line/circle terms vs keypoints (paper: 0.6)
+    alpha: float = DEFAULT_ALPHA  #: weight of line/circle terms vs keypoints (paper: 0.6)
     refine_focal: bool = True
     refine_k1: bool = False
     loss: str = "linear"  #: linear, huber, soft_l1 or cauchy

@@ -14,8 +14,9 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from pnlviz.commands.common import parse_size
+from pnlviz.conventions import EVAL_SIZE
 
-DEFAULT_SIZE = (960, 540)
+DEFAULT_SIZE = EVAL_SIZE
 
 # --------------------------------------------------------------------------- per-frame work
 _STATE: dict = {}
@@ -29,7 +30,6 @@ def _label_one(stem: str) -> tuple[str, str, object]:
     """``(stem, status, payload)``: ``("ok", counts by set)``, ``("none", None)`` for a frame without
     annotation, ``("skipped", message)`` for a bad input file, ``("failed", message)`` otherwise."""
     from pnlviz.data.errors import DataError
-
     from pnlviz.labels.extremities import line_extremities
     from pnlviz.labels.keypoints import keypoints_from_annotation
     from pnlviz.labels.writer import write_labels
@@ -80,7 +80,6 @@ def run_labels(args) -> int:
 
     from pnlviz.commands.common import open_input_dataset
     from pnlviz.data import DataError, OutputError, check_output
-
     from pnlviz.labels.types import SETS, LabelParams
 
     out_dir = Path(args.out)

@@ -7,6 +7,8 @@ import sys
 import time
 from pathlib import Path
 
+from pnlviz.conventions import EVAL_SIZE
+
 
 def add_serve_parser(sub) -> None:
     from pnlviz.commands.common import parse_size
@@ -29,7 +31,7 @@ def add_serve_parser(sub) -> None:
                                    "the URL)")
     p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
                    help="another host name the browser may use for this server (e.g. behind a proxy); repeatable")
-    p.add_argument("--size", type=parse_size, default=(960, 540), help="image size for frames without an image")
+    p.add_argument("--size", type=parse_size, default=EVAL_SIZE, help="image size for frames without an image")
     p.add_argument("--detector-threads", type=int, default=1,
                    help="torch threads of the background detector process (default 1: the app keeps a core)")
     p.set_defaults(func=run_serve)
@@ -121,7 +123,7 @@ def add_export_parser(sub) -> None:
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip, as given to pnlviz serve")
     p.add_argument("--out", required=True, type=Path, help="output folder, or a .zip")
     p.add_argument("--all", action="store_true", help="export every frame, reviewed or not")
-    p.add_argument("--size", type=parse_size, default=(960, 540), help="image size for frames without an image")
+    p.add_argument("--size", type=parse_size, default=EVAL_SIZE, help="image size for frames without an image")
     p.set_defaults(func=run_export)
 
 

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from pnlviz.commands.common import parse_size  # one WxH parser for every command
+from pnlviz.conventions import EVAL_SIZE
 
 __all__ = ["add_synth_parser", "run_synth"]
 
@@ -40,7 +41,7 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("-n", "--num", dest="n", type=_positive_int, required=True, metavar="N", help="number of frames")
     p.add_argument("--seed", type=_non_negative_int, default=0, help="random seed (default 0)")
-    p.add_argument("--size", type=parse_size, default=(960, 540), metavar="WxH",
+    p.add_argument("--size", type=parse_size, default=EVAL_SIZE, metavar="WxH",
                    help="image size (default 960x540); cameras and annotations stay at the 960x540 evaluation scale")
     p.add_argument("--start-index", type=_non_negative_int, default=0, metavar="I",
                    help="index (file stem) of the first frame (default 0)")

@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from pnlviz.conventions import EVAL_HEIGHT, EVAL_WIDTH
 from pnlviz.data import DataError, open_dataset
 from pnlviz.data.cameras import camera_stem, parse_camera_bytes
 from pnlviz.data.dataset import Dataset
@@ -64,7 +65,6 @@ __all__ = [
     "ThresholdScore", "FrameResult", "Summary", "evaluate_frame", "evaluate_dataset", "read_cameras",
 ]
 
-EVAL_WIDTH, EVAL_HEIGHT = 960, 540
 DEFAULT_THRESHOLDS: tuple[float, ...] = (5.0, 10.0, 20.0)
 #: The evaluator's false-positive weight of a class in the per-class confusion (2 extremities
 #: for a line, 9 for anything with "Circle" in its name).

@@ -26,12 +26,13 @@ import math
 
 import numpy as np
 
+from pnlviz.conventions import EVAL_SIZE
 from pnlviz.field.model import load_field_model
 from pnlviz.field.names import CIRCLE_CLASSES
 from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.polylines import visible_pitch
 
-EVAL_W, EVAL_H = 960, 540
+EVAL_W, EVAL_H = EVAL_SIZE
 #: Model sampling of the evaluator: straight classes every 0.9 m, circles every 0.2 m.
 LINE_SPACING, CIRCLE_SPACING = 0.9, 0.2
 #: When a class' visible polyline degenerates to one point, the second click is this far away

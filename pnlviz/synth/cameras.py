@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from pnlviz.conventions import EVAL_SIZE
 from pnlviz.field.model import load_field_model
 from pnlviz.geometry.camera import MIN_DEPTH, Camera
 from pnlviz.geometry.polylines import visible_pitch
@@ -32,7 +33,6 @@ KIND_PROBABILITIES: tuple[float, ...] = (0.7, 0.1, 0.1, 0.1)
 DISTORTED_SHARE = 0.3
 K1_SIGMA = 0.03
 #: The SoccerNet evaluation scale; validity is judged there.
-EVAL_SIZE: tuple[int, int] = (960, 540)
 MIN_CLASSES = 4
 #: A ray "sees the ground" when it meets z = 0 closer than this (metres).
 GROUND_REACH = 200.0

@@ -33,6 +33,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from pnlviz.conventions import EVAL_SIZE
 from pnlviz.data.atomic import atomic_write_bytes
 
 from .annotate import EVAL_H, EVAL_W, annotate, annotation_to_json
@@ -112,7 +113,7 @@ def _dumps(obj) -> bytes:
     return (json.dumps(obj, indent=1, allow_nan=False) + "\n").encode()
 
 
-def make_frame(index: int, seed: int, size: tuple[int, int] = (960, 540)) -> dict:
+def make_frame(index: int, seed: int, size: tuple[int, int] = EVAL_SIZE) -> dict:
     """Everything of frame ``index``: ``{"image": BGR uint8, "annotation": dict, "camera": dict,
     "kind": str, "jpeg_quality": int}`` (nothing written)."""
     rng = np.random.default_rng([int(seed), int(index)])
@@ -127,7 +128,7 @@ def make_frame(index: int, seed: int, size: tuple[int, int] = (960, 540)) -> dic
             "kind": kind, "jpeg_quality": quality}
 
 
-def write_frame(out_dir: str | os.PathLike, index: int, seed: int, size: tuple[int, int] = (960, 540)) -> str:
+def write_frame(out_dir: str | os.PathLike, index: int, seed: int, size: tuple[int, int] = EVAL_SIZE) -> str:
     """Make frame ``index`` and write its three files; returns the stem."""
     root = Path(out_dir)
     frame = make_frame(index, seed, size)
@@ -149,7 +150,7 @@ def _worker(job: tuple) -> str:
     return write_frame(*job)
 
 
-def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int] = (960, 540),
+def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int] = EVAL_SIZE,
              start_index: int = 0, workers: int = 1, progress: bool = True, *, force: bool = False) -> SynthSummary:
     """Write frames ``start_index .. start_index + n - 1`` of ``seed`` into ``out_dir``.
 
