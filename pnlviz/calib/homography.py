@@ -311,8 +311,8 @@ def vote(cands: list[_Candidate], prob: HomographyProblem, tau: float) -> _Candi
 
 # ------------------------------------------------------------------------------ PnL
 def refine_homography_pnl(H: np.ndarray, obs: Observations | FrameData, alpha: float = DEFAULT_ALPHA,
-                          gate_px: float = 20.0, *, point_gate_px: float | None = None, circles: bool = True, scale_gates: bool = True,
-                          model: FieldModel | None = None, circle_step: float = 0.25,
+                          gate_px: float = 20.0, *, point_gate_px: float | None = None, circles: bool = True,
+                          scale_gates: bool = True, model: FieldModel | None = None, circle_step: float = 0.25,
                           max_iter: int = 100) -> tuple[np.ndarray, list[str]]:
     """The paper's PnL refinement for a ground homography: the 8 degrees of freedom of ``H``
     (field metres -> pixels of ``obs``) against ``alpha * lines + (1 - alpha) * points``.
