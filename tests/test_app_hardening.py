@@ -61,14 +61,12 @@ def test_concurrent_edits_from_threads_all_land_on_their_frames(data):
         on_disk = json.loads((st.edits.frames / f"{stem}.json").read_text())["keypoints"]
         want = {str(kid): [x, y] for s, kid, x, y in jobs if s == stem}
         assert on_disk == want
-    assert len(st._undo["00001"]) == 12 and len(st._undo["00002"]) == 12
+    assert st.history("00001") == (12, 0) and st.history("00002") == (12, 0)
     st.close()
 
 
 def test_two_tabs_on_two_frames_never_touch_each_other(data):
-    from pnlviz.app.scene import pixel_to_plane
     from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.session import KeypointHandle
 
     st = AppState(data)
     app = PnlvizApp(st, port=_free_port())
@@ -76,18 +74,16 @@ def test_two_tabs_on_two_frames_never_touch_each_other(data):
         a, b = app.session(), app.session()
         a.goto(st.find("00003"))
         b.goto(st.find("00001"))
-        a.handles_mode.value = "keypoints"
-        a.flush()
-        stem, cam = a._shown
         kid = int(a.view().observations.kp_ids[0])
-        target = SimpleNamespace(position=pixel_to_plane(cam, (321.0, 123.0)))
+        a._on_drag("keypoints", kid, "start", a.view().observations.kp_xy[0])
         b.goto(st.find("00002"))  # the other tab moves while the drag is in the air
-        a.on_drag(SimpleNamespace(phase="end", target=target), stem, KeypointHandle(kid), cam)
-        assert stem == "00003" and a.stem == "00003" and b.stem == "00002"
+        a._on_drag("keypoints", kid, "end", np.array([321.0, 123.0]))
+        a.flush()
+        assert a.stem == "00003" and b.stem == "00002"
         np.testing.assert_allclose(st.edits.get("00003")["keypoints"][str(kid)], [321.0, 123.0], atol=1e-6)
         assert st.edits.get("00002") == {} and st.edits.get("00001") == {}
         st.set_review(b.stem, "rejected")  # a review from tab b: a's frame and progress follow
-        assert st.edits.review("00003") == "corrected" and "rejected 1" in a.progress_text.content
+        assert st.edits.review("00003") == "corrected" and "rejected 1" in a.panels.progress_text.content
     finally:
         app.stop()
         st.close()
@@ -136,7 +132,7 @@ def test_a_failed_write_is_shown_and_changes_nothing(data, monkeypatch):
         monkeypatch.setattr(edits_module, "atomic_write_text", full_disk)
         tab._guarded(lambda: st.set_review(tab.stem, "accepted"))
         assert said and said[-1][0] == "not saved" and "No space left" in said[-1][1]
-        assert st.edits.review(tab.stem) is None and not st._undo.get(tab.stem)  # nothing half-done
+        assert st.edits.review(tab.stem) is None and st.history(tab.stem) == (0, 0)  # nothing half-done
     finally:
         app.stop()
         st.close()
@@ -208,9 +204,10 @@ def test_values_no_honest_browser_sends_are_refused(data):
         said = []
         tab.notify = lambda title, body, error=True: said.append(body)
         stem = tab.stem
-        tab.kp_id.value = "999"  # a dropdown value outside its options
+        tab.panels.kp_id.value = "999"  # a dropdown value outside its options
         tab.flush()
-        tab._guarded(lambda: st.hide_keypoint(stem, tab.kp_id.value))
+        assert "999" in said[-1] and tab.panels.kp_id.value == "1" and tab.place_id == 1
+        tab._guarded(lambda: st.hide_keypoint(stem, 999))
         assert "999" in said[-1] and st.edits.get(stem) == {}
         for x, y in ((math.nan, 10.0), (math.inf, 10.0), (1e9, 10.0), (-2000.0, 10.0)):
             with pytest.raises(EditError):
@@ -222,25 +219,33 @@ def test_values_no_honest_browser_sends_are_refused(data):
         with pytest.raises(EditError):
             st.move_line_point(stem, "Not a class", 0, 10.0, 10.0)
         assert st.edits.get(stem) == {}
-        tab.filter.value = "everything"  # resets to a known filter, the panels keep working
+        p = tab.panels
+        p.filter.value = "everything"  # resets to a known filter, the panels keep working
         tab.flush()
-        tab.refresh_order()
-        assert tab.filter.value == "all" and len(tab.order) == len(st.stems)
-        tab.source.value = "telepathy"
+        assert p.filter.value == "all" and len(tab.order) == len(st.stems)
+        p.source.value = "telepathy"
         tab.flush()
-        assert tab.settings.source == "annotation" and tab.source.value == "annotation"
-        tab.alpha.value = 7.0
+        assert tab.settings.source == "annotation" and p.source.value == "annotation"
+        p.alpha.value = 7.0
         tab.flush()
         assert tab.settings.alpha == 0.6
-        tab.slider.value = 10 ** 6  # past the end: the last frame, no IndexError
+        p.opacity.value = math.nan
+        tab.flush()
+        assert tab.opacity == 1.0
+        p.slider.value = 10 ** 6  # past the end: the last frame, no IndexError
         tab.flush()
         assert tab.stem == st.stems[-1]
+        for junk in ("", "{", "[1, 2]", '{"kind": "pointer", "n": "x"}', '{"kind": "pointer", "n": 5, "log_zoom": 1e400, '
+                     '"x": 0, "y": 0}', "a" * 10000):
+            tab.bridge_message(junk)  # nothing the page's bridge would send: ignored
+        assert tab._bridge_seen[0] == -1
     finally:
         app.stop()
         st.close()
 
 
 def test_a_filter_with_one_match_and_the_slider_past_it(data):
+    """Was an IndexError in the server (the slider's max is 1 with one match) and an empty panel."""
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
@@ -248,13 +253,37 @@ def test_a_filter_with_one_match_and_the_slider_past_it(data):
     try:
         tab = app.session()
         st.set_review("00002", "accepted")
-        tab.filter.value = "accepted"
+        tab.panels.filter.value = "accepted"
         tab.flush()
-        tab.refresh_order()
         assert tab.order == [st.find("00002")] and tab.stem == "00002"
-        tab.slider.value = 1  # the slider's max is 1 even with one match
+        assert tab.panels.slider.disabled and tab.panels.slider.value == 0
+        tab.panels.slider.value = 1
         tab.flush()
-        assert tab.stem == "00002"
+        assert tab.stem == "00002" and "1/1 of 'accepted'" in tab.panels.title.content
+    finally:
+        app.stop()
+        st.close()
+
+
+def test_an_empty_filter_says_so_instead_of_staying_silently(data):
+    from pnlviz.app.server import PnlvizApp
+
+    st = AppState(data)
+    app = PnlvizApp(st, port=_free_port())
+    try:
+        tab = app.session()
+        tab.goto(st.find("00001"))
+        tab.panels.filter.value = "rejected"  # no frame is rejected
+        tab.flush()
+        assert tab.outside_filter and tab.stem == "00001"
+        assert "no frame matches 'rejected'" in tab.panels.filter_text.content
+        assert "not in the filter" in tab.panels.title.content
+        st.set_review("00003", "rejected")
+        tab.panels.filter.value = "all"
+        tab.flush()
+        tab.panels.filter.value = "rejected"
+        tab.flush()
+        assert not tab.outside_filter and tab.stem == "00003"
     finally:
         app.stop()
         st.close()

@@ -112,24 +112,25 @@ def test_server_panels_navigate_review_and_toggle_pnl(data):
     try:
         assert app.url.startswith("http://127.0.0.1:")
         tab = app.session()
+        p = tab.panels
         tab.goto(st.find("00000"))
-        assert "00000" in tab.card.content and "focal" in tab.card.content
+        assert "00000" in p.title.content and "focal" in p.card.content
         tab.step(1)
-        assert tab.stem == st.stems[st.find("00000") + 1] and tab.slider.value == st.find("00000") + 1
+        assert tab.stem == st.stems[st.find("00000") + 1] and p.slider.value == st.find("00000") + 1
         st.set_review(tab.stem, "accepted")
-        assert "1 of 5 reviewed" in tab.progress_text.content  # the change reached the tab
-        tab.filter.value = "accepted"
+        assert "1 of 5 reviewed" in p.progress_text.content  # the change reached the tab
+        assert "review: **accepted**" in p.status.content
+        p.filter.value = "accepted"
         tab.flush()
-        tab.refresh_order()
         assert tab.order == [tab.index]
-        tab.filter.value = "all"
+        p.filter.value = "all"
         tab.flush()
-        tab.refresh_order()
-        tab.pnl.value = False
+        p.pnl.value = False
         tab.flush()
-        assert "PnL set: 0 lines" in tab.card.content
+        assert "PnL set: 0 lines" in p.card.content
         tab.goto(st.find("bad"))
-        assert "error" in tab.card.content and tab._frustum is None
+        assert "error" in p.card.content and tab.scene3d._frustum is None
+        assert tab.workspace.plane is not None  # a frame that cannot be read still has its image plane
     finally:
         app.stop()
         st.close()
@@ -216,34 +217,30 @@ def test_export_only_reads_the_edits(data, tmp_path):
 
 
 def test_drag_end_recalibrates_on_the_server(data):
-    from types import SimpleNamespace
-
-    from pnlviz.app.scene import pixel_to_plane
     from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.session import KeypointHandle
 
     st = AppState(data)
     app = PnlvizApp(st, port=_free_port())
     try:
         tab = app.session()
         tab.goto(st.find("00002"))
-        tab.handles_mode.value = "keypoints"
-        tab.flush()
         view = tab.view()
-        assert set(tab._handles) == {KeypointHandle(int(k)) for k in view.observations.kp_ids}
-        stem, cam = tab._shown
+        assert tab.workspace.points["keypoints"].keys == [int(k) for k in view.observations.kp_ids]
         before = view.result.camera.C.copy()
-        kid = int(view.observations.kp_ids[0])
-        target = SimpleNamespace(position=pixel_to_plane(cam, (300.0, 200.0)))
-        tab.on_drag(SimpleNamespace(phase="update", target=target), stem, KeypointHandle(kid), cam)
-        assert "keypoints" not in st.edits.get("00002")  # only the release counts
+        kid, uv0 = int(view.observations.kp_ids[0]), view.observations.kp_xy[0]
+        tab._on_drag("keypoints", kid, "start", uv0)
+        tab._on_drag("keypoints", kid, "update", np.array([300.0, 200.0]))
+        tab.flush()
+        assert "keypoints" not in st.edits.get("00002")  # only the release counts...
+        assert not np.allclose(tab._overlay.keypoints.uv[0], [300.0, 200.0])  # ...and the preview is not kept
         tab.goto(st.find("00001"))  # the tab moves on before the release...
-        tab.on_drag(SimpleNamespace(phase="end", target=target), stem, KeypointHandle(kid), cam)
+        tab._on_drag("keypoints", kid, "end", np.array([300.0, 200.0]))
+        tab.flush()
         saved = json.loads((st.edits.frames / "00002.json").read_text())  # ...which still lands on 00002
         np.testing.assert_allclose(saved["keypoints"][str(kid)], [300.0, 200.0], atol=1e-6)
         assert "keypoints" not in st.edits.get("00001")
         assert not np.allclose(st.view("00002").result.camera.C, before)
-        assert tab.last_recalibration_ms > 0
+        assert tab.last_recalibration_ms > 0 and tab.grabs == tab.releases == 1
     finally:
         app.stop()
         st.close()

@@ -5,7 +5,9 @@ Layout::
     <edits>/frames/<stem>.json          {"review": "accepted"|"corrected"|"rejected",
                                          "annotation": {SoccerNet annotation},
                                          "keypoints": {"<id>": [x, y] | null},   # pixels; null = not visible
+                                         "history": {"undo": [step, ...], "redo": [step, ...]},
                                          "updated": <unix time>}
+        a step: the fields one user action changed, as they were before it ({"review": null, ...})
     <edits>/frames/<stem>.json.damaged  a file that failed validation, moved aside (kept, never deleted)
     <edits>/lock                        held by the one process writing here (its pid and URL inside)
 
@@ -34,7 +36,11 @@ from pnlviz.data.jsonio import as_number, describe, dumps
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
 #: the fields a record may hold; anything else is dropped when it is read
-FIELDS = ("review", "annotation", "keypoints", "updated")
+FIELDS = ("review", "annotation", "keypoints", "history", "updated")
+#: the fields an undo step may restore
+UNDOABLE = ("annotation", "keypoints", "review")
+#: undo steps kept per frame (and per direction)
+HISTORY_LIMIT = 100
 #: keypoint coordinates are pixels: anything larger is not a position in a frame
 MAX_COORDINATE = 1e6
 
@@ -84,10 +90,33 @@ def validate_record(obj: Any, source: str) -> dict:
         if not isinstance(kps, Mapping):
             raise DataError(source, f'"keypoints" must be an object of id -> [x, y] | null, got {describe(kps)}')
         rec["keypoints"] = dict(validate_keypoint(k, v, source) for k, v in kps.items())
+    history = obj.get("history")
+    if history is not None:
+        rec["history"] = validate_history(history, source)
     updated = as_number(obj.get("updated"))
     if updated is not None and math.isfinite(updated):
         rec["updated"] = updated
     return rec
+
+
+def validate_history(obj: Any, source: str) -> dict:
+    """A checked copy of a record's undo history: ``{"undo": [step], "redo": [step]}``, each step
+    a mapping of some :data:`UNDOABLE` fields to their values (null: absent), valid as a record's."""
+    if not isinstance(obj, Mapping):
+        raise DataError(source, f'"history" must be an object with "undo" and "redo" lists, got {describe(obj)}')
+    out = {}
+    for side in ("undo", "redo"):
+        steps = obj.get(side) or []
+        if not isinstance(steps, list):
+            raise DataError(source, f'history "{side}" must be a list, got {describe(steps)}')
+        checked = []
+        for step in steps[-HISTORY_LIMIT:]:
+            if not isinstance(step, Mapping) or not step or any(k not in UNDOABLE for k in step):
+                raise DataError(source, f"an undo step is an object of {', '.join(UNDOABLE)}, got {describe(step)}")
+            values = validate_record({k: v for k, v in step.items() if v is not None}, source)
+            checked.append({k: values.get(k) for k in step})
+        out[side] = checked
+    return out
 
 
 class EditsStore:

@@ -1,75 +1,214 @@
-"""What the app draws on a frame: annotated lines, keypoints coloured by set, the pitch projected
-through the initial (voted) and the refined camera, and residual vectors."""
+"""What the app draws over a frame, as geometry in image pixels: the pitch projected through the
+known, the initial (voted) and the refined camera, the annotated lines, the detector's lines, the
+keypoints coloured by set, their residuals, and "ghosts" (catalogue keypoints the camera puts in
+the frame that nobody observed: click one to choose its id, drag it to place it).
+
+:func:`overlay_geometry` is pure; :mod:`pnlviz.app.workspace` turns it into scene primitives
+that are updated in place (the frame image itself is sent once per frame). :func:`render` draws
+the same on the pixels, for pictures and for the 3D view's frustum.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
 from pnlviz.app.state import FrameView
-from pnlviz.viz import blank_canvas, caption, draw_annotation, draw_pitch
+from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.geometry.polylines import project_polylines
+from pnlviz.viz import blank_canvas, caption, class_colour, draw_annotation, draw_pitch
 
-#: BGR colours of the keypoint sets, as in the paper's figure (Kp red, Kpe yellow, Kp1 blue,
-#: Kp2 pink, Kp3 green).
-SET_BGR = {"Kp": (40, 40, 230), "Kpe": (0, 220, 255), "Kp1": (255, 120, 30), "Kp2": (200, 90, 255), "Kp3": (60, 200, 60)}
-INITIAL_BGR = (255, 200, 0)  # cyan-blue: pitch through the voted camera, before PnL
-REFINED_BGR = (60, 220, 255)  # amber: pitch through the final camera
-RESIDUAL_BGR = (0, 0, 255)
-DETECTED_BGR = (255, 255, 255)  # white: detected line extremities
-REFERENCE_BGR = (255, 80, 255)  # magenta: pitch through a known camera (synthetic ground truth)
+#: RGB colours of the keypoint sets, as in the paper's figure (Kp red, Kpe yellow, Kp1 blue,
+#: Kp2 pink, Kp3 green)
+SET_RGB = {"Kp": (230, 40, 40), "Kpe": (255, 220, 0), "Kp1": (30, 120, 255), "Kp2": (255, 90, 200), "Kp3": (60, 200, 60)}
+INITIAL_RGB = (0, 200, 255)  # cyan-blue: pitch through the voted camera, before PnL
+REFINED_RGB = (255, 220, 60)  # amber: pitch through the final camera
+REFERENCE_RGB = (255, 80, 255)  # magenta: pitch through a known camera (synthetic ground truth)
+RESIDUAL_RGB = (255, 0, 0)
+DETECTED_RGB = (255, 255, 255)  # white: detected line extremities
+GHOST_RGB = (200, 200, 200)
+
+#: BGR of the same, for OpenCV drawing
+SET_BGR = {k: v[::-1] for k, v in SET_RGB.items()}
+
+#: what each layer is, for the legend: name -> (colour, description)
+LEGEND = {
+    "refined_pitch": (REFINED_RGB, "pitch through the calibrated camera"),
+    "initial_pitch": (INITIAL_RGB, "pitch through the voted camera, before PnL"),
+    "reference_pitch": (REFERENCE_RGB, "pitch through the known camera"),
+    "residuals": (RESIDUAL_RGB, "keypoint -> where the camera puts it"),
+    "detected_lines": (DETECTED_RGB, "detected line extremities"),
+    "ghosts": (GHOST_RGB, "not observed: click to choose, drag to place"),
+}
 
 
 @dataclass
 class Layers:
     annotation: bool = True
     keypoints: bool = True
-    ids: bool = False
-    initial_pitch: bool = True
+    ids: bool = True
+    initial_pitch: bool = False
     refined_pitch: bool = True
     residuals: bool = True
     reference_pitch: bool = True
     detected_lines: bool = True
+    ghosts: bool = True
+
+
+@dataclass
+class Segments:
+    """Line segments in image pixels: ``points`` (N, 2, 2), ``colors`` (N, 3) RGB uint8."""
+
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    colors: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.uint8))
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @classmethod
+    def from_polylines(cls, polylines, color) -> Segments:
+        """Consecutive points of each polyline joined; one colour for all, or one per polyline."""
+        pts, cols = [], []
+        for i, line in enumerate(polylines):
+            line = np.asarray(line, float).reshape(-1, 2)
+            if len(line) < 2:
+                continue
+            pts.append(np.stack([line[:-1], line[1:]], axis=1))
+            c = color[i] if isinstance(color, list) else color
+            cols.append(np.tile(np.asarray(c, np.uint8), (len(line) - 1, 1)))
+        if not pts:
+            return cls()
+        return cls(np.concatenate(pts), np.concatenate(cols))
+
+
+@dataclass
+class Markers:
+    """Points to draw and grab: ``keys`` (what each is: a keypoint id, or (class, index) of an
+    annotated point), ``uv`` (N, 2) pixels, ``colors`` (N, 3) RGB uint8, ``labels`` (N,) text."""
+
+    keys: list = field(default_factory=list)
+    uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    colors: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.uint8))
+    labels: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+
+@dataclass
+class Overlay:
+    """Everything drawn over one frame, in image pixels."""
+
+    segments: dict[str, Segments]  # layer name -> segments
+    keypoints: Markers  # observed keypoints (key: id)
+    ghosts: Markers  # catalogue keypoints the camera puts in the frame, not observed (key: id)
+    line_points: Markers  # points of the annotated lines and circles (key: (class, index))
+    residuals: dict[int, float]  # keypoint id -> reprojection error, pixels
+
+
+def _pitch(camera, W: int, H: int, model: FieldModel, color) -> Segments:
+    polys = project_polylines(camera.scaled(W, H) if (camera.width, camera.height) != (W, H) else camera,
+                              model.sample_polylines(0.5, 0.25), W, H)
+    return Segments.from_polylines(list(polys.values()), color)
+
+
+def _ghosts(view: FrameView, model: FieldModel, hidden: set[int]) -> Markers:
+    cam = view.camera
+    if cam is None:
+        return Markers()
+    W, H = view.size
+    seen = {int(k) for k in view.observations.kp_ids} if view.observations is not None else set()
+    ids = [int(k) for k in model.keypoint_ids if int(k) not in seen and int(k) not in hidden]
+    if not ids:
+        return Markers()
+    uv, _ = cam.project(model.keypoint_xyz(ids))  # NaN behind the camera: never inside
+    with np.errstate(invalid="ignore"):
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
+    keep = [i for i in range(len(ids)) if inside[i]]
+    return Markers([ids[i] for i in keep], uv[keep].reshape(-1, 2), np.tile(np.uint8(GHOST_RGB), (len(keep), 1)),
+                   [str(ids[i]) for i in keep])
+
+
+def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldModel | None = None,
+                     hidden: set[int] = frozenset()) -> Overlay:
+    """The overlays of ``view`` that ``layers`` asks for. ``hidden``: keypoint ids marked not
+    visible (no ghost is offered for them)."""
+    model = model or load_field_model()
+    W, H = view.size
+    res = view.result
+    seg: dict[str, Segments] = {}
+    if layers.reference_pitch and view.reference_camera is not None:
+        seg["reference_pitch"] = _pitch(view.reference_camera, W, H, model, REFERENCE_RGB)
+    if res is not None and res.ok:
+        if layers.initial_pitch and res.initial_camera is not None:
+            seg["initial_pitch"] = _pitch(res.initial_camera, W, H, model, INITIAL_RGB)
+        if layers.refined_pitch:
+            seg["refined_pitch"] = _pitch(res.camera, W, H, model, REFINED_RGB)
+    line_points = Markers()
+    if view.annotation:
+        names = list(view.annotation)
+        polys = [np.asarray(view.annotation[n], float).reshape(-1, 2) * [W - 1, H - 1] for n in names]
+        colours = [class_colour(n)[::-1] for n in names]
+        if layers.annotation:
+            seg["annotation"] = Segments.from_polylines(polys, colours)
+        keys = [(n, i) for n, p in zip(names, polys) for i in range(len(p))]
+        cols = [c for c, p in zip(colours, polys) for _ in range(len(p))]
+        uv = np.concatenate(polys) if keys else np.zeros((0, 2))
+        line_points = Markers(keys, uv, np.array(cols, np.uint8).reshape(-1, 3), [n.strip() for n, _ in keys])
+    if layers.detected_lines and view.detections is not None:
+        ends = [((x1, y1), (x2, y2)) for x1, y1, _, x2, y2, _ in view.detections.lines_px(W, H).values()]
+        seg["detected_lines"] = Segments.from_polylines(ends, DETECTED_RGB)
+    obs = view.observations
+    markers, residuals = Markers(), {}
+    if obs is not None and obs.n_keypoints:
+        ids = [int(k) for k in obs.kp_ids]
+        colours = np.array([SET_RGB.get(str(s), (255, 255, 255)) for s in obs.kp_sets], np.uint8)
+        markers = Markers(ids, obs.kp_xy.copy(), colours, [str(k) for k in ids])
+        if res is not None and res.ok:
+            proj, _ = res.camera.project(obs.kp_xyz)
+            good = np.all(np.isfinite(proj), axis=1)
+            residuals = {k: float(np.hypot(*(proj[i] - obs.kp_xy[i]))) for i, k in enumerate(ids) if good[i]}
+            if layers.residuals and good.any():
+                seg["residuals"] = Segments(np.stack([obs.kp_xy[good], proj[good]], axis=1),
+                                            np.tile(np.uint8(RESIDUAL_RGB), (int(good.sum()), 1)))
+    ghosts = _ghosts(view, model, set(hidden)) if layers.ghosts else Markers()
+    return Overlay(seg, markers, ghosts, line_points, residuals)
 
 
 def render(view: FrameView, image: np.ndarray | None, layers: Layers = Layers(), max_width: int = 1280) -> np.ndarray:
-    """The frame (``image``, BGR, or a neutral canvas when None) with overlays, RGB uint8 for the
-    browser, at most ``max_width`` wide."""
+    """The frame (``image``, BGR, or a neutral canvas when None) with its overlays drawn on the
+    pixels, RGB uint8, at most ``max_width`` wide (for pictures and the 3D view's frustum)."""
     W, H = view.size
     img = image.copy() if image is not None else blank_canvas(W, H)
     res = view.result
     if layers.reference_pitch and view.reference_camera is not None:
-        draw_pitch(img, view.reference_camera, colour=REFERENCE_BGR, thickness=1)
+        draw_pitch(img, view.reference_camera, colour=REFERENCE_RGB[::-1], thickness=1)
     if res is not None and res.ok:
         if layers.initial_pitch and res.initial_camera is not None:
-            draw_pitch(img, res.initial_camera, colour=INITIAL_BGR, thickness=1)
+            draw_pitch(img, res.initial_camera, colour=INITIAL_RGB[::-1], thickness=1)
         if layers.refined_pitch:
-            draw_pitch(img, res.camera, colour=REFINED_BGR, thickness=2)
+            draw_pitch(img, res.camera, colour=REFINED_RGB[::-1], thickness=2)
     if layers.annotation and view.annotation:
         draw_annotation(img, view.annotation, thickness=1, radius=2)
-    obs = view.observations
-    if view.detections is not None and layers.detected_lines:
-        # the detector's line extremities (PnLCalib format: x_px = x W)
-        for x1, y1, p1, x2, y2, p2 in view.detections.lines_px(W, H).values():
-            a, b = (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2)))
-            cv2.line(img, a, b, DETECTED_BGR, 2, cv2.LINE_AA)
-            for p in (a, b):
-                cv2.drawMarker(img, p, DETECTED_BGR, cv2.MARKER_TILTED_CROSS, 10, 2, cv2.LINE_AA)
-    if obs is not None and layers.keypoints and obs.n_keypoints:
-        proj = None
-        if res is not None and res.ok:
-            proj, _ = res.camera.project(obs.kp_xyz)
-        for i, (k, (x, y), s) in enumerate(zip(obs.kp_ids, obs.kp_xy, obs.kp_sets)):
-            col = SET_BGR.get(str(s), (255, 255, 255))
+    geom = overlay_geometry(view, Layers(annotation=False, initial_pitch=False, refined_pitch=False,
+                                         reference_pitch=False, ghosts=False, detected_lines=layers.detected_lines,
+                                         residuals=layers.residuals))
+    for name in ("detected_lines", "residuals"):
+        s = geom.segments.get(name)
+        for (a, b), c in zip(s.points if s is not None else (), s.colors if s is not None else ()):
+            cv2.line(img, tuple(int(round(x)) for x in a), tuple(int(round(x)) for x in b),
+                     tuple(int(x) for x in c[::-1]), 1 if name == "residuals" else 2, cv2.LINE_AA)
+    if layers.keypoints:
+        for (x, y), col, label in zip(geom.keypoints.uv, geom.keypoints.colors, geom.keypoints.labels):
             c = (int(round(x)), int(round(y)))
-            if layers.residuals and proj is not None and np.all(np.isfinite(proj[i])):
-                cv2.line(img, c, (int(round(proj[i, 0])), int(round(proj[i, 1]))), RESIDUAL_BGR, 1, cv2.LINE_AA)
             cv2.circle(img, c, 5, (0, 0, 0), 2, cv2.LINE_AA)
-            cv2.circle(img, c, 4, col, -1, cv2.LINE_AA)
+            cv2.circle(img, c, 4, tuple(int(v) for v in col[::-1]), -1, cv2.LINE_AA)
             if layers.ids:
-                cv2.putText(img, str(k), (c[0] + 6, c[1] - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 3, cv2.LINE_AA)
-                cv2.putText(img, str(k), (c[0] + 6, c[1] - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45, col, 1, cv2.LINE_AA)
+                cv2.putText(img, label, (c[0] + 6, c[1] - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 3, cv2.LINE_AA)
+                cv2.putText(img, label, (c[0] + 6, c[1] - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                            tuple(int(v) for v in col[::-1]), 1, cv2.LINE_AA)
     if view.error or (res is not None and not res.ok):
         caption(img, f"{view.stem}: {view.error or res.failure}")
     if W > max_width:

@@ -1,13 +1,22 @@
-"""Where the frame sits in the 3D view: the image plane in front of the estimated camera, and the
-maps between its pixels and world points on it."""
+"""The 3D view of one tab: the estimated camera as a frustum with the frame on it, and a ray from
+the camera through every keypoint to its place on the pitch model (the pitch itself is the
+server's, shared by every tab). Nodes are created once and updated in place; the frame is drawn on
+the frustum only while the tab is in the 3D view.
+"""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-FRUSTUM_SCALE = 4.0  # metres: distance of the image plane from the camera in the 3D view
-HANDLE_SCALE = FRUSTUM_SCALE * 0.035  # arrows of the drag handles, metres on the image plane
+from pnlviz.app.overlay import SET_RGB
+
+FRUSTUM_SCALE = 4.0  # metres: distance of the frustum's image from the camera
+FRUSTUM_RGB = (255, 190, 40)
+#: where the 3D view starts when a frame has no camera: the whole pitch from high above the main stand
+OVERVIEW = {"position": (0.0, 95.0, -70.0), "look_at": (0.0, 0.0, 0.0), "up": (0.0, 0.0, -1.0)}
 
 
 def camera_wxyz(R: np.ndarray) -> np.ndarray:
@@ -16,25 +25,54 @@ def camera_wxyz(R: np.ndarray) -> np.ndarray:
     return np.array([w, x, y, z])
 
 
-def pixel_to_plane(cam, uv, depth: float = FRUSTUM_SCALE * 0.99) -> np.ndarray:
-    """World point on the frustum's image plane (``depth`` in front of the camera) under pixel uv."""
-    ray = np.array([(uv[0] - cam.cx) / cam.fx, (uv[1] - cam.cy) / cam.fy, 1.0])
-    return cam.C + cam.R.T @ (depth * ray)
+def behind_camera(cam, back: float = 12.0) -> dict:
+    """A viewpoint ``back`` metres behind and above the estimated camera, looking where it looks:
+    the frustum, the rays and the pitch in one view."""
+    forward = cam.R[2]
+    target = cam.C + 30.0 * forward
+    position = cam.C - back * forward + np.array([0.0, 0.0, -0.3 * back])
+    return {"position": position, "look_at": target, "up": (0.0, 0.0, -1.0)}
 
 
-def plane_to_pixel(cam, point) -> np.ndarray:
-    x = cam.R @ (np.asarray(point, float) - cam.C)
-    return np.array([cam.fx * x[0] / x[2] + cam.cx, cam.fy * x[1] / x[2] + cam.cy])
+class Scene3D:
+    """Frustum and rays of one tab, under scene path ``root``."""
 
+    def __init__(self, scene, root: str):
+        self.scene, self.root = scene, f"{root}/view3d"
+        self._frustum = self._rays = None
 
-def ray_to_pixel(cam, origin, direction, depth: float = FRUSTUM_SCALE * 0.999) -> np.ndarray | None:
-    """Pixel where a click ray meets the frustum's image plane, or None."""
-    o = cam.R @ (np.asarray(origin, float) - cam.C)
-    d = cam.R @ np.asarray(direction, float)
-    if abs(d[2]) < 1e-12:
-        return None
-    t = (depth - o[2]) / d[2]
-    if t <= 0:
-        return None
-    p = o + t * d
-    return np.array([cam.fx * p[0] / p[2] + cam.cx, cam.fy * p[1] / p[2] + cam.cy])
+    def hide(self) -> None:
+        for handle in (self._frustum, self._rays):
+            if handle is not None:
+                handle.visible = False
+
+    def show(self, view, image_rgb: np.ndarray | None) -> None:
+        """The frame's camera, its image (when given) and the keypoint rays; nothing without a camera."""
+        cam = view.camera
+        if cam is None:
+            self.hide()
+            return
+        W, H = view.size
+        fov_y, wxyz = 2 * math.atan((H / 2) / cam.fy), camera_wxyz(cam.R)
+        if image_rgb is None:
+            image_rgb = np.full((9, 16, 3), 60, np.uint8)
+        if self._frustum is None:
+            self._frustum = self.scene.add_camera_frustum(
+                f"{self.root}/camera", fov=fov_y, aspect=W / H, scale=FRUSTUM_SCALE, image=image_rgb, format="jpeg",
+                jpeg_quality=85, wxyz=wxyz, position=cam.C, color=FRUSTUM_RGB)
+        else:
+            f = self._frustum
+            f.fov, f.aspect, f.image, f.wxyz, f.position, f.visible = fov_y, W / H, image_rgb, wxyz, cam.C, True
+        obs = view.observations
+        if obs is None or not obs.n_keypoints:
+            if self._rays is not None:
+                self._rays.visible = False
+            return
+        seg = np.stack([np.repeat(cam.C[None], obs.n_keypoints, 0), obs.kp_xyz], axis=1)
+        cols = np.array([SET_RGB.get(str(s), (255, 255, 255)) for s in obs.kp_sets], np.uint8)
+        cols = np.repeat(cols[:, None], 2, 1)
+        if self._rays is None:
+            self._rays = self.scene.add_line_segments(f"{self.root}/rays", seg, cols, thickness=1.5,
+                                                      thickness_units="screen")
+        else:
+            self._rays.points, self._rays.colors, self._rays.visible = seg, cols, True

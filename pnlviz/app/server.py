@@ -1,11 +1,13 @@
-"""``pnlviz serve``: the viser app. The frame with its overlays sits on the estimated camera's
-frustum in a 3D model of the pitch; panels navigate, show the calibration card, switch PnL and its
-weight, and record the review status of each frame (autosaved beside the data).
+"""``pnlviz serve``: the viser app. Each frame opens in an image view (zoom, pan, overlays and
+points drawn over the picture, points dragged where they belong, the frame recalibrated as they
+move); the 3D view shows the estimated camera's frustum over a model of the pitch. Panels
+navigate, review, show the calibration card and switch PnL and its weight; every edit and review
+is autosaved beside the data.
 
-Each browser tab is a :class:`pnlviz.app.session.Session` with its own frame and panels; this
-module holds what they share: the viser server (behind :mod:`pnlviz.app.guard`, which refuses
-foreign pages), the pitch model, the background calibration of every frame and the background
-detector. Everything shown comes from :class:`pnlviz.app.state.AppState`.
+Each browser tab is a :class:`pnlviz.app.session.Session` with its own frame, view and panel;
+this module holds what they share: the viser server (behind :mod:`pnlviz.app.guard`, which
+refuses foreign pages), the pitch model, the background calibration of every frame and the
+background detector. Everything shown comes from :class:`pnlviz.app.state.AppState`.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import viser
 from pnlviz.app.guard import AccessPolicy, guarded_viser_server
 from pnlviz.app.session import Session
 from pnlviz.app.state import AppState
+from pnlviz.app.view2d import FOV_Y, PLANE_Z
 from pnlviz.field.meshes import goals_mesh, grass_mesh, markings_mesh, nets_mesh
 
 
@@ -32,13 +35,15 @@ class PnlvizApp:
         self.server = guarded_viser_server(self.policy, host=host, port=port, label="pnlviz", verbose=False)
         self.policy.port = self.server.get_port()
         self.server.scene.set_up_direction("-z")  # SoccerNet world: z points down
-        # the first view: the whole pitch from high above the main stand
-        self.server.initial_camera.position = (0.0, 95.0, -70.0)
-        self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
-        self.server.initial_camera.up = (0.0, 0.0, -1.0)
+        # the first view, until a tab puts its frame in it: straight at the image plane
+        self.server.initial_camera.position = (0.0, 0.0, PLANE_Z - 30.0)
+        self.server.initial_camera.look_at = (0.0, 0.0, PLANE_Z)
+        self.server.initial_camera.up = (0.0, -1.0, 0.0)
+        self.server.initial_camera.fov = FOV_Y
         self.sessions: dict[int, Session] = {}
         self._sessions_lock = threading.Lock()
         self._detecting: set[str] = set()
+        self._detection_status: dict[str, str] = {}  # stem -> what the detector is doing or did there
         self._background_text = ""
         self._add_pitch()
         state.subscribe(self._frame_changed)
@@ -58,7 +63,7 @@ class PnlvizApp:
         session = Session(self, client.gui, client.scene, client)
         with self._sessions_lock:
             self.sessions[client.client_id] = session
-        session.background.content = self._background_text
+        session.panels.background.content = self._background_text
         problems = self.state.problems + self.state.edits.warnings
         if problems:  # the server's log has them all
             more = f" (and {len(problems) - 3} more, listed where the server runs)" if len(problems) > 3 else ""
@@ -113,23 +118,31 @@ class PnlvizApp:
 
     # ------------------------------------------------------------------ background
     def _say(self, text: str) -> None:
+        """The background calibration's progress, in every tab."""
         self._background_text = text
         for session in self._all_sessions():
-            session.background.content = text
+            session.panels.background.content = text
+
+    def detection_status(self, stem: str) -> str | None:
+        """What the detector does or did on ``stem`` (for the tabs showing it), None when nothing."""
+        return self._detection_status.get(stem)
 
     def detect_in_background(self, stem: str) -> None:
-        """Run the detector on a frame off the GUI threads; the tabs showing it redraw when done."""
+        """Run the detector on a frame off the GUI threads; the tabs showing it redraw when done
+        (and each tab says so for its own frame only)."""
         if stem in self._detecting:
             return
         self._detecting.add(stem)
 
         def work():
+            self._detection_status[stem] = "detecting (light model: < 1 s; published networks: ~13 s on 2 cores)"
+            self._frame_changed(stem)
             try:
-                self._say(f"detecting on {stem} (light model: < 1 s; published networks: ~13 s on 2 cores)...")
                 self.state.run_detector(stem)  # announces the change: the tabs on this frame redraw
-                self._say(f"detections ready for {stem}")
+                self._detection_status.pop(stem, None)
             except Exception as exc:  # noqa: BLE001 - a detector failure is shown, never fatal
-                self._say(f"detection failed on {stem}: {type(exc).__name__}: {exc}")
+                self._detection_status[stem] = f"**detection failed**: {type(exc).__name__}: {exc}"
+                self._frame_changed(stem)
             finally:
                 self._detecting.discard(stem)
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pnlviz.app.edits import REVIEW_STATES, EditsStore, keypoint_ids
+from pnlviz.app.edits import HISTORY_LIMIT, REVIEW_STATES, UNDOABLE, EditsStore, keypoint_ids
 from pnlviz.calib.calibrate import CalibParams, CalibrationResult
 from pnlviz.calib.frame import SOURCES, FrameInputs, FrameSettings, calibrate_frame, detection_settings_apply
 from pnlviz.calib.observations import Observations
@@ -99,10 +99,6 @@ class FrameView:
         return self.reference_camera
 
 
-#: what one undo step restores
-_UNDOABLE = ("annotation", "keypoints", "review")
-
-
 class _Unchanged(Exception):
     """Raised inside an edit transaction that changes nothing: no write, no undo step."""
 
@@ -146,8 +142,6 @@ class AppState:
         self._images: dict[str, np.ndarray | None] = {}
         #: why an image could not be decoded (stem -> one line), once it was tried
         self.image_errors: dict[str, str] = {}
-        self._undo: dict[str, list[dict]] = {}
-        self._redo: dict[str, list[dict]] = {}
         self._listeners: list[Callable[[str], None]] = []
 
     def close(self) -> None:
@@ -281,7 +275,14 @@ class AppState:
             items = list(self._cache.items())
         return [v for k, v in items if k[1] == settings and k == self._key(k[0], settings)]
 
-    def _compute(self, stem: str, settings: Settings) -> FrameView:
+    def preview(self, stem: str, settings: Settings, kid: int, x: float, y: float) -> FrameView:
+        """The frame as it would be with keypoint ``kid`` at (x, y), calibrated (for feedback while
+        a point is dragged): neither saved nor cached."""
+        kid, (x, y) = self._check_id(kid), self._check_position(stem, x, y)
+        edits = {**(self.edits.get(stem).get("keypoints") or {}), str(kid): [x, y]}
+        return self._compute(stem, settings, keypoint_edits=edits)
+
+    def _compute(self, stem: str, settings: Settings, keypoint_edits: dict | None = None) -> FrameView:
         """Read the frame's inputs (the only I/O here), then the engine's one path per frame."""
         from pnlviz.metrics.soccernet import evaluate_frame
 
@@ -295,7 +296,9 @@ class AppState:
             ref = Camera.from_soccernet(ref).scaled(*size) if ref is not None else None
         except DataError as exc:
             return FrameView(stem, idx, False, self.size, None, None, None, error=str(exc), settings=settings)
-        inputs = FrameInputs(size, ann, self.detections_for(stem), self.edits.get(stem).get("keypoints"))
+        if keypoint_edits is None:
+            keypoint_edits = self.edits.get(stem).get("keypoints")
+        inputs = FrameInputs(size, ann, self.detections_for(stem), keypoint_edits)
         fc = calibrate_frame(inputs, self.frame_settings(settings), self.model)
         engine_error = fc.failure.message if fc.failure is not None and fc.failure.code in ("no_input", "internal") else None
         jac = {}
@@ -340,22 +343,22 @@ class AppState:
 
     def _edit(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True) -> None:
         """One user action on one frame: ``change(record)`` under the frame's lock, one undo
-        step, autosaved at once (an OSError of the write reaches the caller, nothing changes)."""
+        step (saved in the record, so it outlives the server), autosaved at once (an OSError of
+        the write reaches the caller, nothing changes)."""
         self.index_of(stem)
-        with self.edits.lock(stem):
-            try:
-                with self.edits.edit(stem) as rec:
-                    before = {k: rec.get(k) for k in _UNDOABLE}
-                    change(rec)
-                    if corrected:
-                        rec["review"] = "corrected"
-                    if {k: rec.get(k) for k in _UNDOABLE} == before:
-                        raise _Unchanged
-            except _Unchanged:
-                return
-            with self._lock:  # the write succeeded: now it is an undo step
-                self._undo.setdefault(stem, []).append(before)
-                self._redo.pop(stem, None)
+        try:
+            with self.edits.edit(stem) as rec:
+                before = {k: rec.get(k) for k in UNDOABLE}
+                change(rec)
+                if corrected:
+                    rec["review"] = "corrected"
+                step = {k: before[k] for k in UNDOABLE if rec.get(k) != before[k]}
+                if not step:
+                    raise _Unchanged
+                history = rec.get("history") or {}
+                rec["history"] = {"undo": (history.get("undo", []) + [step])[-HISTORY_LIMIT:], "redo": []}
+        except _Unchanged:
+            return
         self._changed(stem)
 
     def set_review(self, stem: str, status: str | None) -> None:
@@ -398,24 +401,31 @@ class AppState:
         self._edit(stem, change)
 
     def undo(self, stem: str) -> bool:
-        return self._step(stem, self._undo, self._redo)
+        """Take back the frame's last change (whoever made it); False if there is none."""
+        return self._step(stem, "undo", "redo")
 
     def redo(self, stem: str) -> bool:
-        return self._step(stem, self._redo, self._undo)
+        return self._step(stem, "redo", "undo")
 
-    def _step(self, stem: str, source: dict, target: dict) -> bool:
+    def history(self, stem: str) -> tuple[int, int]:
+        """(undo steps, redo steps) the frame has."""
+        h = self.edits.get(stem).get("history") or {}
+        return len(h.get("undo", [])), len(h.get("redo", []))
+
+    def _step(self, stem: str, source: str, target: str) -> bool:
         self.index_of(stem)
-        with self.edits.lock(stem):
-            with self._lock:
-                if not source.get(stem):
-                    return False
-                state = source[stem][-1]
+        try:
             with self.edits.edit(stem) as rec:
-                current = {k: rec.get(k) for k in _UNDOABLE}
-                rec.update(state)
-            with self._lock:  # written: move the step across
-                source[stem].pop()
-                target.setdefault(stem, []).append(current)
+                history = rec.get("history") or {}
+                steps = list(history.get(source, []))
+                if not steps:
+                    raise _Unchanged
+                step = steps.pop()
+                back = {k: rec.get(k) for k in step}
+                rec.update(step)
+                rec["history"] = {source: steps, target: (list(history.get(target, [])) + [back])[-HISTORY_LIMIT:]}
+        except _Unchanged:
+            return False
         self._changed(stem)
         return True
 

@@ -1,0 +1,131 @@
+// pnlviz's pointer bridge: the few things viser's client does not do for the image view.
+//
+// - The mouse wheel and the + / - keys zoom around the pointer (viser's camera dollies towards the
+//   centre of the view). In the image view the wheel is taken before the camera controls see it;
+//   the zoom is sent to the server, which moves the camera (pnlviz.app.bridge).
+// - The arrow keys nudge the selected point by one image pixel (ten with shift) instead of turning
+//   the camera.
+// - Every <label for="..."> points at its input (viser labels inputs whose elements carry no id).
+//
+// The server talks to it through the attributes of an element of its own (#pnlviz-bridge:
+// data-input, the uuid of the text field it writes to; data-mode, "image" or "3d"), and it talks
+// to the server by writing JSON into that text field, which viser sends like a typed value.
+// GUI values are throttled (the latest one wins), so what it sends is cumulative: the total
+// log-zoom and nudge so far, where the pointer is, and the canvas size in CSS pixels.
+(() => {
+  const config = () => {
+    const el = document.getElementById("pnlviz-bridge");
+    return el ? { input: el.dataset.input, mode: el.dataset.mode } : null;
+  };
+  if (window.__pnlvizBridge) return; // one bridge per page, whatever re-renders the panel
+  const state = { logZoom: 0.0, nudgeX: 0, nudgeY: 0, seq: 0, x: 0.5, y: 0.5, over: false };
+  window.__pnlvizBridge = state;
+
+  const field = () => {
+    const cfg = config();
+    if (!cfg || !cfg.input) return null;
+    const label = document.querySelector(`label[for="${cfg.input}"]`);
+    let row = label;
+    while (row && !row.querySelector("input")) row = row.parentElement;
+    const input = row ? row.querySelector("input") : null;
+    if (row && row.parentElement && row.parentElement.style.display !== "none") {
+      row.parentElement.style.display = "none"; // a channel, not a control
+    }
+    return input;
+  };
+
+  const send = () => {
+    const input = field();
+    if (!input) return;
+    state.seq += 1;
+    const canvas = document.querySelector("canvas");
+    const message = JSON.stringify({
+      kind: "pointer", n: state.seq, log_zoom: state.logZoom, x: state.x, y: state.y,
+      nudge: [state.nudgeX, state.nudgeY],
+      canvas: canvas ? [canvas.clientWidth, canvas.clientHeight] : null,
+    });
+    Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set.call(input, message);
+    input.dispatchEvent(new Event("input", { bubbles: true }));
+  };
+
+  const canvasOf = (target) => (target && target.tagName === "CANVAS" ? target : null);
+  const track = (event) => {
+    const canvas = canvasOf(event.target);
+    state.over = canvas !== null;
+    if (!canvas) return;
+    const box = canvas.getBoundingClientRect();
+    state.x = (event.clientX - box.left) / box.width;
+    state.y = (event.clientY - box.top) / box.height;
+  };
+  window.addEventListener("pointermove", track, { capture: true, passive: true });
+
+  const zoomBy = (logFactor) => {
+    state.logZoom += logFactor;
+    send();
+  };
+  window.addEventListener(
+    "wheel",
+    (event) => {
+      const cfg = config();
+      if (!cfg || cfg.mode !== "image" || !canvasOf(event.target)) return;
+      event.preventDefault();
+      event.stopImmediatePropagation();
+      track(event);
+      const lines = event.deltaMode === 1 ? 16 : event.deltaMode === 2 ? 400 : 1;
+      zoomBy(-0.0015 * event.deltaY * lines); // one notch (100 px) ~ x1.16
+    },
+    { capture: true, passive: false },
+  );
+  window.addEventListener(
+    "keydown",
+    (event) => {
+      const cfg = config();
+      const t = event.target;
+      const typing = t && (t.tagName === "INPUT" || t.tagName === "TEXTAREA" || t.isContentEditable);
+      if (!cfg || cfg.mode !== "image" || typing || event.ctrlKey || event.metaKey || event.altKey) return;
+      const arrows = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, -1], ArrowDown: [0, 1] };
+      if (event.key in arrows) {
+        // nudge the selected point (instead of turning the camera, which the image view does not do)
+        const step = event.shiftKey ? 10 : 1;
+        state.nudgeX += step * arrows[event.key][0];
+        state.nudgeY += step * arrows[event.key][1];
+        event.preventDefault();
+        event.stopImmediatePropagation();
+        send();
+        return;
+      }
+      if (!state.over) {
+        state.x = 0.5;
+        state.y = 0.5;
+      }
+      if (event.key === "+" || event.key === "=") zoomBy(Math.log(Math.SQRT2));
+      else if (event.key === "-" || event.key === "_") zoomBy(-Math.log(Math.SQRT2));
+      else return;
+      event.preventDefault();
+    },
+    { capture: true },
+  );
+
+  // <label for> without its element: give the input (or select, button) of that row the id.
+  const mendLabels = () => {
+    for (const label of document.querySelectorAll("label[for]")) {
+      const id = label.getAttribute("for");
+      if (!id || document.getElementById(id)) continue;
+      const controls = "input, select, textarea, button, [role=slider], [role=switch], [role=combobox]";
+      let row = label.parentElement;
+      for (let up = 0; row && up < 4 && !row.querySelector(controls); up++) row = row.parentElement;
+      const target = row ? row.querySelector(controls) : null;
+      if (target && !target.id) target.id = id;
+    }
+  };
+  mendLabels();
+  new MutationObserver(mendLabels).observe(document.body, { childList: true, subtree: true });
+  // the canvas size in CSS pixels (the screen pixels a zoom is measured in; viser reports the
+  // drawing buffer's, which shrinks when it lowers the resolution on a slow machine)
+  const watchCanvas = () => {
+    const canvas = document.querySelector("canvas");
+    if (!canvas || !field()) return setTimeout(watchCanvas, 200);
+    new ResizeObserver(() => send()).observe(canvas);
+  };
+  watchCanvas();
+})();

@@ -1,0 +1,180 @@
+"""The panel of one tab (docked to the right of the image, narrow and collapsible): the widgets,
+the keys, and which session action each one calls. Every callback goes through the session's
+queue (:meth:`pnlviz.app.session.Session.ordered`), so actions run one at a time in the order the
+browser sent them, and every value is checked by the action it reaches.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pnlviz.app.bridge import bridge_html
+from pnlviz.app.overlay import LEGEND, SET_RGB
+
+FILTERS = ("all", "failed", "unreviewed", "accepted", "corrected", "rejected")
+SORTS = ("index", "JaC@5 (worst first)", "residual (worst first)")
+DRAG_MODES = ("keypoints", "line points")
+LAYERS = ("keypoints", "ids", "ghosts", "refined_pitch", "initial_pitch", "reference_pitch", "annotation",
+          "residuals", "detected_lines")
+KEYPOINT_CHOICES = tuple(str(i) for i in range(1, 74))
+REVIEW_KEYS = {"accepted": "G", "corrected": "C", "rejected": "R"}
+PANEL_WIDTH = 320
+
+#: every key of the app: (keys, what), for the help section (the bridge handles + and -, the
+#: arrows; viser's camera keys W A S D Q E pan and zoom the image view too)
+KEYS = (
+    ("wheel, + / -", "zoom around the pointer"),
+    ("drag the image, right-drag", "pan"),
+    ("0 / 1", "fit the frame / native resolution (1 image pixel = 1 screen pixel)"),
+    ("V", "image view <-> 3D view (the pitch, the camera frustum)"),
+    ("N / P", "next / previous frame (of the filter)"),
+    ("G / C / R", "review: accepted / corrected / rejected, then the next frame"),
+    ("click a point", "select it (a ghost: choose its id)"),
+    ("drag a point", "move it (a ghost: place it); the frame recalibrates as you drag"),
+    ("shift+click", "place the chosen id there"),
+    ("arrows (shift: x10)", "nudge the selected point by one image pixel"),
+    ("Delete / Backspace", "mark the selected keypoint not visible"),
+    ("Escape", "clear the selection"),
+    ("Ctrl+Z / Ctrl+Shift+Z", "undo / redo (saved with the edits)"),
+    ("Ctrl+K", "all commands"),
+)
+
+
+def legend_markdown() -> str:
+    """The colours of the overlays and of the keypoint sets."""
+    def swatch(rgb) -> str:
+        return f'<span style="color:rgb{tuple(int(c) for c in rgb)}">&#9632;</span>'
+
+    rows = [f"{swatch(c)} {text}" for c, text in LEGEND.values()]
+    rows.append("keypoint sets: " + ", ".join(f"{swatch(c)} {name}" for name, c in SET_RGB.items()))
+    return "<br>".join(rows)
+
+
+def help_markdown() -> str:
+    return "\n".join(f"- **{keys}**: {what}" for keys, what in KEYS)
+
+
+class Panels:
+    """The widgets of one tab's panel, bound to ``session``'s actions."""
+
+    def __init__(self, session):
+        self.session = s = session
+        gui = s.gui
+        gui.configure_theme(control_width="medium", show_share_button=False)
+        gui.main_panel.dock_right()
+        gui.main_panel.set_width(PANEL_WIDTH)
+        self.title = gui.add_markdown("")
+        self.status = gui.add_markdown("")
+        with gui.add_folder("Frame"):
+            self.slider = gui.add_slider("frame", min=0, max=1, step=1, initial_value=0)
+            self.nav = gui.add_button_group("navigate", ("previous", "next"))
+            self.jump = gui.add_text("jump to stem", initial_value="")
+            self.filter = gui.add_dropdown("filter", FILTERS, initial_value="all")
+            self.sort = gui.add_dropdown("sort", SORTS, initial_value="index")
+            self.filter_text = gui.add_markdown("")
+        with gui.add_folder("Review"):
+            self.review = gui.add_button_group("status", tuple(f"{k} ({v})" for k, v in REVIEW_KEYS.items()) + ("clear",))
+            self.advance = gui.add_checkbox("then next frame", initial_value=True)
+            self.progress = gui.add_progress_bar(0.0)
+            self.progress_text = gui.add_markdown("")
+        with gui.add_folder("Points"):
+            self.selected = gui.add_markdown("")
+            self.kp_id = gui.add_dropdown("place id", KEYPOINT_CHOICES, initial_value="1",
+                                          hint="shift+click on the image places this keypoint")
+            self.points = gui.add_dropdown("on this frame", ("-",), initial_value="-",
+                                           hint="the frame's keypoints: choose one to select it")
+            self.hide = gui.add_button("not visible (Delete)")
+            self.drag_mode = gui.add_dropdown("drag", DRAG_MODES, initial_value="keypoints")
+            self.snap = gui.add_checkbox("snap to pitch", initial_value=False,
+                                         hint="a point dropped within 8 screen pixels of a projected "
+                                              "intersection or line goes onto it")
+            self.history = gui.add_button_group("history", ("undo", "redo"))
+            self.export = gui.add_button("export labels (zip)")
+        with gui.add_folder("View"):
+            self.view_buttons = gui.add_button_group("view", ("fit (0)", "1:1 (1)", "3D (V)"))
+            self.zoom_text = gui.add_markdown("")
+            self.opacity = gui.add_slider("overlay opacity", min=0.1, max=1.0, step=0.05, initial_value=1.0)
+            self.layer_boxes = {name: gui.add_checkbox(name.replace("_", " "), initial_value=getattr(s.layers, name))
+                                for name in LAYERS}
+            self.legend = gui.add_markdown(legend_markdown())
+        with gui.add_folder("Calibration"):
+            self.card = gui.add_markdown("")
+            self.pnl = gui.add_checkbox("PnL refinement", initial_value=s.settings.pnl)
+            self.alpha = gui.add_slider("alpha (lines vs points)", min=0.0, max=1.0, step=0.05,
+                                        initial_value=s.settings.alpha)
+            self.sources = s.sources
+            self.source = gui.add_dropdown("keypoint source", self.sources, initial_value=s.settings.source)
+        with gui.add_folder("Help", expand_by_default=False):
+            gui.add_markdown(help_markdown())
+        self.background = gui.add_markdown("")
+        # the pointer bridge: a text field it writes to (hidden by the bridge) and its loader
+        self.bridge_field = gui.add_text("pointer", initial_value="")
+        self.bridge = gui.add_html(bridge_html(self.bridge_field._impl.uuid, "image"))
+        self._bind()
+
+    def set_mode(self, mode: str) -> None:
+        self.bridge.content = bridge_html(self.bridge_field._impl.uuid, mode)
+
+    # ------------------------------------------------------------------ bindings
+    def _bind(self) -> None:
+        s, on = self.session, self.session.ordered
+        self.slider.on_update(on(lambda _: s.slider_moved(self.slider.value)))
+        self.nav.on_click(on(lambda e: s.step(-1 if e.target.value == "previous" else 1)
+                             if e.target.value in ("previous", "next") else None))
+        self.jump.on_update(on(lambda _: s.jump(self.jump.value)))
+        self.filter.on_update(on(lambda _: s.set_filter(self.filter.value)))
+        self.sort.on_update(on(lambda _: s.set_sort(self.sort.value)))
+        self.review.on_click(on(lambda e: s.review(str(e.target.value).split(" (")[0], advance=self.advance.value)))
+        self.kp_id.on_update(on(lambda _: s.set_place_id(self.kp_id.value)))
+        self.points.on_update(on(lambda _: s.select_listed(self.points.value)))
+        self.hide.on_click(on(lambda _: s.hide_selected()))
+        self.drag_mode.on_update(on(lambda _: s.set_drag_mode(self.drag_mode.value)))
+        self.snap.on_update(on(lambda _: s.set_snap(self.snap.value)))
+        self.history.on_click(on(lambda e: s.undo() if e.target.value == "undo" else s.redo()))
+        self.export.on_click(on(lambda _: s.export()))
+        self.view_buttons.on_click(on(lambda e: {"fit (0)": s.fit, "1:1 (1)": s.native, "3D (V)": s.toggle_mode}
+                                      .get(e.target.value, lambda: None)()))
+        self.opacity.on_update(on(lambda _: s.set_opacity(self.opacity.value)))
+        for name, box in self.layer_boxes.items():
+            box.on_update(on(lambda _, name=name, box=box: s.set_layer(name, box.value)))
+        self.pnl.on_update(on(lambda _: s.set_pnl(self.pnl.value)))
+        self.alpha.on_update(on(lambda _: s.set_alpha(self.alpha.value)))
+        self.source.on_update(on(lambda _: s.set_source(self.source.value)))
+        self.bridge_field.on_update(on(lambda _: s.bridge_message(self.bridge_field.value)))
+        self._bind_keys()
+
+    def _bind_keys(self) -> None:
+        s, gui = self.session, self.session.gui
+        keys = (("next frame", "N", None, lambda: s.step(1)),
+                ("previous frame", "P", None, lambda: s.step(-1)),
+                ("review: accepted, next", "G", None, lambda: s.review("accepted", advance=self.advance.value)),
+                ("review: corrected, next", "C", None, lambda: s.review("corrected", advance=self.advance.value)),
+                ("review: rejected, next", "R", None, lambda: s.review("rejected", advance=self.advance.value)),
+                ("undo", "Z", "cmd/ctrl", s.undo),
+                ("redo", "Z", "cmd/ctrl+shift", s.redo),
+                ("image view / 3D view", "V", None, s.toggle_mode),
+                ("fit the frame", "0", None, s.fit),
+                ("native resolution", "1", None, s.native),
+                ("selected point not visible", "delete", None, s.hide_selected),
+                ("selected point not visible ", "backspace", None, s.hide_selected),
+                ("clear the selection", "escape", None, lambda: s.select(None)))
+        for label, key, modifier, action in keys:
+            description = (modifier.replace("cmd/ctrl", "Ctrl").replace("+shift", "+Shift") + "+" if modifier else "") + key
+            command = gui.add_command(label, hotkey=key, modifier=modifier, description=description)
+            command.on_trigger(self.session.ordered(lambda _, action=action: action()))
+
+    # ------------------------------------------------------------------ values from the browser
+    def choice(self, handle, options, fallback: str) -> str:
+        """The dropdown's value if it is one of ``options``; else it is reset to ``fallback``."""
+        value = handle.value
+        if value in options:
+            return value
+        self.session.notify("refused", f"{handle.label}: {str(value)[:40]!r} is not one of the options")
+        self.session.set_value(handle, fallback)
+        return fallback
+
+    def set_order(self, n: int, pos: int) -> None:
+        """The slider over ``n`` frames at position ``pos`` (disabled when there is only one)."""
+        self.slider.max = max(1, n - 1)
+        self.slider.disabled = n <= 1
+        self.session.set_value(self.slider, int(np.clip(pos, 0, max(0, n - 1))))

@@ -1,0 +1,344 @@
+"""The image view's scene nodes for one tab: the frame on its plane (sent once per frame), the
+overlays as line segments over it, and the points you grab (observed keypoints, ghosts of the
+missing ones, points of annotated lines) as batched discs with their ids. Every node is created
+once and then updated in place, so an edit sends only what changed and a drag in progress is
+never cut short by a redraw.
+
+Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
+select, move, place) is the session's business. Nothing here computes a calibration.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from pnlviz.app.overlay import Markers, Overlay, Segments
+from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter
+
+#: screen pixels: the radius of a point's disc, of its black rim, of the area that grabs it, and
+#: of the selection ring
+DISC_PX, RIM_PX, GRAB_PX, RING_PX = 4.5, 6.0, 8.0, 11.0
+#: screen thickness of each layer's lines
+THICKNESS = {"refined_pitch": 2.0, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
+             "detected_lines": 2.0, "residuals": 1.5}
+BACKDROP_RGB = (38, 40, 46)
+SELECTED_RGB = (255, 255, 255)
+LABEL_MIN_GAP_PX = 16.0  # ids closer than this on screen: only the first one shows
+
+
+def _disc(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """A unit disc in the xy plane (a fan of ``n`` triangles), facing both ways."""
+    a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    vertices = np.vstack([[0.0, 0.0, 0.0], np.stack([np.cos(a), np.sin(a), np.zeros(n)], 1)])
+    faces = np.array([[0, 1 + i, 1 + (i + 1) % n] for i in range(n)])
+    return vertices, faces
+
+
+@dataclass
+class WorkspaceEvents:
+    """What the workspace reports, in image pixels of the frame it showed."""
+
+    place: Callable[[np.ndarray], None]  # shift+click on the frame
+    click: Callable[[np.ndarray], None]  # a plain click on the frame (not on a point)
+    pan: Callable[[str, np.ndarray, np.ndarray], None]  # (phase, start, now): screen fractions of the canvas
+    pick: Callable[[str, object], None]  # (kind, key): a click on a point
+    drag: Callable[[str, object, str, np.ndarray], None]  # (kind, key, phase, pixel the point is dragged to)
+
+
+class _PointNodes:
+    """The points of one kind, drawn as flat discs with a black rim (two point clouds: unlit, so
+    the colours are the legend's) over an invisible batched mesh that takes the pointer, so every
+    point of a frame is grabbed directly; ``keys[i]`` says what instance ``i`` is. The grab
+    mesh holds a few spare instances (parked out of sight): a point more or less does not
+    re-create it under a hand that is dragging one."""
+
+    def __init__(self, scene, path: str, kind: str, layer: str, opacity: float = 1.0):
+        self.scene, self.path, self.kind, self.layer, self.opacity = scene, path, kind, layer, opacity
+        self.keys: list = []
+        self.uv = np.zeros((0, 2))
+        self.colors = np.zeros((0, 3), np.uint8)
+        self.plane: ImagePlane | None = None
+        self.world_per_px = 0.01
+        self.disc = self.rim = self.grab = None
+
+    def show(self, markers: Markers, plane: ImagePlane, world_per_px: float, events: WorkspaceEvents) -> None:
+        self.keys, self.plane, self.world_per_px = list(markers.keys), plane, world_per_px
+        self.uv = np.asarray(markers.uv, float).reshape(-1, 2).copy()
+        self.colors = np.asarray(markers.colors, np.uint8).reshape(-1, 3)
+        if not self.keys and self.grab is None:
+            return
+        self._draw()
+        capacity = max(8, 1 << max(0, len(self.keys) - 1).bit_length())
+        pos, scales = self._grab_layout(capacity)
+        if self.grab is None or len(self.grab.batched_positions) != capacity:
+            vertices, faces = _disc()
+            self.grab = self.scene.add_batched_meshes_simple(
+                f"{self.path}/grab", vertices, faces, np.tile([1.0, 0.0, 0.0, 0.0], (capacity, 1)), pos,
+                batched_scales=scales, batched_colors=(255, 255, 255), opacity=0.0, side="double",
+                cast_shadow=False, receive_shadow=False, lod="off")
+            self._bind(self.grab, events)
+        else:
+            self.grab.batched_positions, self.grab.batched_scales = pos, scales
+
+    def _draw(self) -> None:
+        """The visible discs and rims, where ``uv`` says (none: hidden)."""
+        if not self.keys:
+            for node in (self.disc, self.rim):
+                if node is not None:
+                    node.visible = False
+            return
+        pos = self.plane.world(self.uv, self.layer).astype(np.float32)
+        rim_pos = pos + np.float32([0.0, 0.0, 0.0002])
+        if self.disc is None:
+            common = {"point_shape": "circle", "point_shading": "flat", "precision": "float32"}
+            self.rim = self.scene.add_point_cloud(f"{self.path}/rim", rim_pos, np.zeros_like(self.colors),
+                                                  point_size=RIM_PX * self.world_per_px, **common)
+            self.disc = self.scene.add_point_cloud(f"{self.path}/disc", pos, self._shade(self.colors),
+                                                   point_size=DISC_PX * self.world_per_px, **common)
+            return
+        self.rim.points, self.rim.colors, self.rim.visible = rim_pos, np.zeros_like(self.colors), True
+        self.disc.points, self.disc.colors, self.disc.visible = pos, self._shade(self.colors), True
+
+    def _shade(self, colors: np.ndarray) -> np.ndarray:
+        """Colours at this kind's opacity (ghosts: mixed with grey)."""
+        if self.opacity >= 1.0:
+            return colors
+        return (self.opacity * colors + (1 - self.opacity) * 90).astype(np.uint8)
+
+    def _grab_layout(self, capacity: int) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and scales of the grab mesh's instances: the points, then the spares."""
+        n = len(self.keys)
+        pos = np.zeros((capacity, 3))
+        pos[:, 2] = PLANE_Z + 1.0  # spares: behind the image, and of no size
+        scales = np.zeros(capacity)
+        if n:
+            pos[:n] = self.plane.world(self.uv, "grab")
+            scales[:n] = GRAB_PX * self.world_per_px
+        return pos, scales
+
+    def rescale(self, world_per_px: float) -> None:
+        self.world_per_px = world_per_px
+        if self.disc is not None:
+            self.disc.point_size, self.rim.point_size = DISC_PX * world_per_px, RIM_PX * world_per_px
+        if self.grab is not None and self.keys:
+            self.grab.batched_scales = self._grab_layout(len(self.grab.batched_positions))[1]
+
+    def move(self, index: int, uv) -> None:
+        """Put point ``index`` at pixel ``uv`` (while it is dragged)."""
+        if not 0 <= index < len(self.keys):
+            return
+        self.uv[index] = uv
+        self._draw()
+        if self.grab is not None:
+            self.grab.batched_positions = self._grab_layout(len(self.grab.batched_positions))[0]
+
+    def _bind(self, node, events: WorkspaceEvents) -> None:
+        grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
+
+        @node.on_click
+        async def _(event) -> None:
+            i = event.instance_index
+            if i is not None and 0 <= i < len(self.keys):
+                events.pick(self.kind, self.keys[i])
+
+        @node.on_drag
+        async def _(event) -> None:
+            if event.phase == "start":
+                i = event.instance_index
+                if i is None or not 0 <= i < len(self.keys):
+                    return
+                grabbed.update(key=self.keys[i], index=i, at=self.plane.pixel(event.start_position),
+                               uv=self.uv[i].copy())
+            if "key" not in grabbed:
+                return
+            # the point follows the pointer by as many image pixels as the pointer moved
+            now = grabbed["uv"] + self.plane.pixel(event.end_position) - grabbed["at"]
+            if event.phase != "start" and self.keys[grabbed["index"]:grabbed["index"] + 1] == [grabbed["key"]]:
+                self.move(grabbed["index"], now)
+            events.drag(self.kind, grabbed["key"], event.phase, now)
+            if event.phase == "end":
+                grabbed.clear()
+
+
+class Workspace:
+    """The image view of one tab, under scene path ``root``."""
+
+    def __init__(self, scene, root: str, events: WorkspaceEvents):
+        self.scene, self.root, self.events = scene, f"{root}/image_view", events
+        self.plane: ImagePlane | None = None
+        self.image_key: tuple | None = None  # (stem, version) of the pixels on the plane
+        self.world_per_px = 0.01  # scene units per screen pixel at the current zoom
+        self._image = self._backdrop = self._ring = None
+        self._lines: dict[str, object] = {}
+        self.points = {kind: _PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity)
+                       for kind, layer, opacity in (("keypoints", "keypoints", 1.0), ("ghosts", "ghosts", 0.55),
+                                                    ("line_points", "keypoints", 1.0))}
+        self._labels: dict[object, object] = {}  # keypoint id -> label node
+        self._label_uv: dict[object, np.ndarray] = {}
+        self._label_rank: dict[object, int] = {}
+        self.selected: tuple[str, object] | None = None
+
+    # ------------------------------------------------------------------ the frame
+    def show_image(self, key: tuple, image_rgb: np.ndarray) -> bool:
+        """Put the frame's pixels on the plane, unless these are already there. True if sent."""
+        if key == self.image_key:
+            return False
+        H, W = image_rgb.shape[:2]
+        plane = ImagePlane(W, H)
+        w, h = plane.extent
+        if self._image is None:
+            self._image = self.scene.add_image(f"{self.root}/frame", image_rgb, w, h, format="jpeg", jpeg_quality=90,
+                                               position=(0.0, 0.0, PLANE_Z), cast_shadow=False, receive_shadow=False)
+            backdrop = np.full((4, 4, 3), BACKDROP_RGB, np.uint8)
+            self._backdrop = self.scene.add_image(f"{self.root}/backdrop", backdrop, 12 * w, 12 * h, format="png",
+                                                  position=(0.0, 0.0, PLANE_Z + 0.01), cast_shadow=False,
+                                                  receive_shadow=False)
+            self._bind_frame()
+        else:
+            if plane != self.plane:
+                self._image.render_width, self._image.render_height = w, h
+                self._backdrop.render_width, self._backdrop.render_height = 12 * w, 12 * h
+            self._image.image = image_rgb
+        self.plane, self.image_key = plane, key
+        return True
+
+    def _bind_frame(self) -> None:
+        ev = self.events
+
+        @self._image.on_click(modifier="shift")
+        async def _(event) -> None:
+            uv = self._clicked(event)
+            if uv is not None:
+                ev.place(uv)
+
+        @self._image.on_click
+        async def _(event) -> None:
+            uv = self._clicked(event)
+            if uv is not None:
+                ev.click(uv)
+
+        for node in (self._image, self._backdrop):
+            start: dict = {}
+
+            @node.on_drag
+            async def _(event, start=start) -> None:
+                if event.phase == "start":
+                    start["at"] = np.array(event.start_screen_pos, float)
+                if "at" in start:
+                    ev.pan(event.phase, start["at"], np.array(event.end_screen_pos, float))
+
+    def _clicked(self, event) -> np.ndarray | None:
+        if self.plane is None:
+            return None
+        return self.plane.pixel_on_ray(event.ray_origin, np.asarray(event.ray_origin) + np.asarray(event.ray_direction))
+
+    # ------------------------------------------------------------------ overlays
+    def show_overlay(self, overlay: Overlay, line_colors: dict[str, np.ndarray] | None = None, *,
+                     keypoints: bool = True, ghosts: bool = True, line_points: bool = False, ids: bool = True) -> None:
+        """Every layer of ``overlay`` updated in place (``line_colors``: colours per segment end,
+        (N, 2, 3), e.g. blended towards the image for a lower opacity)."""
+        plane = self.plane
+        for name in set(self._lines) | set(overlay.segments):
+            seg = overlay.segments.get(name, Segments())
+            handle = self._lines.get(name)
+            if not len(seg):
+                if handle is not None:
+                    handle.visible = False
+                continue
+            pts = plane.world(seg.points, "residuals" if name == "residuals" else "pitch")
+            cols = line_colors[name] if line_colors and name in line_colors else np.repeat(seg.colors[:, None], 2, 1)
+            if handle is None:
+                self._lines[name] = self.scene.add_line_segments(f"{self.root}/lines/{name}", pts, cols,
+                                                                 thickness=THICKNESS.get(name, 1.5),
+                                                                 thickness_units="screen")
+            else:
+                handle.points, handle.colors, handle.visible = pts, cols, True
+        shown = {"keypoints": overlay.keypoints if keypoints else Markers(),
+                 "ghosts": overlay.ghosts if ghosts else Markers(),
+                 "line_points": overlay.line_points if line_points else Markers()}
+        for kind, markers in shown.items():
+            self.points[kind].show(markers, plane, self.world_per_px, self.events)
+        labelled = [(k, uv, 0) for k, uv in zip(shown["keypoints"].keys, shown["keypoints"].uv)] if ids else []
+        labelled += [(k, uv, 1) for k, uv in zip(shown["ghosts"].keys, shown["ghosts"].uv)] if ids else []
+        self._show_labels(labelled)
+        self._show_selection()
+
+    def _show_labels(self, labelled: list) -> None:
+        wanted = {k: (np.asarray(uv, float), rank) for k, uv, rank in labelled}
+        for k in [k for k in self._labels if k not in wanted]:
+            self._labels.pop(k).remove()
+            self._label_uv.pop(k, None)
+            self._label_rank.pop(k, None)
+        for k, (uv, rank) in wanted.items():
+            pos = self.plane.world(uv, "selection")
+            text = f"{k}" if rank == 0 else f"{k}?"
+            handle = self._labels.get(k)
+            if handle is None:
+                self._labels[k] = self.scene.add_label(f"{self.root}/ids/{k}", text, position=pos,
+                                                       font_screen_scale=0.75, anchor="bottom-left")
+            elif k not in self._label_uv or not np.allclose(self._label_uv[k], uv) or self._label_rank[k] != rank:
+                handle.position, handle.text = pos, text
+            self._label_uv[k], self._label_rank[k] = uv, rank
+        self.declutter()
+
+    def declutter(self) -> None:
+        """Ids too close to an earlier one on screen at this zoom are hidden (observed before ghosts)."""
+        if not self._labels:
+            return
+        keys = sorted(self._labels, key=lambda k: (self._label_rank[k], str(k)))
+        uv = np.array([self._label_uv[k] for k in keys])
+        px_per_image_px = self.plane.scale / self.world_per_px
+        keep = declutter(uv * px_per_image_px, LABEL_MIN_GAP_PX)
+        for k, show in zip(keys, keep):
+            handle = self._labels[k]
+            if handle.visible != bool(show):
+                handle.visible = bool(show)
+
+    # ------------------------------------------------------------------ selection and zoom
+    def select(self, selected: tuple[str, object] | None) -> None:
+        self.selected = selected
+        self._show_selection()
+
+    def _show_selection(self) -> None:
+        uv = None
+        if self.selected is not None and self.plane is not None:
+            nodes = self.points.get(self.selected[0])
+            if nodes is not None and self.selected[1] in nodes.keys:
+                uv = nodes.uv[nodes.keys.index(self.selected[1])]
+        if uv is None:
+            if self._ring is not None:
+                self._ring.visible = False
+            return
+        a = np.linspace(0, 2 * math.pi, 33)
+        circle = uv + RING_PX * self.world_per_px / self.plane.scale * np.stack([np.cos(a), np.sin(a)], 1)
+        pts = self.plane.world(np.stack([circle[:-1], circle[1:]], 1), "selection")
+        if self._ring is None:
+            self._ring = self.scene.add_line_segments(f"{self.root}/selection", pts, SELECTED_RGB, thickness=2.0,
+                                                      thickness_units="screen")
+        else:
+            self._ring.points, self._ring.visible = pts, True
+
+    def set_zoom(self, world_per_px: float) -> None:
+        """The camera zoomed: points keep their size on screen, ids are decluttered again."""
+        if self.world_per_px > 0 and abs(math.log(world_per_px / self.world_per_px)) < 0.05:
+            return
+        self.world_per_px = world_per_px
+        for nodes in self.points.values():
+            nodes.rescale(world_per_px)
+        if self.plane is not None:
+            self.declutter()
+            self._show_selection()
+
+    def move_point(self, kind: str, key, uv) -> None:
+        """Show point ``key`` at ``uv`` (and its id and ring), before the edit comes back."""
+        nodes = self.points[kind]
+        if key in nodes.keys:
+            nodes.move(nodes.keys.index(key), uv)
+        if key in self._labels:
+            self._labels[key].position = self.plane.world(uv, "selection")
+            self._label_uv[key] = np.asarray(uv, float)
+        self._show_selection()
