@@ -24,7 +24,7 @@
   const field = () => {
     const cfg = config();
     if (!cfg || !cfg.input) return null;
-    const label = document.querySelector(`label[for="${cfg.input}"]`);
+    const label = document.querySelector(`label[for="${cfg.input}"], label[data-viser-for="${cfg.input}"]`);
     let row = label;
     while (row && !row.querySelector("input")) row = row.parentElement;
     const input = row ? row.querySelector("input") : null;
@@ -106,16 +106,20 @@
     { capture: true },
   );
 
-  // <label for> without its element: give the input (or select, button) of that row the id.
+  // <label for> without its element: point it at the input of its row, or (a row of buttons, which
+  // name themselves) drop the "for".
   const mendLabels = () => {
     for (const label of document.querySelectorAll("label[for]")) {
       const id = label.getAttribute("for");
       if (!id || document.getElementById(id)) continue;
-      const controls = "input, select, textarea, button, [role=slider], [role=switch], [role=combobox]";
+      const controls = "input, select, textarea, [role=slider], [role=switch], [role=combobox]";
       let row = label.parentElement;
-      for (let up = 0; row && up < 4 && !row.querySelector(controls); up++) row = row.parentElement;
+      for (let up = 0; row && up < 2 && !row.querySelector(controls); up++) row = row.parentElement;
       const target = row ? row.querySelector(controls) : null;
-      if (target && !target.id) target.id = id;
+      label.setAttribute("data-viser-for", id); // what viser named it (the bridge finds its field so)
+      if (!target) label.removeAttribute("for");
+      else if (target.id) label.setAttribute("for", target.id); // it has an id of its own: point there
+      else target.id = id;
     }
   };
   mendLabels();

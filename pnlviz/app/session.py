@@ -133,7 +133,7 @@ class Session:
         #: server's shared scene) a branch of its own
         self._nodes = "/tab" if client is not None else f"/tab/session-{id(self):x}"
         events = WorkspaceEvents(place=self._on_place, click=self._on_click, pan=self._on_pan, pick=self._on_pick,
-                                 drag=self._on_drag)
+                                 drag=self._on_drag, screen_to_pixel=self._screen_to_pixel)
         self.workspace = Workspace(scene, self._nodes, events)
         self.scene3d = Scene3D(scene, self._nodes)
         self.panels = Panels(self)
@@ -531,6 +531,10 @@ class Session:
             return
         if self._drag is drag:  # still dragging: show the frame as it would be
             self._show_overlay(view, preview=True)
+
+    def _screen_to_pixel(self, fractions) -> np.ndarray:
+        view = self.view2d or View2D(0.0, 0.0, 1.0)
+        return view.to_pixel(np.asarray(fractions, float) * self.canvas, self.canvas)
 
     def _on_pan(self, phase: str, start, now) -> None:
         self.enqueue(lambda: self.pan(phase, start, now))

@@ -300,7 +300,8 @@ class AppState:
             keypoint_edits = self.edits.get(stem).get("keypoints")
         inputs = FrameInputs(size, ann, self.detections_for(stem), keypoint_edits)
         fc = calibrate_frame(inputs, self.frame_settings(settings), self.model)
-        engine_error = fc.failure.message if fc.failure is not None and fc.failure.code in ("no_input", "internal") else None
+        # nothing to calibrate from is not an error of the frame: the card asks for keypoints
+        engine_error = fc.failure.message if fc.failure is not None and fc.failure.code == "internal" else None
         jac = {}
         if fc.ok and ann:
             fr = evaluate_frame(fc.result.camera.scaled(*EVAL_SIZE), ann)

@@ -47,6 +47,7 @@ class WorkspaceEvents:
     pan: Callable[[str, np.ndarray, np.ndarray], None]  # (phase, start, now): screen fractions of the canvas
     pick: Callable[[str, object], None]  # (kind, key): a click on a point
     drag: Callable[[str, object, str, np.ndarray], None]  # (kind, key, phase, pixel the point is dragged to)
+    screen_to_pixel: Callable[[np.ndarray], np.ndarray]  # screen fractions of the canvas -> image pixel
 
 
 class _PointNodes:
@@ -113,8 +114,8 @@ class _PointNodes:
         """Positions and scales of the grab mesh's instances: the points, then the spares."""
         n = len(self.keys)
         pos = np.zeros((capacity, 3))
-        pos[:, 2] = PLANE_Z + 1.0  # spares: behind the image, and of no size
-        scales = np.zeros(capacity)
+        pos[:, 2] = PLANE_Z + 5.0  # spares: behind the image, tiny (a zero scale has no inverse)
+        scales = np.full(capacity, 1e-6)
         if n:
             pos[:n] = self.plane.world(self.uv, "grab")
             scales[:n] = GRAB_PX * self.world_per_px
@@ -136,27 +137,44 @@ class _PointNodes:
         if self.grab is not None:
             self.grab.batched_positions = self._grab_layout(len(self.grab.batched_positions))[0]
 
+    def _instance(self, index: int | None, at_uv) -> int | None:
+        """The point an event is about: its instance, or (viser sometimes reports none for a hit
+        on a batched mesh whose instances moved) the point nearest where the pointer hit."""
+        if index is not None and 0 <= index < len(self.keys):
+            return index
+        if at_uv is None or not self.keys:
+            return None
+        d = np.hypot(*(self.uv - at_uv).T)
+        i = int(np.argmin(d))
+        return i if d[i] * self.plane.scale <= 1.5 * GRAB_PX * self.world_per_px else None
+
     def _bind(self, node, events: WorkspaceEvents) -> None:
         grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
 
         @node.on_click
         async def _(event) -> None:
-            i = event.instance_index
-            if i is not None and 0 <= i < len(self.keys):
+            o = np.asarray(event.ray_origin, float)
+            i = self._instance(event.instance_index, self.plane.pixel_on_ray(o, o + np.asarray(event.ray_direction)))
+            if i is not None:
                 events.pick(self.kind, self.keys[i])
 
         @node.on_drag
         async def _(event) -> None:
             if event.phase == "start":
-                i = event.instance_index
-                if i is None or not 0 <= i < len(self.keys):
+                at = self.plane.pixel(event.start_position)
+                exact = bool(np.all(np.isfinite(at)))
+                if not exact:  # viser lost the instance it hit: where the pointer is, on screen
+                    at = events.screen_to_pixel(np.asarray(event.end_screen_pos, float))
+                i = self._instance(event.instance_index, at)
+                if i is None:
                     return
-                grabbed.update(key=self.keys[i], index=i, at=self.plane.pixel(event.start_position),
-                               uv=self.uv[i].copy())
+                grabbed.update(key=self.keys[i], index=i, at=at, uv=self.uv[i].copy(), exact=exact)
             if "key" not in grabbed:
                 return
             # the point follows the pointer by as many image pixels as the pointer moved
-            now = grabbed["uv"] + self.plane.pixel(event.end_position) - grabbed["at"]
+            pointer = (self.plane.pixel(event.end_position) if grabbed["exact"]
+                       else events.screen_to_pixel(np.asarray(event.end_screen_pos, float)))
+            now = grabbed["uv"] + pointer - grabbed["at"]
             if event.phase != "start" and self.keys[grabbed["index"]:grabbed["index"] + 1] == [grabbed["key"]]:
                 self.move(grabbed["index"], now)
             events.drag(self.kind, grabbed["key"], event.phase, now)
