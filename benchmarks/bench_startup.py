@@ -15,6 +15,7 @@ run and a summary with the servers' and detector processes' peak memory (VmHWM).
 from __future__ import annotations
 
 import argparse
+import re
 import shutil
 import socket
 import statistics
@@ -68,7 +69,7 @@ def one_run(browser, args, edits: Path) -> dict:
         page.goto(f"http://127.0.0.1:{port}/")
         page.get_by_text("computed in").first.wait_for(timeout=120_000)
         run["frame_s"] = time.perf_counter() - t0
-        page.get_by_text("detections ready").first.wait_for(timeout=180_000)
+        page.get_by_text(re.compile(r"calibrated from: (both|detections)")).first.wait_for(timeout=180_000)
         run["detections_s"] = time.perf_counter() - t0
         page.close()
         alive = proc.poll() is None

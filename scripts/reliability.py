@@ -6,7 +6,7 @@ docs/reliability.md.
 1. every batch command on a catalogue of bad inputs (each run a real ``pnlviz`` process):
    exit code, traceback or not, the bad file named in one line, the good frames still done;
 2. ``kill -9`` in the middle of bursts of edits: every acknowledged edit on disk, nothing damaged;
-3. concurrent edits: threads of the app's edit path, and two real browser tabs dragging handles
+3. concurrent edits: threads of the app's edit path, and two real browser tabs dragging points
    on the same frame at once (headless Chromium);
 4. damaged edit records: moved aside, the server starts, the frame shows its source labels;
 5. requests from foreign pages and hosts, and without the token.
@@ -390,26 +390,13 @@ def threads_section(tmp: Path) -> list[str]:
             f"**{landed} of {len(jobs)} on disk, each on its own frame**."]
 
 
-def screen_point(client, box: dict, world) -> tuple[float, float]:
-    """Where a world point shows on the canvas of ``client`` (viser cameras: OpenCV axes, vertical
-    field of view ``fov``)."""
-    from scipy.spatial.transform import Rotation
-
-    w, x, y, z = client.camera.wxyz
-    p = Rotation.from_quat([x, y, z, w]).as_matrix().T @ (np.asarray(world) - client.camera.position)
-    f = box["height"] / 2 / np.tan(client.camera.fov / 2)
-    return box["x"] + box["width"] / 2 + f * p[0] / p[2], box["y"] + box["height"] / 2 + f * p[1] / p[2]
-
-
 def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
-    """Two real tabs on the same frame drag different keypoint handles in turns, as fast as the
-    browser takes them (each release recalibrates the frame, which moves the other tab's handles:
-    every drag aims at where its handle is right then)."""
+    """Two real tabs on the same frame drag different keypoints in turns, as fast as the browser
+    takes them (each release recalibrates the frame, which moves the other tab's points: every
+    drag aims at where its point is on that tab's screen right then)."""
     from playwright.sync_api import sync_playwright
 
-    from pnlviz.app.scene import HANDLE_SCALE
     from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.session import KeypointHandle
     from pnlviz.app.state import AppState
 
     data = frames(tmp / "tabs", cameras=True)
@@ -417,6 +404,10 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
     app = PnlvizApp(st, port=free_port())
     flags = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
              "--disable-component-update", "--disable-sync"]
+
+    def canvas_box(page) -> dict:
+        return max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
+
     try:
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=shutil.which("chromium"), args=flags)
@@ -425,27 +416,28 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
                 page = browser.new_page(viewport={"width": 1400, "height": 900})
                 page.goto(app.url)
                 page.get_by_text("focal").first.wait_for(timeout=60000)
+                deadline = time.time() + 30
+                while time.time() < deadline and not any(
+                        t._css_canvas is not None and all(t is not s for _, s in tabs) for t in app.tabs()):
+                    time.sleep(0.2)
                 session = next(t for t in app.tabs() if all(t is not s for _, s in tabs))
-                session.handles_mode.value = "keypoints"
-                session.flush()
-                page.get_by_role("button", name="camera view").click()
                 tabs.append((page, session))
-            time.sleep(3.0)
+            time.sleep(2.0)
             obs = tabs[0][1].view().observations
             order = [int(obs.kp_ids[i]) for i in np.argsort(obs.kp_xy[:, 0])]  # leftmost first: away from the panel
             dragged = order[:2 * drags_per_tab]
             for n, kid in enumerate(dragged):
                 page, session = tabs[n % 2]
-                box = page.locator("canvas").first.bounding_box()
-                pos = np.asarray(session._handles[KeypointHandle(kid)].position, float)
-                cam = session._handle_frame[KeypointHandle(kid)][1]
-                x0, y0 = screen_point(session.client, box, pos + 0.5 * HANDLE_SCALE * cam.R[0])  # on the x arrow
-                x1, y1 = screen_point(session.client, box, pos + 0.9 * HANDLE_SCALE * cam.R[0])
-                step = np.array([x1 - x0, y1 - y0]) / max(np.hypot(x1 - x0, y1 - y0), 1e-9)
+                page.bring_to_front()  # a page in the background does not draw (nor pick)
+                session.flush()
+                box = canvas_box(page)
+                nodes = session.workspace.points["keypoints"]
+                x0, y0 = session.view2d.to_screen(nodes.uv[nodes.keys.index(kid)], session.canvas)
+                x0, y0 = box["x"] + x0, box["y"] + y0
                 page.mouse.move(x0, y0)
                 page.mouse.down()
-                page.mouse.move(x0 + 7 * step[0], y0 + 7 * step[1], steps=3)
-                page.mouse.move(x0 + 15 * step[0], y0 + 15 * step[1], steps=3)
+                page.mouse.move(x0 + 4, y0 + 5, steps=3)
+                page.mouse.move(x0 + 8, y0 + 10, steps=3)
                 page.mouse.up()
             time.sleep(4.0)
             grabbed = sum(s.grabs for _, s in tabs)
@@ -458,9 +450,10 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
     finally:
         app.stop()
         st.close()
-    return [f"- two browser tabs (headless Chromium, real mouse drags of the handles) on the same frame, dragging "
-            f"in turns without waiting for each other: {len(dragged)} drags, {grabbed} grabbed a handle, {released} "
-            f"releases reached the server, **{landed} edits on disk**, {len(others)} edits on another frame."]
+    return [f"- two browser tabs (headless Chromium, real mouse drags of the points themselves) on the same frame, "
+            f"dragging in turns without waiting for each other: {len(dragged)} drags, {grabbed} grabbed a point, "
+            f"{released} releases reached the server, **{landed} edits on disk**, {len(others)} edits on another "
+            f"frame."]
 
 
 # ------------------------------------------------------------------------------ damaged records

@@ -12,6 +12,7 @@ import shutil
 import socket
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -20,6 +21,7 @@ from playwright.sync_api import sync_playwright
 from pnlviz import EXAMPLES_DIR, REPO_ROOT
 from pnlviz.app.server import PnlvizApp
 from pnlviz.app.state import AppState
+from pnlviz.app.view2d import View2D
 
 OUT = REPO_ROOT / "docs" / "screenshots"
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
@@ -44,23 +46,56 @@ def shoot(page, name: str) -> None:
     print(f"wrote {OUT / name}.jpg")
 
 
-def session(browser, data: Path, edits: Path, shots: list[tuple[str, str, bool]]) -> None:
+def session(browser, data: Path, edits: Path, shots: list[tuple[str, str, Callable | None]]) -> None:
+    """Open ``data`` in a page and take each shot: (file name, frame, what to do on it first)."""
     app = PnlvizApp(AppState(data, edits=edits), port=free_port())
     try:
         page = browser.new_page(viewport={"width": 1600, "height": 900})
         page.goto(app.url)
         page.get_by_text("Calibration").first.wait_for(timeout=30000)
         tab = app.tabs()[0]
-        for name, stem, camera_view in shots:
-            tab.goto(app.state.find(stem))
+        deadline = time.time() + 30
+        while tab._css_canvas is None and time.time() < deadline:  # the page bridge has reported the canvas
+            time.sleep(0.2)
+        for name, stem, before in shots:
+            tab.enqueue(lambda stem=stem: tab.goto(app.state.find(stem)))
+            tab.flush()
             time.sleep(1.0)
-            if camera_view:
-                page.get_by_role("button", name="camera view").click()
+            if before is not None:
+                before(page, tab)
+                tab.flush()
             shoot(page, name)
+            if tab.mode != "image":
+                tab.enqueue(lambda: tab.set_mode("image"))
+            tab.enqueue(lambda: tab.select(None))
+            tab.enqueue(tab.fit)
+            tab.flush()
         page.close()
     finally:
         app.stop()
         app.state.close()
+
+
+def select_leftmost(page, tab) -> None:
+    """Click the leftmost keypoint (it shows selected, with its id, set and residual)."""
+    nodes = tab.workspace.points["keypoints"]
+    i = int(nodes.uv[:, 0].argmin())
+    box = max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
+    x, y = tab.view2d.to_screen(nodes.uv[i], tab.canvas)
+    page.mouse.click(box["x"] + x, box["y"] + y)
+
+
+def zoom_on_densest(page, tab) -> None:
+    """Zoom 4x (screen pixels per image pixel) around the densest group of keypoints."""
+    nodes = tab.workspace.points["keypoints"]
+    uv = nodes.uv
+    crowd = int(((uv[:, None] - uv[None]) ** 2).sum(-1).__lt__(60.0 ** 2).sum(1).argmax())
+    tab.enqueue(lambda: tab._push_view(View2D(*uv[crowd], 4.0)))
+
+
+def three_d(page, tab) -> None:
+    page.mouse.click(5, 450)  # the page has the keys
+    page.keyboard.press("v")
 
 
 def main() -> None:
@@ -75,12 +110,12 @@ def main() -> None:
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=shutil.which("chromium"), args=FLAGS)
         session(browser, EXAMPLES_DIR / "sample", tmp / "edits", [
-            ("view_3d", "00006", False),
-            ("camera_view_synthetic", "00006", True),
-            ("camera_view_wc14", "wc14_trainval_16", True),
-            ("camera_view_sn22_annotation", "sn22_00250", True),
+            ("workspace_synthetic", "00006", select_leftmost),
+            ("workspace_wc14", "wc14_trainval_16", select_leftmost),
+            ("workspace_zoomed", "sn22_00250", zoom_on_densest),
+            ("view_3d", "00006", three_d),
         ])
-        session(browser, failed, tmp / "edits2", [("failed_frame", "00003", False)])
+        session(browser, failed, tmp / "edits2", [("failed_frame", "00003", None)])
         browser.close()
     shutil.rmtree(tmp)
 

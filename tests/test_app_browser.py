@@ -91,9 +91,14 @@ def settle(session, seconds=0.6):
     session.flush()
 
 
+def canvas_box(page):
+    """The viewer's canvas on the page (the largest: viser draws text into small ones too)."""
+    return max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
+
+
 def on_screen(page, session, uv):
     """Where image pixel ``uv`` of the frame shown is on the page."""
-    box = page.locator("canvas").first.bounding_box()
+    box = canvas_box(page)
     x, y = session.view2d.to_screen(uv, session.canvas)
     return box["x"] + x, box["y"] + y
 
@@ -171,7 +176,7 @@ def test_the_image_view_holds_across_next_edit_pnl_and_source(tmp_path, shared_d
     try:
         page = open_page(browser, app, "focal")
         session = tab(app)
-        box = page.locator("canvas").first.bounding_box()
+        box = canvas_box(page)
         page.mouse.move(box["x"] + 250, box["y"] + 450)
         for _ in range(5):
             page.mouse.wheel(0, -120)

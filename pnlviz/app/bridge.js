@@ -21,6 +21,15 @@
   const state = { logZoom: 0.0, nudgeX: 0, nudgeY: 0, seq: 0, x: 0.5, y: 0.5, over: false };
   window.__pnlvizBridge = state;
 
+  // the viewer's canvas: the largest one on the page (viser draws text into small ones too)
+  const viewCanvas = () => {
+    let best = null;
+    for (const c of document.querySelectorAll("canvas")) {
+      if (!best || c.clientWidth * c.clientHeight > best.clientWidth * best.clientHeight) best = c;
+    }
+    return best;
+  };
+
   const field = () => {
     const cfg = config();
     if (!cfg || !cfg.input) return null;
@@ -38,7 +47,7 @@
     const input = field();
     if (!input) return;
     state.seq += 1;
-    const canvas = document.querySelector("canvas");
+    const canvas = viewCanvas();
     const message = JSON.stringify({
       kind: "pointer", n: state.seq, log_zoom: state.logZoom, x: state.x, y: state.y,
       nudge: [state.nudgeX, state.nudgeY],
@@ -48,7 +57,14 @@
     input.dispatchEvent(new Event("input", { bubbles: true }));
   };
 
-  const canvasOf = (target) => (target && target.tagName === "CANVAS" ? target : null);
+  // a canvas of the viewer (there can be two of the same size, one over the other), not a small
+  // one that draws text
+  const canvasOf = (target) => {
+    if (!target || target.tagName !== "CANVAS") return null;
+    const view = viewCanvas();
+    const area = (c) => c.clientWidth * c.clientHeight;
+    return view && area(target) >= 0.5 * area(view) ? target : null;
+  };
   const track = (event) => {
     const canvas = canvasOf(event.target);
     state.over = canvas !== null;
@@ -127,8 +143,8 @@
   // the canvas size in CSS pixels (the screen pixels a zoom is measured in; viser reports the
   // drawing buffer's, which shrinks when it lowers the resolution on a slow machine)
   const watchCanvas = () => {
-    const canvas = document.querySelector("canvas");
-    if (!canvas || !field()) return setTimeout(watchCanvas, 200);
+    const canvas = viewCanvas();
+    if (!canvas || !canvas.clientWidth || !field()) return setTimeout(watchCanvas, 200);
     new ResizeObserver(() => send()).observe(canvas);
   };
   watchCanvas();

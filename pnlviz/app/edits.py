@@ -106,7 +106,7 @@ def validate_history(obj: Any, source: str) -> dict:
         raise DataError(source, f'"history" must be an object with "undo" and "redo" lists, got {describe(obj)}')
     out = {}
     for side in ("undo", "redo"):
-        steps = obj.get(side) or []
+        steps = obj.get(side, [])
         if not isinstance(steps, list):
             raise DataError(source, f'history "{side}" must be a list, got {describe(steps)}')
         checked = []

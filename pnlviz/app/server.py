@@ -165,5 +165,5 @@ class PnlvizApp:
         self._stop.set()
         self._worker.join(timeout=5.0)  # it stops after the frame it is on
         for session in self._all_sessions():
-            session.close()
+            session.close(wait=True)  # nothing queued for a tab is sent after the server stopped
         self.server.stop()

@@ -115,6 +115,7 @@ class Session:
         self.opacity = 1.0
         self.drag_mode = "keypoints"
         self.grabs = self.releases = 0  # drags started and released in this tab
+        self.live_preview = True  # recalibrate while a point is dragged (off: only on release)
         self.last_recalibration_ms = 0.0
         self.actions: list[str] = []  # frames this tab changed, most recent last: Ctrl+Z goes back there
         self.undone: list[str] = []
@@ -507,7 +508,7 @@ class Session:
         if drag is None or drag["key"] != key:
             return
         drag["uv"] = np.asarray(uv, float)
-        if phase == "update" and not drag["pending"]:
+        if phase == "update" and not drag["pending"] and self.live_preview:
             drag["pending"] = True
             self.enqueue(self._drag_preview)
         elif phase == "end":
@@ -703,12 +704,27 @@ class Session:
                     self.scene3d.show(view, render(view, st.image(view.stem), self.layers))
             return view
 
+    def _pixels(self, stem: str) -> np.ndarray:
+        """The frame as the browser shows it: its image (RGB), or a neutral canvas of its size."""
+        image = self.state.image(stem)
+        if image is None:
+            image = blank_canvas(*self.state.frame_size(stem))
+        return np.ascontiguousarray(image[:, :, ::-1])
+
+    def _preload_neighbours(self) -> None:
+        """Send the frames before and after this one (in the filter's order) ahead, hidden."""
+        with self._lock:
+            if self._closed or self.index not in self.order:
+                return
+            pos = self.order.index(self.index)
+            stems = [self.state.stems[self.order[p]] for p in (pos + 1, pos - 1) if 0 <= p < len(self.order)]
+        for stem in stems:
+            self.workspace.preload(stem, lambda stem=stem: self._pixels(stem))
+
     def _show_image(self, view: FrameView) -> None:
-        image = self.state.image(view.stem)
-        W, H = view.size
-        rgb = image[:, :, ::-1] if image is not None else blank_canvas(W, H)[:, :, ::-1]
         before = self.workspace.plane
-        self.workspace.show_image((view.stem, image is None, rgb.shape), np.ascontiguousarray(rgb))
+        if self.workspace.show_image(view.stem, lambda: self._pixels(view.stem)):
+            self.enqueue(self._preload_neighbours)
         plane = self.workspace.plane
         if plane != before or self.view2d is None:  # the first frame, or one of another size
             fit = View2D.fit(plane, self.canvas)
@@ -830,12 +846,12 @@ class Session:
             self.client.send_file_download(f"{st.data.name}_labels.zip", export_zip_bytes(st, settings=self.settings),
                                            save_immediately=True)
 
-    def close(self) -> None:
+    def close(self, wait: bool = False) -> None:
         """The tab is gone: stop drawing (its GUI and scene nodes went with its connection). Edits
-        already released still go through."""
+        already released still go through; ``wait``: until they have (the server stopping)."""
         with self._lock:
             self._closed = True
-        self._queue.shutdown(wait=False)
+        self._queue.shutdown(wait=wait)
 
 
 __all__ = ["Session", "calibration_card", "keypoint_name"]

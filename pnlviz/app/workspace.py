@@ -26,6 +26,8 @@ DISC_PX, RIM_PX, GRAB_PX, RING_PX = 4.5, 6.0, 8.0, 11.0
 THICKNESS = {"refined_pitch": 2.0, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
              "detected_lines": 2.0, "residuals": 1.5}
 BACKDROP_RGB = (38, 40, 46)
+BACKDROP_MARGIN = 6.0  # the dark frame around the image: this many image widths (heights) each side
+FRAME_SLOTS = 3  # frames whose pixels are kept in the browser: the one shown and two sent ahead
 SELECTED_RGB = (255, 255, 255)
 LABEL_MIN_GAP_PX = 16.0  # ids closer than this on screen: only the first one shows
 
@@ -190,7 +192,10 @@ class Workspace:
         self.plane: ImagePlane | None = None
         self.image_key: tuple | None = None  # (stem, version) of the pixels on the plane
         self.world_per_px = 0.01  # scene units per screen pixel at the current zoom
-        self._image = self._backdrop = self._ring = None
+        self._slots: list[dict] = []  # image nodes: the frame shown, and frames sent ahead (hidden)
+        self._clock = 0
+        self._backdrop: dict[str, object] = {}
+        self._ring = None
         self._lines: dict[str, object] = {}
         self.points = {kind: _PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity)
                        for kind, layer, opacity in (("keypoints", "keypoints", 1.0), ("ghosts", "ghosts", 0.55),
@@ -201,53 +206,99 @@ class Workspace:
         self.selected: tuple[str, object] | None = None
 
     # ------------------------------------------------------------------ the frame
-    def show_image(self, key: tuple, image_rgb: np.ndarray) -> bool:
-        """Put the frame's pixels on the plane, unless these are already there. True if sent."""
+    def show_image(self, key: tuple, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> bool:
+        """Show the frame ``key`` (its pixels, or a function that reads them when they are not
+        in the browser yet). A frame preloaded with :meth:`preload` is shown at once, with no
+        image sent. True if anything changed."""
         if key == self.image_key:
             return False
+        slot = next((sl for sl in self._slots if sl["key"] == key), None)
+        if slot is None:
+            slot = self._load(key, image_rgb() if callable(image_rgb) else image_rgb)
+        for sl in self._slots:
+            if sl is not slot and sl["visible"]:
+                sl["handle"].visible, sl["handle"].position, sl["visible"] = False, (0.0, 0.0, PLANE_Z + 50.0), False
+        slot["handle"].position, slot["handle"].visible, slot["visible"] = (0.0, 0.0, PLANE_Z), True, True
+        slot["used"] = self._clock = self._clock + 1
+        if slot["plane"] != self.plane:
+            self._frame_backdrop(slot["plane"])
+        self.plane, self.image_key = slot["plane"], key
+        return True
+
+    def preload(self, key: tuple, image_rgb: Callable[[], np.ndarray]) -> None:
+        """Send frame ``key``'s pixels ahead, hidden, so that going there shows them at once."""
+        if all(sl["key"] != key for sl in self._slots):
+            self._load(key, image_rgb())
+
+    def loaded(self) -> list[tuple]:
+        """The frames whose pixels are in the browser."""
+        return [sl["key"] for sl in self._slots if sl["key"] is not None]
+
+    def _load(self, key: tuple, image_rgb: np.ndarray) -> dict:
+        """Pixels into a hidden slot (a new one while there are fewer than :data:`FRAME_SLOTS`,
+        else the one shown longest ago)."""
         H, W = image_rgb.shape[:2]
         plane = ImagePlane(W, H)
         w, h = plane.extent
-        if self._image is None:
-            self._image = self.scene.add_image(f"{self.root}/frame", image_rgb, w, h, format="jpeg", jpeg_quality=90,
-                                               position=(0.0, 0.0, PLANE_Z), cast_shadow=False, receive_shadow=False)
-            backdrop = np.full((4, 4, 3), BACKDROP_RGB, np.uint8)
-            self._backdrop = self.scene.add_image(f"{self.root}/backdrop", backdrop, 12 * w, 12 * h, format="png",
-                                                  position=(0.0, 0.0, PLANE_Z + 0.01), cast_shadow=False,
-                                                  receive_shadow=False)
-            self._bind_frame()
+        if len(self._slots) < FRAME_SLOTS:
+            handle = self.scene.add_image(f"{self.root}/frame{len(self._slots)}", image_rgb, w, h, format="jpeg",
+                                          jpeg_quality=90, position=(0.0, 0.0, PLANE_Z + 50.0), visible=False,
+                                          cast_shadow=False, receive_shadow=False)
+            slot = {"handle": handle, "visible": False, "used": 0}
+            self._slots.append(slot)
+            self._bind_frame(handle)
         else:
-            if plane != self.plane:
-                self._image.render_width, self._image.render_height = w, h
-                self._backdrop.render_width, self._backdrop.render_height = 12 * w, 12 * h
-            self._image.image = image_rgb
-        self.plane, self.image_key = plane, key
-        return True
+            slot = min((sl for sl in self._slots if not sl["visible"]), key=lambda sl: sl["used"])
+            if slot["plane"] != plane:
+                slot["handle"].render_width, slot["handle"].render_height = w, h
+            slot["handle"].image = image_rgb
+        slot.update(key=key, plane=plane)
+        return slot
 
-    def _bind_frame(self) -> None:
+    def _frame_backdrop(self, plane: ImagePlane) -> None:
+        """A dark frame around the image (four strips, none under it: nothing is drawn twice)
+        that pans the view when dragged, like the image itself."""
+        w, h = plane.extent
+        m = BACKDROP_MARGIN
+        strips = {"top": ((0.0, -(h + m * h) / 2), (w + 2 * m * w, m * h)),
+                  "bottom": ((0.0, (h + m * h) / 2), (w + 2 * m * w, m * h)),
+                  "left": ((-(w + m * w) / 2, 0.0), (m * w, h)), "right": (((w + m * w) / 2, 0.0), (m * w, h))}
+        for name, ((x, y), (sw, sh)) in strips.items():
+            handle = self._backdrop.get(name)
+            if handle is None:
+                self._backdrop[name] = self.scene.add_image(
+                    f"{self.root}/backdrop/{name}", np.full((2, 2, 3), BACKDROP_RGB, np.uint8), sw, sh, format="png",
+                    position=(x, y, PLANE_Z + 0.01), cast_shadow=False, receive_shadow=False)
+                self._bind_pan(self._backdrop[name])
+            else:
+                handle.render_width, handle.render_height, handle.position = sw, sh, (x, y, PLANE_Z + 0.01)
+
+    def _bind_frame(self, node) -> None:
         ev = self.events
 
-        @self._image.on_click(modifier="shift")
+        @node.on_click(modifier="shift")
         async def _(event) -> None:
             uv = self._clicked(event)
             if uv is not None:
                 ev.place(uv)
 
-        @self._image.on_click
+        @node.on_click
         async def _(event) -> None:
             uv = self._clicked(event)
             if uv is not None:
                 ev.click(uv)
 
-        for node in (self._image, self._backdrop):
-            start: dict = {}
+        self._bind_pan(node)
 
-            @node.on_drag
-            async def _(event, start=start) -> None:
-                if event.phase == "start":
-                    start["at"] = np.array(event.start_screen_pos, float)
-                if "at" in start:
-                    ev.pan(event.phase, start["at"], np.array(event.end_screen_pos, float))
+    def _bind_pan(self, node) -> None:
+        start: dict = {}
+
+        @node.on_drag
+        async def _(event) -> None:
+            if event.phase == "start":
+                start["at"] = np.array(event.start_screen_pos, float)
+            if "at" in start:
+                self.events.pan(event.phase, start["at"], np.array(event.end_screen_pos, float))
 
     def _clicked(self, event) -> np.ndarray | None:
         if self.plane is None:

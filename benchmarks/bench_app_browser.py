@@ -1,0 +1,200 @@
+"""What the hand sees in the app, measured in the page: headless Chromium (software WebGL on this
+machine) driving ``pnlviz serve``'s app with real mouse and keyboard events.
+
+    python benchmarks/bench_app_browser.py [--frames 300] [--drags 30] [--steps 30]
+
+* drag release -> overlay: a keypoint is dragged with the mouse and released; the time from the
+  page's ``pointerup`` to the first frame the canvas draws with the overlays as they end up
+  (the recalibrated pitch, the residuals). Measured twice: as the app runs (the frame is
+  recalibrated while the point moves, so the release mostly confirms what is on screen) and
+  with that live preview off (the full round trip: release -> edit saved -> recalibration ->
+  overlay sent -> drawn).
+* next frame -> image: ``n`` pressed; the time from the page's ``keydown`` to the first frame
+  the canvas draws with the next frame's pixels and overlays as they end up.
+
+How: Chromium's screencast hands over every frame it composites, with its time; the page notes
+when the event happened (same clock); once the scene has settled, the first frame after the
+event whose patch around the change equals the settled one is when the change became visible.
+The frames come from ``pnlviz synth`` (made once into a temporary folder). Prints p50/p95 and
+the server process's peak memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import resource
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from playwright.sync_api import sync_playwright
+
+FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync"]
+
+#: the page records when the pointer is released and when a key goes down (wall clock, ms)
+EVENTS = """() => {
+  if (window.__events) return;
+  window.__events = [];
+  window.addEventListener("pointerup", () => window.__events.push(["up", Date.now()]), true);
+  window.addEventListener("keydown", () => window.__events.push(["key", Date.now()]), true);
+}"""
+
+
+class Screencast:
+    """The frames Chromium composites, as they come (its DevTools screencast), with their times."""
+
+    def __init__(self, page, width: int = 800):
+        self.page, self.frames, self.scale = page, [], width / page.viewport_size["width"]
+        self.cdp = page.context.new_cdp_session(page)
+        self.cdp.on("Page.screencastFrame", self._frame)
+        self.cdp.send("Page.startScreencast", {"format": "jpeg", "quality": 70, "maxWidth": width,
+                                               "maxHeight": width, "everyNthFrame": 1})
+
+    def _frame(self, event) -> None:
+        self.frames.append((event["metadata"]["timestamp"], event["data"]))
+        self.cdp.send("Page.screencastFrameAck", {"sessionId": event["sessionId"]})
+
+    def wait(self, seconds: float) -> None:
+        """Let time pass while the frames keep coming (events are handled inside playwright calls)."""
+        end = time.time() + seconds
+        while time.time() < end:
+            self.page.wait_for_timeout(20)
+
+    def crop(self, data: str, region) -> np.ndarray:
+        img = cv2.imdecode(np.frombuffer(base64.b64decode(data), np.uint8), cv2.IMREAD_GRAYSCALE)
+        x, y, w, h = (int(round(v * self.scale)) for v in region)
+        return img[y:y + h, x:x + w].astype(float)
+
+    def visible_after(self, kind: str, region, settle: float = 1.2) -> float | None:
+        """ms from the page's last ``kind`` event to the first composited frame showing the
+        ``region`` (CSS px: x, y, w, h) as it is once everything has settled."""
+        n0 = len(self.frames)
+        self.wait(settle)
+        events = self.page.evaluate("() => window.__events")
+        t0 = [t for k, t in events if k == kind][-1] / 1000.0
+        frames = [f for f in self.frames[max(0, n0 - 5):] if f[0] >= t0 - 0.001]
+        if not frames:
+            return 0.0  # nothing was drawn after the event: the screen already showed it
+        final = self.crop(frames[-1][1], region)
+        for t, data in frames:
+            if np.mean(np.abs(self.crop(data, region) - final)) < 1.5:
+                return 1e3 * (t - t0)
+        return None
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def percentiles(values) -> str:
+    v = np.array([x for x in values if x is not None])
+    missed = len(values) - len(v)
+    if not len(v):
+        return "no sample"
+    return (f"p50 {np.percentile(v, 50):.0f} ms, p95 {np.percentile(v, 95):.0f} ms, max {v.max():.0f} ms "
+            f"({len(v)} events" + (f", {missed} not seen" if missed else "") + ")")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=300, help="synthetic frames in the set served")
+    ap.add_argument("--drags", type=int, default=30)
+    ap.add_argument("--steps", type=int, default=30, help="'next frame' presses")
+    ap.add_argument("--data", type=Path, help="serve this folder instead of making a synthetic set")
+    ap.add_argument("--hide", nargs="*", default=[], help="overlay layers to switch off (e.g. ids ghosts)")
+    args = ap.parse_args()
+
+    from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.state import AppState
+
+    tmp = Path(tempfile.mkdtemp(prefix="pnlviz-bench-"))
+    try:
+        data = args.data
+        if data is None:
+            data = tmp / "set"
+            subprocess.run([sys.executable, "-m", "pnlviz.cli", "synth", "--out", str(data), "-n", str(args.frames),
+                            "--seed", "5", "--workers", "2", "--no-progress"], check=True)
+        app = PnlvizApp(AppState(data, edits=tmp / "edits"), port=free_port())
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=shutil.which("chromium"), args=FLAGS)
+            page = browser.new_page(viewport={"width": 1600, "height": 900})
+            page.goto(app.url)
+            page.get_by_text("review:").first.wait_for(timeout=60_000)
+            deadline = time.time() + 20
+            while time.time() < deadline and not (app.tabs() and app.tabs()[0]._css_canvas):
+                time.sleep(0.2)
+            session = app.tabs()[0]
+            for layer in args.hide:
+                session.enqueue(lambda layer=layer: session.set_layer(layer, False))
+            session.flush()
+            print(f"served {len(app.state.stems)} frames from {data}; browser canvas {session.canvas[0]}x"
+                  f"{session.canvas[1]} CSS px, WebGL: "
+                  + page.evaluate("() => { const gl = document.createElement('canvas').getContext('webgl');"
+                                  "const i = gl.getExtension('WEBGL_debug_renderer_info');"
+                                  "return i ? gl.getParameter(i.UNMASKED_RENDERER_WEBGL) : 'unknown'; }"))
+            page.evaluate(EVENTS)
+            cast = Screencast(page)
+            box = max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
+
+            def drags(n: int) -> list[float | None]:
+                out = []
+                for i in range(n):
+                    view = session.view()
+                    obs = view.observations
+                    if obs is None or not obs.n_keypoints or not view.result or not view.result.ok:
+                        session.enqueue(lambda: session.step(1))
+                        session.flush()
+                        continue
+                    k = i % obs.n_keypoints
+                    uv = obs.kp_xy[k]
+                    x, y = session.view2d.to_screen(uv, session.canvas)
+                    region = (box["x"] + max(0, x - 150), box["y"] + max(0, y - 100), 300, 200)
+                    cast.wait(0.3)
+                    page.mouse.move(box["x"] + x, box["y"] + y)
+                    page.mouse.down()
+                    for step in range(1, 6):
+                        page.mouse.move(box["x"] + x + 2 * step, box["y"] + y + step)
+                        cast.wait(0.04)
+                    page.mouse.up()
+                    out.append(cast.visible_after("up", region))
+                    session.enqueue(lambda: session.step(1))  # a fresh frame for the next drag
+                    session.flush()
+                    cast.wait(0.5)
+                return out
+
+            live = drags(args.drags)
+            session.live_preview = False
+            round_trip = drags(args.drags)
+            session.live_preview = True
+            steps = []
+            for _ in range(args.steps):
+                x, y = box["x"] + session.canvas[0] / 2, box["y"] + session.canvas[1] / 3
+                cast.wait(0.3)
+                page.keyboard.press("n")
+                steps.append(cast.visible_after("key", (x - 200, y - 100, 400, 200), settle=1.0))
+            print(f"drag release -> overlay (live preview, as the app runs): {percentiles(live)}")
+            print(f"drag release -> overlay (no preview: release -> save -> recalibrate -> send -> draw): "
+                  f"{percentiles(round_trip)}")
+            print(f"next frame -> image: {percentiles(steps)}")
+            print(f"server-side recalibration of the last drag: {session.last_recalibration_ms:.0f} ms")
+            browser.close()
+        app.stop()
+        app.state.close()
+        print(f"peak memory of this process (server + benchmark): "
+              f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,264 @@
+"""The image view's pure parts: the plane and the 2D camera over it, label decluttering, snapping,
+the pointer bridge's messages, the overlay geometry, and the undo history kept with the edits."""
+
+import json
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+from pnlviz import EXAMPLES_DIR
+from pnlviz.app.bridge import bridge_html, parse_pointer
+from pnlviz.app.view2d import FOV_Y, MAX_ZOOM, PLANE_Z, ImagePlane, View2D, declutter, snap
+
+CANVAS = (1276, 900)
+
+
+# ---------------------------------------------------------------------- plane and view
+def test_pixels_and_scene_points_round_trip_and_the_frame_is_centred():
+    plane = ImagePlane(960, 540)
+    uv = np.array([[0.0, 0.0], [959.0, 539.0], [123.25, 456.5]])
+    xyz = plane.world(uv, "keypoints")
+    assert np.all(xyz[:, 2] < PLANE_Z)  # floated towards the camera
+    np.testing.assert_allclose(plane.pixel(xyz), uv, atol=1e-9)
+    w, h = plane.extent
+    # the outer edges of the corner pixels are the edges of the frame on the plane
+    np.testing.assert_allclose(plane.world([[-0.5, -0.5], [959.5, 539.5]])[:, :2], [[-w / 2, -h / 2], [w / 2, h / 2]])
+    # a ray from a camera meets the plane at the pixel under the pointer, whatever layer it grabbed
+    eye = np.array([1.0, -2.0, PLANE_Z - 5.0])
+    np.testing.assert_allclose(plane.pixel_on_ray(eye, plane.world([300.0, 200.0])), [300.0, 200.0], atol=1e-9)
+    over = plane.world([300.0, 200.0], "keypoints")  # seen from the side: a fraction of a pixel of parallax
+    assert 0 < np.hypot(*(plane.pixel_on_ray(eye, over) - [300.0, 200.0])) < 0.2
+    assert plane.pixel_on_ray(eye, eye - [0.0, 0.0, 1.0]) is None  # pointing away from the plane
+
+
+def test_fit_shows_the_whole_frame_centred():
+    plane = ImagePlane(960, 540)
+    v = View2D.fit(plane, CANVAS)
+    corners = v.to_screen(np.array([[-0.5, -0.5], [959.5, 539.5]]), CANVAS)
+    assert np.all(corners >= 0) and np.all(corners <= CANVAS)
+    np.testing.assert_allclose(corners.mean(axis=0), np.array(CANVAS) / 2)
+    assert math.isclose(corners[1, 0] - corners[0, 0], 0.96 * CANVAS[0])  # width-limited at 16:9 in this canvas
+
+
+def test_zoom_keeps_the_pixel_under_the_pointer_in_place():
+    plane = ImagePlane(960, 540)
+    v = View2D.fit(plane, CANVAS)
+    pointer = np.array([250.0, 450.0])
+    under = v.to_pixel(pointer, CANVAS)
+    z = v.zoomed(4.0 / v.zoom, at=under)  # 4 screen pixels per image pixel
+    assert math.isclose(z.zoom, 4.0)
+    np.testing.assert_allclose(z.to_screen(under, CANVAS), pointer, atol=1e-9)
+    np.testing.assert_allclose(z.to_pixel(z.to_screen(under, CANVAS), CANVAS), under, atol=1e-9)
+    # N screen pixels at 4x are N/4 image pixels
+    np.testing.assert_allclose(z.to_pixel(pointer + [40.0, -20.0], CANVAS) - under, [10.0, -5.0], atol=1e-9)
+    assert v.zoomed(1e6).zoom == MAX_ZOOM
+
+
+def test_the_view_and_the_camera_pose_are_one_and_the_same():
+    plane = ImagePlane(1280, 720)
+    v = View2D(400.0, 300.0, 2.5)
+    position, _ = v.camera(plane, CANVAS[1])
+    back = View2D.from_camera(plane, position, CANVAS[1])
+    np.testing.assert_allclose([back.cu, back.cv, back.zoom], [v.cu, v.cv, v.zoom], atol=1e-9)
+    # a pixel one canvas pixel from the centre is one canvas pixel away through the pinhole camera
+    f = CANVAS[1] / (2 * math.tan(FOV_Y / 2))
+    off = plane.world([v.cu + 1 / v.zoom, v.cv]) - position
+    assert math.isclose(f * off[0] / off[2], 1.0, rel_tol=1e-9)
+    with pytest.raises(ValueError):
+        View2D.from_camera(plane, [0.0, 0.0, PLANE_Z + 1.0], CANVAS[1])  # behind the plane
+
+
+def test_pan_clamp_and_relative_views_across_frame_sizes():
+    plane = ImagePlane(960, 540)
+    v = View2D.fit(plane, CANVAS).panned(100.0, -50.0)
+    assert (v.cu, v.cv) == (479.5 - 100.0, 269.5 + 50.0)
+    far = View2D(-5000.0, 9000.0, 1e-6).clamped(plane, CANVAS)
+    assert (far.cu, far.cv) == (-0.5, 539.5) and far.zoom > 0  # the frame's centre never leaves the screen
+    big = ImagePlane(1920, 1080)
+    moved = View2D.from_relative(v.relative(plane, CANVAS), big, CANVAS)
+    np.testing.assert_allclose([moved.cu + 0.5, moved.cv + 0.5], [2 * (v.cu + 0.5), 2 * (v.cv + 0.5)])
+    np.testing.assert_allclose(moved.zoom, v.zoom / 2)  # the same part of the frame on screen
+
+
+# ---------------------------------------------------------------------- labels and snapping
+def test_declutter_keeps_the_first_of_labels_that_would_overlap():
+    xy = [[0, 0], [5, 0], [20, 0], [24, 3], [100, 100]]
+    assert declutter(xy, 16.0).tolist() == [True, False, True, False, True]
+    assert declutter(xy, 0.0).all() and declutter(np.zeros((0, 2)), 16.0).shape == (0,)
+
+
+def test_snap_prefers_points_then_lines_within_the_radius():
+    points = np.array([[100.0, 100.0]])
+    segments = np.array([[[0.0, 200.0], [400.0, 200.0]]])
+    uv, what = snap([103.0, 98.0], points, segments, radius=5.0)
+    assert what == "point" and uv.tolist() == [100.0, 100.0]
+    uv, what = snap([250.0, 196.0], points, segments, radius=5.0)
+    assert what == "line" and np.allclose(uv, [250.0, 200.0])
+    uv, what = snap([250.0, 150.0], points, segments, radius=5.0)
+    assert what is None and uv.tolist() == [250.0, 150.0]
+    uv, what = snap([450.0, 201.0], points, segments, radius=60.0)  # beyond the end: onto the end
+    assert what == "line" and np.allclose(uv, [400.0, 200.0])
+
+
+# ---------------------------------------------------------------------- the bridge
+def _msg(**kw):
+    d = {"kind": "pointer", "n": 3, "log_zoom": 0.5, "x": 0.25, "y": 0.75, "nudge": [1, -2], "canvas": [1276, 900]}
+    d.update(kw)
+    return json.dumps(d)
+
+
+def test_bridge_messages_are_read_and_anything_else_is_refused():
+    m = parse_pointer(_msg())
+    assert (m.n, m.log_zoom, m.x, m.y, m.nudge, m.canvas) == (3, 0.5, 0.25, 0.75, (1, -2), (1276, 900))
+    assert parse_pointer(_msg(x=7.0, y=-1.0)).x == 1.0  # clamped to the canvas
+    assert parse_pointer(_msg(canvas=[0, 900])).canvas is None
+    for bad in ("", "{", "[1]", _msg(kind="other"), _msg(n=-1), _msg(log_zoom="nan"), _msg(log_zoom=1e9),
+                _msg(nudge=[1]), _msg(nudge=[10 ** 8, 0]), _msg(x=None), "x" * 500, None, 12):
+        assert parse_pointer(bad) is None, bad
+
+
+def test_the_bridge_element_carries_the_script_and_a_clean_input_id():
+    html = bridge_html('abc-1"><script>', "image")
+    assert 'data-input="abc-1script"' in html and "<script>" not in html and 'data-mode="image"' in html
+    assert "onerror=\"eval(atob('" in html
+    with pytest.raises(ValueError):
+        bridge_html("abc", "orbit")
+
+
+# ---------------------------------------------------------------------- overlays and history
+@pytest.fixture()
+def data(tmp_path):
+    src = EXAMPLES_DIR / "sample"
+    dst = tmp_path / "set"
+    (dst / "cameras").mkdir(parents=True)
+    for stem in ("00000", "00001"):
+        for name in (f"{stem}.jpg", f"{stem}.json", f"cameras/camera_{stem}.json"):
+            shutil.copy(src / name, dst / name)
+    return dst
+
+
+def test_overlay_geometry_residuals_and_ghosts(data):
+    from pnlviz.app.overlay import Layers, overlay_geometry
+    from pnlviz.app.state import AppState
+
+    with AppState(data) as st:
+        view = st.view("00000")
+        obs, cam = view.observations, view.result.camera
+        geom = overlay_geometry(view, Layers(), st.model)
+        assert geom.keypoints.keys == [int(k) for k in obs.kp_ids]
+        # a residual is the distance from the keypoint to where the camera projects it
+        proj, _ = cam.project(obs.kp_xyz)
+        expected = np.hypot(*(proj - obs.kp_xy).T)
+        np.testing.assert_allclose([geom.residuals[int(k)] for k in obs.kp_ids], expected, atol=1e-9)
+        np.testing.assert_allclose(geom.segments["residuals"].points[:, 1], proj, atol=1e-9)
+        # ghosts: catalogue ids the camera puts inside the frame, none of them observed or hidden
+        W, H = view.size
+        assert geom.ghosts.keys and not set(geom.ghosts.keys) & set(geom.keypoints.keys)
+        assert np.all((geom.ghosts.uv >= 0) & (geom.ghosts.uv <= [W - 1, H - 1]))
+        np.testing.assert_allclose(geom.ghosts.uv, cam.project(st.model.keypoint_xyz(geom.ghosts.keys))[0])
+        hidden = {geom.ghosts.keys[0]}
+        assert not hidden & set(overlay_geometry(view, Layers(), st.model, hidden=hidden).ghosts.keys)
+        assert not overlay_geometry(view, Layers(ghosts=False, residuals=False), st.model).ghosts.keys
+        assert "residuals" not in overlay_geometry(view, Layers(residuals=False), st.model).segments
+
+
+def test_undo_history_is_saved_with_the_edits_and_outlives_a_restart(data):
+    from pnlviz.app.state import AppState
+
+    with AppState(data) as st:
+        v0 = st.view("00001")
+        kid, (x, y) = int(v0.observations.kp_ids[0]), v0.observations.kp_xy[0]
+        st.set_review("00001", "accepted")
+        st.move_keypoint("00001", kid, x + 5, y)
+        st.move_keypoint("00001", kid, x + 9, y)
+        assert st.history("00001") == (3, 0)
+    with AppState(data) as st:  # a new server on the same edits
+        assert st.history("00001") == (3, 0)
+        assert st.undo("00001")
+        assert st.edits.get("00001")["keypoints"][str(kid)] == [x + 5, y]
+        assert st.undo("00001") and st.edits.review("00001") == "accepted"  # back before the first move
+        assert st.undo("00001") and st.edits.review("00001") is None and not st.undo("00001")
+        assert st.history("00001") == (0, 3)
+    with AppState(data) as st:
+        assert st.redo("00001") and st.edits.review("00001") == "accepted"
+        st.set_review("00001", "rejected")  # a new action drops what could be redone
+        assert st.history("00001") == (2, 0)
+
+
+def test_a_damaged_history_is_refused_like_any_damaged_record(tmp_path):
+    from pnlviz.app.edits import HISTORY_LIMIT, validate_history
+    from pnlviz.data import DataError
+
+    ok = validate_history({"undo": [{"review": None}, {"keypoints": {"5": [1.0, 2.0]}}], "redo": []}, "x")
+    assert ok == {"undo": [{"review": None}, {"keypoints": {"5": [1.0, 2.0]}}], "redo": []}
+    long = validate_history({"undo": [{"review": "accepted"}] * (HISTORY_LIMIT + 7)}, "x")
+    assert len(long["undo"]) == HISTORY_LIMIT and long["redo"] == []
+    for bad in ([], {"undo": {}}, {"undo": [{}]}, {"undo": [{"updated": 3}]}, {"undo": [{"review": "maybe"}]},
+                {"redo": [{"keypoints": {"999": [1, 2]}}]}, {"undo": ["x"]}):
+        with pytest.raises(DataError):
+            validate_history(bad, "x")
+
+
+# ---------------------------------------------------------------------- a tab without a browser
+def test_a_bare_frame_takes_placements_calibrates_at_four_and_snaps_and_nudges(tmp_path):
+    """Placing, nudging and snapping as the tab does them (the browser test drives the same with
+    real events): an image alone gets an image plane; the fourth placed id calibrates it."""
+    import socket
+
+    import cv2
+
+    from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.state import AppState
+    from pnlviz.geometry.camera import Camera
+    from pnlviz.synth import make_frame
+
+    data = tmp_path / "bare"
+    data.mkdir()
+    frame = make_frame(3, 4242, (960, 540))
+    cv2.imwrite(str(data / "bare.jpg"), frame["image"])
+    truth = Camera.from_soccernet(frame["camera"]).scaled(960, 540)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    app = PnlvizApp(AppState(data, edits=tmp_path / "edits"), port=port)
+    try:
+        model = app.state.model
+        ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
+        uv, _ = truth.project(model.keypoint_xyz(ground))
+        inside = {k: p for k, p in zip(ground, uv) if 60 < p[0] < 900 and 60 < p[1] < 480}
+        chosen = [min(inside, key=lambda k: inside[k].sum())]
+        while len(chosen) < 4:  # spread over the frame
+            chosen.append(max(inside, key=lambda k: min(np.hypot(*(inside[k] - inside[c])) for c in chosen)))
+        tab = app.session()
+        assert tab.view().camera is None and tab.workspace.plane == ImagePlane(960, 540)
+        assert tab.view2d == View2D.fit(tab.workspace.plane, tab.canvas)
+        for n, kid in enumerate(chosen):
+            tab.place_id = kid
+            tab.place("bare", np.round(inside[kid]))
+            assert (tab.view().result is not None and tab.view().result.ok) == (n == 3)
+        cam = tab.view().result.camera
+        err = np.hypot(*(cam.project(model.keypoint_xyz(list(inside)))[0] - np.array(list(inside.values()))).T)
+        assert np.median(err) < 2.0
+        # arrow keys: the selected point moves by whole pixels
+        kid = chosen[0]
+        tab.select(("keypoints", kid))
+        before = np.array(app.state.edits.get("bare")["keypoints"][str(kid)])
+        tab.nudge(3, -2)
+        np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(kid)], before + [3, -2])
+        # snapping: a ghost dropped a few screen pixels off the camera's projection lands on it
+        tab.set_snap(True)
+        ghost = next(k for k in tab._overlay.ghosts.keys if k in inside)
+        target = tab._overlay.ghosts.uv[tab._overlay.ghosts.keys.index(ghost)]
+        tab.place_id = ghost
+        tab.place("bare", target + np.array([4.0, -3.0]) / tab.view2d.zoom)
+        np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(ghost)], target, atol=1e-6)
+        tab.set_snap(False)
+        tab.place_id = chosen[1]
+        off = np.array(app.state.edits.get("bare")["keypoints"][str(chosen[1])]) + [4.0, 0.0]
+        tab.place("bare", off)
+        np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(chosen[1])], off)
+    finally:
+        app.stop()
+        app.state.close()
