@@ -1,5 +1,6 @@
 """Server-side latency of an edit in the app: keypoint moved -> frame recalibrated -> overlay
-rendered (what happens between a drag's release and the update sent to the browser).
+geometry computed (what happens between a drag's release and the update sent to the browser;
+``benchmarks/bench_app_browser.py`` measures the whole way to the screen).
 
     python benchmarks/bench_app.py [--data examples/sample]
 
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from pnlviz import EXAMPLES_DIR
-from pnlviz.app.overlay import Layers, render
+from pnlviz.app.overlay import Layers, overlay_geometry
 from pnlviz.app.state import AppState
 
 
@@ -56,13 +57,13 @@ def main() -> None:
         t1 = time.perf_counter()
         view = st.view(stem)
         t2 = time.perf_counter()
-        render(view, st.image(stem), Layers())
+        overlay_geometry(view, Layers(), st.model)
         t3 = time.perf_counter()
         calib.append(1e3 * (t2 - t0))
         total.append(1e3 * (t3 - t0))
     print(f"edit + autosave + recalibration: median {np.median(calib):.1f} ms, p90 {np.percentile(calib, 90):.1f} ms "
           f"({len(calib)} edits)")
-    print(f"... + overlay rendering: median {np.median(total):.1f} ms, p90 {np.percentile(total, 90):.1f} ms")
+    print(f"... + overlay geometry: median {np.median(total):.1f} ms, p90 {np.percentile(total, 90):.1f} ms")
     print(f"peak memory (ru_maxrss): {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 

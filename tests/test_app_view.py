@@ -102,6 +102,24 @@ def test_snap_prefers_points_then_lines_within_the_radius():
     assert what == "line" and np.allclose(uv, [400.0, 200.0])
 
 
+def test_pitch_lines_are_simplified_within_a_tenth_of_a_pixel():
+    from pnlviz.app.overlay import PITCH_TOLERANCE_PX, simplify_polyline
+
+    straight = np.stack([np.linspace(100, 900, 200), np.linspace(50, 500, 200)], 1)
+    kept = simplify_polyline(straight)
+    np.testing.assert_allclose(kept, straight[[0, -1]], atol=1e-3)  # a straight line: its two ends
+    t = np.linspace(0, np.pi, 400)
+    arc = np.stack([480 + 300 * np.cos(t), 270 + 200 * np.sin(t)], 1)
+    kept = simplify_polyline(arc)
+    assert 10 < len(kept) < 100  # far fewer points, still a curve
+    # every dropped point within the tolerance of what is drawn
+    a, b = kept[:-1], kept[1:]
+    ab = b - a
+    s = np.clip(np.einsum("pij,ij->pi", arc[:, None] - a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+    gap = np.hypot(*(arc[:, None] - (a + s[..., None] * ab)).transpose(2, 0, 1)).min(axis=1)
+    assert gap.max() <= PITCH_TOLERANCE_PX + 1e-3 and np.allclose(kept[[0, -1]], arc[[0, -1]], atol=1e-3)
+
+
 # ---------------------------------------------------------------------- the bridge
 def _msg(**kw):
     d = {"kind": "pointer", "n": 3, "log_zoom": 0.5, "x": 0.25, "y": 0.75, "nudge": [1, -2], "canvas": [1276, 900]}
@@ -262,3 +280,27 @@ def test_a_bare_frame_takes_placements_calibrates_at_four_and_snaps_and_nudges(t
     finally:
         app.stop()
         app.state.close()
+
+
+def test_a_released_drag_reuses_its_preview_and_nothing_else(data):
+    """The calibration shown while a point moves is the one its release keeps (not computed twice),
+    and it is the one a fresh computation gives; a release elsewhere is computed anew."""
+    from pnlviz.app.state import AppState
+
+    with AppState(data) as st:
+        settings = st.default_settings
+        v0 = st.view("00000", settings)
+        kid, (x, y) = int(v0.observations.kp_ids[0]), v0.observations.kp_xy[0]
+        shown = st.preview("00000", settings, kid, x + 4.0, y + 2.0)
+        st.move_keypoint("00000", kid, x + 4.0, y + 2.0)
+        kept = st.view("00000", settings)
+        assert kept is shown
+        fresh = st._compute("00000", settings)
+        np.testing.assert_allclose(kept.result.camera.C, fresh.result.camera.C)
+        np.testing.assert_allclose(kept.result.camera.R, fresh.result.camera.R)
+        elsewhere = st.preview("00000", settings, kid, x + 9.0, y)
+        st.move_keypoint("00000", kid, x + 8.0, y)
+        released = st.view("00000", settings)
+        assert released is not elsewhere
+        i = list(released.observations.kp_ids).index(kid)
+        np.testing.assert_allclose(released.observations.kp_xy[i], [x + 8.0, y])

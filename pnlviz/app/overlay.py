@@ -108,10 +108,28 @@ class Overlay:
     residuals: dict[int, float]  # keypoint id -> reprojection error, pixels
 
 
+#: how far a drawn pitch line may stray from the projected one, image pixels (0.4 screen pixels at
+#: 4x): the projection is sampled finely (0.5 m along lines, 0.25 m along circles) and then
+#: simplified to this tolerance, which leaves about a seventh of the segments (straight lines
+#: collapse to a few, curves keep what they need) and so a seventh of the browser's work
+PITCH_TOLERANCE_PX = 0.1
+
+
+def simplify_polyline(uv: np.ndarray, tolerance: float = PITCH_TOLERANCE_PX) -> np.ndarray:
+    """``uv`` (N, 2) with the points removed that lie within ``tolerance`` of the polyline
+    through the others (Douglas-Peucker); the end points stay."""
+    uv = np.asarray(uv, float).reshape(-1, 2)
+    if len(uv) < 3:
+        return uv
+    origin = uv.min(axis=0)  # float32 inside OpenCV: keep the numbers small
+    kept = cv2.approxPolyDP((uv - origin).astype(np.float32).reshape(-1, 1, 2), tolerance, False)
+    return kept.reshape(-1, 2).astype(float) + origin
+
+
 def _pitch(camera, W: int, H: int, model: FieldModel, color) -> Segments:
     polys = project_polylines(camera.scaled(W, H) if (camera.width, camera.height) != (W, H) else camera,
                               model.sample_polylines(0.5, 0.25), W, H)
-    return Segments.from_polylines(list(polys.values()), color)
+    return Segments.from_polylines([simplify_polyline(p) for p in polys.values()], color)
 
 
 def _ghosts(view: FrameView, model: FieldModel, hidden: set[int]) -> Markers:

@@ -1,17 +1,20 @@
-"""The 3D view of one tab: the estimated camera as a frustum with the frame on it, and a ray from
-the camera through every keypoint to its place on the pitch model (the pitch itself is the
-server's, shared by every tab). Nodes are created once and updated in place; the frame is drawn on
-the frustum only while the tab is in the 3D view.
+"""The 3D view of one tab: the pitch model (markings, goals, nets), the estimated camera as a
+frustum with the frame on it, and a ray from the camera through every keypoint to its place on
+the pitch. Nodes are created the first time the tab opens the 3D view, updated in place, and hidden
+in the image view (nothing of it is drawn there, not even culled: every frame of the image view
+costs only what it shows).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pnlviz.app.overlay import SET_RGB
+from pnlviz.field.meshes import goals_mesh, grass_mesh, markings_mesh, nets_mesh
 
 FRUSTUM_SCALE = 4.0  # metres: distance of the frustum's image from the camera
 FRUSTUM_RGB = (255, 190, 40)
@@ -34,23 +37,46 @@ def behind_camera(cam, back: float = 12.0) -> dict:
     return {"position": position, "look_at": target, "up": (0.0, 0.0, -1.0)}
 
 
+@functools.cache
+def _pitch_meshes() -> dict:
+    """name -> (vertices, faces, RGB, more options) of the pitch model (made once per process).
+    The grass sits 1 cm below the markings (z points down) so that they never fight over depth."""
+    grass, markings, goals, nets = grass_mesh(), markings_mesh(), goals_mesh(), nets_mesh()
+    return {"grass": (np.asarray(grass.vertices) + [0.0, 0.0, 0.01], grass.faces, (40, 110, 50), {"side": "double"}),
+            "markings": (markings.vertices, markings.faces, (245, 245, 245), {"side": "double"}),
+            "goals": (goals.vertices, goals.faces, (255, 255, 255), {}),
+            "nets": (nets.vertices, nets.faces, (200, 200, 210), {"opacity": 0.35, "side": "double"})}
+
+
 class Scene3D:
     """Frustum and rays of one tab, under scene path ``root``."""
 
     def __init__(self, scene, root: str):
         self.scene, self.root = scene, f"{root}/view3d"
-        self._frustum = self._rays = None
+        self._frustum = self._rays = self._pitch = None
 
     def hide(self) -> None:
-        for handle in (self._frustum, self._rays):
+        for handle in (self._frustum, self._rays, self._pitch):
             if handle is not None:
                 handle.visible = False
 
+    def _show_pitch(self) -> None:
+        if self._pitch is not None:
+            self._pitch.visible = True
+            return
+        self._pitch = self.scene.add_frame(f"{self.root}/pitch", show_axes=False)
+        for name, (vertices, faces, rgb, extra) in _pitch_meshes().items():
+            self.scene.add_mesh_simple(f"{self.root}/pitch/{name}", vertices, faces, color=rgb, cast_shadow=False,
+                                       receive_shadow=False, **extra)
+
     def show(self, view, image_rgb: np.ndarray | None) -> None:
         """The frame's camera, its image (when given) and the keypoint rays; nothing without a camera."""
+        self._show_pitch()
         cam = view.camera
         if cam is None:
-            self.hide()
+            for handle in (self._frustum, self._rays):
+                if handle is not None:
+                    handle.visible = False
             return
         W, H = view.size
         fov_y, wxyz = 2 * math.atan((H / 2) / cam.fy), camera_wxyz(cam.R)

@@ -6,7 +6,7 @@ is autosaved beside the data.
 
 Each browser tab is a :class:`pnlviz.app.session.Session` with its own frame, view and panel;
 this module holds what they share: the viser server (behind :mod:`pnlviz.app.guard`, which
-refuses foreign pages), the pitch model, the background calibration of every frame and the
+refuses foreign pages), the lights, the background calibration of every frame and the
 background detector. Everything shown comes from :class:`pnlviz.app.state.AppState`.
 """
 
@@ -21,7 +21,6 @@ from pnlviz.app.guard import AccessPolicy, guarded_viser_server
 from pnlviz.app.session import Session
 from pnlviz.app.state import AppState
 from pnlviz.app.view2d import FOV_Y, PLANE_Z
-from pnlviz.field.meshes import goals_mesh, grass_mesh, markings_mesh, nets_mesh
 
 
 class PnlvizApp:
@@ -45,7 +44,7 @@ class PnlvizApp:
         self._detecting: set[str] = set()
         self._detection_status: dict[str, str] = {}  # stem -> what the detector is doing or did there
         self._background_text = ""
-        self._add_pitch()
+        self._add_lights()
         state.subscribe(self._frame_changed)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
@@ -102,19 +101,14 @@ class PnlvizApp:
                 session.show_progress()
 
     # ------------------------------------------------------------------ scene
-    def _add_pitch(self) -> None:
+    def _add_lights(self) -> None:
         sc = self.server.scene
+        # no shadows: the pitch is flat, and a shadow pass (three cascades of viser's default
+        # light) would be drawn on every frame, the image view's too
+        sc.configure_default_lights(True, cast_shadow=False)
         # light from above the pitch (z points down in this world)
         sc.add_light_ambient("/lights/ambient", intensity=0.6)
         sc.add_light_directional("/lights/sun", intensity=2.0, position=(30.0, 40.0, -100.0))
-        g = grass_mesh()
-        sc.add_mesh_simple("/pitch/grass", g.vertices + [0, 0, 0.01], g.faces, color=(40, 110, 50), side="double")
-        m = markings_mesh()
-        sc.add_mesh_simple("/pitch/markings", m.vertices, m.faces, color=(245, 245, 245), side="double")
-        gm = goals_mesh()
-        sc.add_mesh_simple("/pitch/goals", gm.vertices, gm.faces, color=(255, 255, 255))
-        n = nets_mesh()
-        sc.add_mesh_simple("/pitch/nets", n.vertices, n.faces, color=(200, 200, 210), opacity=0.35, side="double")
 
     # ------------------------------------------------------------------ background
     def _say(self, text: str) -> None:

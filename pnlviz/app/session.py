@@ -86,6 +86,13 @@ def keypoint_name(model, kid: int) -> str:
     return " x ".join(str(p) for p in parts) + f" ({kp.group})"
 
 
+def _put(handle, **props) -> None:
+    """Set the widget properties that differ from what it shows (each set is a message)."""
+    for name, value in props.items():
+        if getattr(handle, name) != value:
+            setattr(handle, name, value)
+
+
 class Session:
     """The panel and scene nodes of one tab (``gui``/``scene`` of its viser client), or of the
     server itself when ``client`` is None (a session without a browser, for scripts and tests)."""
@@ -141,6 +148,7 @@ class Session:
         self.panels.set_order(len(self.order), self.index)
         if client is not None:
             client.camera.on_update(self._on_camera)
+            client.scene.configure_default_lights(True, cast_shadow=False)  # no shadow pass on every frame
 
     @property
     def stem(self) -> str:
@@ -769,11 +777,12 @@ class Session:
         pos = self.order.index(self.index) + 1 if self.index in self.order else 0
         where = (f"not in the filter '{p.filter.value}' (no frame is)" if self.outside_filter
                  else f"{pos}/{len(self.order)}" + (f" of '{p.filter.value}'" if p.filter.value != "all" else ""))
-        p.title.content = f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}"
-        p.status.content = self._status_line(view)
-        p.filter_text.content = (f"**no frame matches '{p.filter.value}'**: showing {view.stem}" if self.outside_filter
-                                 else f"{len(self.order)} frames")
-        p.card.content = calibration_card(view, st)
+        _put(p.title, content=f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}")
+        _put(p.status, content=self._status_line(view))
+        n = len(self.order)
+        _put(p.filter_text, content=f"**no frame matches '{p.filter.value}'**: showing {view.stem}"
+             if self.outside_filter else f"{n} frame" + ("s" if n != 1 else ""))
+        _put(p.card, content=calibration_card(view, st))
         self._show_points_list(view)
         self._show_selected()
         self.show_progress()
@@ -789,7 +798,13 @@ class Session:
         else:
             saved = "no edits"
         detection = self.app.detection_status(view.stem)
-        return f"review: **{review}** · {saved}" + (f" · {detection}" if detection else "")
+        line = f"review: **{review}** · {saved}" + (f" · {detection}" if detection else "")
+        # why a frame has no camera, where it is seen first (the card below says more)
+        if view.error:
+            line += f"  \n**cannot be shown**: {view.error}"
+        elif view.result is not None and not view.result.ok:
+            line += f"  \n**not calibrated**: {view.result.failure}"
+        return line
 
     def _show_points_list(self, view: FrameView) -> None:
         overlay = self._overlay
@@ -809,7 +824,7 @@ class Session:
     def _show_selected(self) -> None:
         sel, overlay, model = self.selected, self._overlay, self.state.model
         if sel is None or overlay is None:
-            self.panels.selected.content = f"nothing selected · shift+click places id **{self.place_id}**"
+            _put(self.panels.selected, content=f"nothing selected · shift+click places id **{self.place_id}**")
             return
         kind, key = sel
         if kind == "line_points":
@@ -825,14 +840,14 @@ class Session:
         if key in m.keys:
             u, v = m.uv[m.keys.index(key)]
             text += f" · at ({u:.1f}, {v:.1f})"
-        self.panels.selected.content = text
+        _put(self.panels.selected, content=text)
 
     def show_progress(self) -> None:
         done, total = self.state.review_progress()
         counts = self.state.edits.counts()
-        self.panels.progress.value = 100.0 * done / total
-        self.panels.progress_text.content = f"{done} of {total} reviewed: " + ", ".join(
-            f"{k} {v}" for k, v in counts.items())
+        _put(self.panels.progress, value=100.0 * done / total)
+        _put(self.panels.progress_text, content=f"{done} of {total} reviewed: " + ", ".join(
+            f"{k} {v}" for k, v in counts.items()))
 
     def _atomic(self):
         return self.client.atomic() if self.client is not None else self.app.server.atomic()

@@ -138,6 +138,9 @@ class AppState:
         #: the frame a new tab opens: the first with an image, the most telling one
         self.first_index = next((i for i, s in enumerate(self.stems) if self.ds.frame(s).has_image), 0)
         self._cache: dict[tuple, FrameView] = {}
+        #: per frame, the last preview (while a point is dragged) under the cache key the frame
+        #: will have if that position is released: the release then costs no recalibration
+        self._previews: dict[str, tuple[tuple, FrameView]] = {}
         self._lock = threading.RLock()
         self._images: dict[str, np.ndarray | None] = {}
         #: why an image could not be decoded (stem -> one line), once it was tried
@@ -221,6 +224,7 @@ class AppState:
             # views computed before the detections existed are stale
             for key in [k for k in self._cache if k[0] == stem]:
                 del self._cache[key]
+            self._previews.pop(stem, None)
         self._changed(stem)
 
     def image(self, stem: str) -> np.ndarray | None:
@@ -250,8 +254,12 @@ class AppState:
         :func:`pnlviz.calib.frame.detection_settings_apply`)."""
         return dict(detection_settings_apply(origin, self.frame_settings(settings)))
 
-    def _key(self, stem: str, settings: Settings) -> tuple:
-        rec = self.edits.get(stem)
+    def _key(self, stem: str, settings: Settings, keypoints: dict | None = None) -> tuple:
+        """The cache key of the frame's view: its settings and its edits (``keypoints``: these
+        keypoint edits instead of the saved ones)."""
+        rec = dict(self.edits.get(stem))
+        if keypoints is not None:
+            rec["keypoints"] = keypoints
         edit = {k: rec[k] for k in ("annotation", "keypoints") if rec.get(k) is not None}
         return stem, settings, json.dumps(edit, sort_keys=True) if edit else None
 
@@ -263,6 +271,11 @@ class AppState:
         with self._lock:
             if key in self._cache:
                 return self._cache[key]
+            preview = self._previews.pop(stem, None)
+            # the position a drag just previewed, released (and no detections came meanwhile)
+            if preview is not None and preview[0] == key and preview[1].detections is self.detections_for(stem):
+                self._cache[key] = preview[1]
+                return preview[1]
         view = self._compute(stem, settings)
         with self._lock:
             self._cache[key] = view
@@ -277,10 +290,18 @@ class AppState:
 
     def preview(self, stem: str, settings: Settings, kid: int, x: float, y: float) -> FrameView:
         """The frame as it would be with keypoint ``kid`` at (x, y), calibrated (for feedback while
-        a point is dragged): neither saved nor cached."""
+        a point is dragged): not saved; kept until the frame's next view, which it is if that
+        position is then released."""
         kid, (x, y) = self._check_id(kid), self._check_position(stem, x, y)
         edits = {**(self.edits.get(stem).get("keypoints") or {}), str(kid): [x, y]}
-        return self._compute(stem, settings, keypoint_edits=edits)
+        key = self._key(stem, settings, keypoints=edits)
+        with self._lock:
+            if key in self._cache:
+                return self._cache[key]
+        view = self._compute(stem, settings, keypoint_edits=edits)
+        with self._lock:
+            self._previews[stem] = (key, view)
+        return view
 
     def _compute(self, stem: str, settings: Settings, keypoint_edits: dict | None = None) -> FrameView:
         """Read the frame's inputs (the only I/O here), then the engine's one path per frame."""

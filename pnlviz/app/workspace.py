@@ -52,6 +52,22 @@ class WorkspaceEvents:
     screen_to_pixel: Callable[[np.ndarray], np.ndarray]  # screen fractions of the canvas -> image pixel
 
 
+def _update(handle, **props) -> None:
+    """Set those ``props`` of a scene node that differ from what it has: an unchanged value is not
+    sent again (every message makes the browser draw the scene again)."""
+    for name, value in props.items():
+        old = getattr(handle, name)
+        if isinstance(old, np.ndarray):  # viser keeps arrays in their wire type (float32, uint8)
+            new = np.asarray(value)
+            same = old.shape == new.shape and np.array_equal(old, new.astype(old.dtype, copy=False))
+        elif isinstance(value, (np.ndarray, tuple, list)):
+            same = np.shape(old) == np.shape(value) and np.array_equal(old, value)
+        else:
+            same = old == value
+        if not same:
+            setattr(handle, name, value)
+
+
 class _PointNodes:
     """The points of one kind, drawn as flat discs with a black rim (two point clouds: unlit, so
     the colours are the legend's) over an invisible batched mesh that takes the pointer, so every
@@ -85,14 +101,14 @@ class _PointNodes:
                 cast_shadow=False, receive_shadow=False, lod="off")
             self._bind(self.grab, events)
         else:
-            self.grab.batched_positions, self.grab.batched_scales = pos, scales
+            _update(self.grab, batched_positions=pos, batched_scales=scales)
 
     def _draw(self) -> None:
         """The visible discs and rims, where ``uv`` says (none: hidden)."""
         if not self.keys:
             for node in (self.disc, self.rim):
                 if node is not None:
-                    node.visible = False
+                    _update(node, visible=False)
             return
         pos = self.plane.world(self.uv, self.layer).astype(np.float32)
         rim_pos = pos + np.float32([0.0, 0.0, 0.0002])
@@ -103,8 +119,8 @@ class _PointNodes:
             self.disc = self.scene.add_point_cloud(f"{self.path}/disc", pos, self._shade(self.colors),
                                                    point_size=DISC_PX * self.world_per_px, **common)
             return
-        self.rim.points, self.rim.colors, self.rim.visible = rim_pos, np.zeros_like(self.colors), True
-        self.disc.points, self.disc.colors, self.disc.visible = pos, self._shade(self.colors), True
+        _update(self.rim, points=rim_pos, colors=np.zeros_like(self.colors), visible=True)
+        _update(self.disc, points=pos, colors=self._shade(self.colors), visible=True)
 
     def _shade(self, colors: np.ndarray) -> np.ndarray:
         """Colours at this kind's opacity (ghosts: mixed with grey)."""
@@ -256,22 +272,25 @@ class Workspace:
         return slot
 
     def _frame_backdrop(self, plane: ImagePlane) -> None:
-        """A dark frame around the image (four strips, none under it: nothing is drawn twice)
-        that pans the view when dragged, like the image itself."""
+        """A dark frame around the image (four quads, none under it: nothing is drawn twice; an
+        opaque toon material, the cheapest viser has) that pans the view when dragged, like the
+        image itself."""
         w, h = plane.extent
         m = BACKDROP_MARGIN
-        strips = {"top": ((0.0, -(h + m * h) / 2), (w + 2 * m * w, m * h)),
-                  "bottom": ((0.0, (h + m * h) / 2), (w + 2 * m * w, m * h)),
-                  "left": ((-(w + m * w) / 2, 0.0), (m * w, h)), "right": (((w + m * w) / 2, 0.0), (m * w, h))}
-        for name, ((x, y), (sw, sh)) in strips.items():
-            handle = self._backdrop.get(name)
-            if handle is None:
-                self._backdrop[name] = self.scene.add_image(
-                    f"{self.root}/backdrop/{name}", np.full((2, 2, 3), BACKDROP_RGB, np.uint8), sw, sh, format="png",
-                    position=(x, y, PLANE_Z + 0.01), cast_shadow=False, receive_shadow=False)
-                self._bind_pan(self._backdrop[name])
-            else:
-                handle.render_width, handle.render_height, handle.position = sw, sh, (x, y, PLANE_Z + 0.01)
+        x0, x1, y0, y1 = -w / 2, w / 2, -h / 2, h / 2
+        X0, X1, Y0, Y1 = x0 - m * w, x1 + m * w, y0 - m * h, y1 + m * h
+        quads = [(X0, Y0, X1, y0), (X0, y1, X1, Y1), (X0, y0, x0, y1), (x1, y0, X1, y1)]  # top, bottom, left, right
+        vertices = np.array([[[a, b, 0.0], [c, b, 0.0], [c, d, 0.0], [a, d, 0.0]] for a, b, c, d in quads]).reshape(-1, 3)
+        vertices[:, 2] = PLANE_Z + 0.01
+        faces = np.array([[k, k + 1, k + 2] for k in range(0, 16, 4)] + [[k, k + 2, k + 3] for k in range(0, 16, 4)])
+        handle = self._backdrop.get("mesh")
+        if handle is None:
+            self._backdrop["mesh"] = self.scene.add_mesh_simple(
+                f"{self.root}/backdrop", vertices, faces, color=BACKDROP_RGB, material="toon3", side="double",
+                flat_shading=True, cast_shadow=False, receive_shadow=False)
+            self._bind_pan(self._backdrop["mesh"])
+        else:
+            _update(handle, vertices=vertices.astype(np.float32))
 
     def _bind_frame(self, node) -> None:
         ev = self.events
@@ -316,7 +335,7 @@ class Workspace:
             handle = self._lines.get(name)
             if not len(seg):
                 if handle is not None:
-                    handle.visible = False
+                    _update(handle, visible=False)
                 continue
             pts = plane.world(seg.points, "residuals" if name == "residuals" else "pitch")
             cols = line_colors[name] if line_colors and name in line_colors else np.repeat(seg.colors[:, None], 2, 1)
@@ -325,7 +344,7 @@ class Workspace:
                                                                  thickness=THICKNESS.get(name, 1.5),
                                                                  thickness_units="screen")
             else:
-                handle.points, handle.colors, handle.visible = pts, cols, True
+                _update(handle, points=pts, colors=cols, visible=True)
         shown = {"keypoints": overlay.keypoints if keypoints else Markers(),
                  "ghosts": overlay.ghosts if ghosts else Markers(),
                  "line_points": overlay.line_points if line_points else Markers()}
@@ -380,7 +399,7 @@ class Workspace:
                 uv = nodes.uv[nodes.keys.index(self.selected[1])]
         if uv is None:
             if self._ring is not None:
-                self._ring.visible = False
+                _update(self._ring, visible=False)
             return
         a = np.linspace(0, 2 * math.pi, 33)
         circle = uv + RING_PX * self.world_per_px / self.plane.scale * np.stack([np.cos(a), np.sin(a)], 1)
@@ -389,7 +408,7 @@ class Workspace:
             self._ring = self.scene.add_line_segments(f"{self.root}/selection", pts, SELECTED_RGB, thickness=2.0,
                                                       thickness_units="screen")
         else:
-            self._ring.points, self._ring.visible = pts, True
+            _update(self._ring, points=pts, visible=True)
 
     def set_zoom(self, world_per_px: float) -> None:
         """The camera zoomed: points keep their size on screen, ids are decluttered again."""
