@@ -22,6 +22,7 @@ from pnlviz import EXAMPLES_DIR, REPO_ROOT
 from pnlviz.app.server import PnlvizApp
 from pnlviz.app.state import AppState
 from pnlviz.app.view2d import View2D
+from pnlviz.detect.worker import DetectorProcess
 
 OUT = REPO_ROOT / "docs" / "screenshots"
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
@@ -46,9 +47,15 @@ def shoot(page, name: str) -> None:
     print(f"wrote {OUT / name}.jpg")
 
 
-def session(browser, data: Path, edits: Path, shots: list[tuple[str, str, Callable | None]]) -> None:
-    """Open ``data`` in a page and take each shot: (file name, frame, what to do on it first)."""
-    app = PnlvizApp(AppState(data, edits=edits), port=free_port())
+def session(browser, data: Path, edits: Path, shots: list[tuple[str, str, Callable | None]],
+            detect: bool = False) -> None:
+    """Open ``data`` in a page and take each shot: (file name, frame, what to do on it first);
+    ``detect``: with the light default model in the background, as ``pnlviz serve`` runs it."""
+    detector = DetectorProcess(threads=1) if detect else None
+    state = AppState(data, edits=edits, detector=detector, source="annotation" if detect else None)
+    app = PnlvizApp(state, port=free_port())
+    if detector is not None:
+        detector.warm_up()
     try:
         page = browser.new_page(viewport={"width": 1600, "height": 900})
         page.goto(app.url)
@@ -77,8 +84,14 @@ def session(browser, data: Path, edits: Path, shots: list[tuple[str, str, Callab
 
 
 def select_leftmost(page, tab) -> None:
-    """Click the leftmost keypoint (it shows selected, with its id, set and residual)."""
+    """Click the leftmost keypoint (it shows selected, with its id, set and residual); a frame
+    with an image only waits for the light model's detections first."""
     nodes = tab.workspace.points["keypoints"]
+    deadline = time.time() + 60
+    while not nodes.keys and time.time() < deadline:
+        time.sleep(0.5)
+    tab.flush()
+    time.sleep(1.0)
     i = int(nodes.uv[:, 0].argmin())
     box = max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
     x, y = tab.view2d.to_screen(nodes.uv[i], tab.canvas)
@@ -112,9 +125,9 @@ def main() -> None:
         session(browser, EXAMPLES_DIR / "sample", tmp / "edits", [
             ("workspace_synthetic", "00006", select_leftmost),
             ("workspace_wc14", "wc14_trainval_16", select_leftmost),
-            ("workspace_zoomed", "sn22_00250", zoom_on_densest),
+            ("workspace_zoomed", "00006", zoom_on_densest),
             ("view_3d", "00006", three_d),
-        ])
+        ], detect=True)
         session(browser, failed, tmp / "edits2", [("failed_frame", "00003", None)])
         browser.close()
     shutil.rmtree(tmp)
