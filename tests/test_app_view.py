@@ -304,3 +304,27 @@ def test_a_released_drag_reuses_its_preview_and_nothing_else(data):
         assert released is not elsewhere
         i = list(released.observations.kp_ids).index(kid)
         np.testing.assert_allclose(released.observations.kp_xy[i], [x + 8.0, y])
+
+
+def test_steps_already_in_the_history_are_kept_and_a_new_bad_one_is_refused(data):
+    """The write path checks only the undo steps it has not checked before (a full history is not
+    validated again on every edit), and still refuses a bad new one."""
+    from pnlviz.app.state import AppState
+    from pnlviz.data import DataError
+
+    with AppState(data) as st:
+        v0 = st.view("00000")
+        kid, (x, y) = int(v0.observations.kp_ids[0]), v0.observations.kp_xy[0]
+        for n in range(5):
+            st.move_keypoint("00000", kid, x + n + 1, y)
+        before = st.edits.get("00000")
+        with pytest.raises(DataError):
+            with st.edits.edit("00000") as rec:
+                rec["history"] = {"undo": rec["history"]["undo"] + [{"review": "maybe"}], "redo": []}
+        assert st.edits.get("00000") == before  # nothing written, nothing cached
+        copy = st.edits.get("00000")
+        copy["keypoints"][str(kid)] = [1.0, 1.0]
+        copy["history"]["undo"].clear()
+        assert st.edits.get("00000") == before  # a copy's changes stay in the copy
+    with AppState(data) as st:  # and what was written reads back whole
+        assert st.history("00000") == (5, 0) and st.edits.get("00000")["keypoints"][str(kid)] == [x + 5, y]

@@ -20,13 +20,14 @@ edits from several browser tabs are applied one after the other, none lost.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import os
 import socket
 import threading
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +50,7 @@ class EditsFolderError(RuntimeError):
     """The edits folder cannot be used: not writable, or in use by another process."""
 
 
+@functools.cache
 def keypoint_ids() -> frozenset[int]:
     """The catalogue's keypoint ids (PnLCalib's 1..73)."""
     from pnlviz.field.model import load_field_model
@@ -72,8 +74,9 @@ def validate_keypoint(kid: Any, value: Any, source: str) -> tuple[str, list[floa
     return str(int(text)), xy
 
 
-def validate_record(obj: Any, source: str) -> dict:
-    """A checked copy of an edit record (see the module docstring); DataError on anything else."""
+def validate_record(obj: Any, source: str, checked_before: Collection[int] = ()) -> dict:
+    """A checked copy of an edit record (see the module docstring); DataError on anything else.
+    ``checked_before``: see :func:`validate_history`."""
     if not isinstance(obj, Mapping):
         raise DataError(source, f"an edit record must be a JSON object, got {describe(obj)}")
     rec: dict = {}
@@ -92,16 +95,17 @@ def validate_record(obj: Any, source: str) -> dict:
         rec["keypoints"] = dict(validate_keypoint(k, v, source) for k, v in kps.items())
     history = obj.get("history")
     if history is not None:
-        rec["history"] = validate_history(history, source)
+        rec["history"] = validate_history(history, source, checked_before)
     updated = as_number(obj.get("updated"))
     if updated is not None and math.isfinite(updated):
         rec["updated"] = updated
     return rec
 
 
-def validate_history(obj: Any, source: str) -> dict:
+def validate_history(obj: Any, source: str, checked_before: Collection[int] = ()) -> dict:
     """A checked copy of a record's undo history: ``{"undo": [step], "redo": [step]}``, each step
-    a mapping of some :data:`UNDOABLE` fields to their values (null: absent), valid as a record's."""
+    a mapping of some :data:`UNDOABLE` fields to their values (null: absent), valid as a record's.
+    ``checked_before``: ids of step objects that were checked already (kept as they are)."""
     if not isinstance(obj, Mapping):
         raise DataError(source, f'"history" must be an object with "undo" and "redo" lists, got {describe(obj)}')
     out = {}
@@ -111,12 +115,25 @@ def validate_history(obj: Any, source: str) -> dict:
             raise DataError(source, f'history "{side}" must be a list, got {describe(steps)}')
         checked = []
         for step in steps[-HISTORY_LIMIT:]:
+            if id(step) in checked_before:
+                checked.append(step)
+                continue
             if not isinstance(step, Mapping) or not step or any(k not in UNDOABLE for k in step):
                 raise DataError(source, f"an undo step is an object of {', '.join(UNDOABLE)}, got {describe(step)}")
             values = validate_record({k: v for k, v in step.items() if v is not None}, source)
             checked.append({k: values.get(k) for k in step})
         out[side] = checked
     return out
+
+
+def _record_text(rec: dict) -> str:
+    """A record as JSON: one line without spaces (with a hundred undo steps of a whole annotation
+    a record is half a megabyte, and an indented one is encoded by Python's slow encoder on every
+    edit); plain JSON types only after validation, numpy ones converted if any slipped in."""
+    try:
+        return json.dumps(rec, allow_nan=False, separators=(",", ":"))
+    except TypeError:
+        return dumps(rec)
 
 
 class EditsStore:
@@ -224,9 +241,21 @@ class EditsStore:
             self.warnings.append(f"{path}: damaged edit record ignored ({reason}); cannot move it aside: {move_error}")
 
     def get(self, stem: str) -> dict:
-        """A copy of the frame's record ({} when it has none)."""
+        """A copy of the frame's record ({} when it has none). The undo steps in its history are
+        not copied (a hundred of them can be most of the record): they are never changed in
+        place, only added, removed and moved between the lists."""
         rec = self._cache.get(stem)
-        return json.loads(json.dumps(rec)) if rec else {}
+        if not rec:
+            return {}
+        out = json.loads(json.dumps({k: v for k, v in rec.items() if k != "history"}))
+        if "history" in rec:
+            out["history"] = {side: list(steps) for side, steps in rec["history"].items()}
+        return out
+
+    def _checked_steps(self, stem: str) -> set[int]:
+        """Ids of the undo steps of the frame's record as it is (all checked when it was)."""
+        history = (self._cache.get(stem) or {}).get("history") or {}
+        return {id(step) for steps in history.values() for step in steps}
 
     def review(self, stem: str) -> str | None:
         return self._cache.get(stem, {}).get("review")
@@ -259,8 +288,8 @@ class EditsStore:
             yield rec
             rec = {k: v for k, v in rec.items() if v is not None and k in FIELDS}
             rec["updated"] = time.time()
-            rec = validate_record(rec, f"{self.frames / stem}.json")
-            atomic_write_text(self.frames / f"{stem}.json", dumps(rec, indent=1))
+            rec = validate_record(rec, f"{self.frames / stem}.json", self._checked_steps(stem))
+            atomic_write_text(self.frames / f"{stem}.json", _record_text(rec))
             self._cache[stem] = rec
 
     def update(self, stem: str, **changes) -> dict:

@@ -22,7 +22,8 @@ from pnlviz.viz import blank_canvas, caption, class_colour, draw_annotation, dra
 
 #: RGB colours of the keypoint sets, as in the paper's figure (Kp red, Kpe yellow, Kp1 blue,
 #: Kp2 pink, Kp3 green)
-SET_RGB = {"Kp": (230, 40, 40), "Kpe": (255, 220, 0), "Kp1": (30, 120, 255), "Kp2": (255, 90, 200), "Kp3": (60, 200, 60)}
+SET_RGB = {"Kp": (230, 40, 40), "Kpe": (255, 220, 0), "Kp1": (30, 120, 255), "Kp2": (255, 90, 200),
+           "Kp3": (60, 200, 60)}
 INITIAL_RGB = (0, 200, 255)  # cyan-blue: pitch through the voted camera, before PnL
 REFINED_RGB = (255, 220, 60)  # amber: pitch through the final camera
 REFERENCE_RGB = (255, 80, 255)  # magenta: pitch through a known camera (synthetic ground truth)

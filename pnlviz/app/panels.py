@@ -73,7 +73,8 @@ class Panels:
             self.sort = gui.add_dropdown("sort", SORTS, initial_value="index")
             self.filter_text = gui.add_markdown("")
         with gui.add_folder("Review"):
-            self.review = gui.add_button_group("status", tuple(f"{k} ({v})" for k, v in REVIEW_KEYS.items()) + ("clear",))
+            statuses = tuple(f"{k} ({v})" for k, v in REVIEW_KEYS.items()) + ("clear",)
+            self.review = gui.add_button_group("status", statuses)
             self.advance = gui.add_checkbox("then next frame", initial_value=True)
             self.progress = gui.add_progress_bar(0.0)
             self.progress_text = gui.add_markdown("")
@@ -159,7 +160,8 @@ class Panels:
                 ("selected point not visible ", "backspace", None, s.hide_selected),
                 ("clear the selection", "escape", None, lambda: s.select(None)))
         for label, key, modifier, action in keys:
-            description = (modifier.replace("cmd/ctrl", "Ctrl").replace("+shift", "+Shift") + "+" if modifier else "") + key
+            prefix = modifier.replace("cmd/ctrl", "Ctrl").replace("+shift", "+Shift") + "+" if modifier else ""
+            description = prefix + key
             command = gui.add_command(label, hotkey=key, modifier=modifier, description=description)
             command.on_trigger(self.session.ordered(lambda _, action=action: action()))
 

@@ -49,7 +49,7 @@ def _pitch_meshes() -> dict:
 
 
 class Scene3D:
-    """Frustum and rays of one tab, under scene path ``root``."""
+    """The pitch, frustum and rays of one tab, under scene path ``root``."""
 
     def __init__(self, scene, root: str):
         self.scene, self.root = scene, f"{root}/view3d"

@@ -49,8 +49,9 @@ def calibration_card(view: FrameView, state: AppState) -> str:
     res = view.result
     if view.origin is not None:
         settings = state.applied_detection_settings(view.origin, view.settings)
-        lines.append(f"calibrated from: **{view.origin}**" + (
-            " (the detector's settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()) + ")" if settings else ""))
+        used = ", ".join(f"{k}={v}" for k, v in settings.items())
+        lines.append(f"calibrated from: **{view.origin}**"
+                     + (f" (the detector's settings: {used})" if settings else ""))
     if view.reference_camera is not None:
         lines.append("reference camera (magenta): known for this frame")
     if res is None:
@@ -64,7 +65,8 @@ def calibration_card(view: FrameView, state: AppState) -> str:
     line_errs = np.array(list(res.line_residuals.values()))
     lines += [
         f"focal **{cam.fx:.1f} px** (hFOV {cam.hfov_deg:.1f} deg), k1 {cam.radial[0]:+.3f}",
-        f"position ({cam.C[0]:.1f}, {cam.C[1]:.1f}, {cam.C[2]:.1f}) m; pan {pan:.2f}, tilt {tilt:.2f}, roll {roll:.2f} deg",
+        f"position ({cam.C[0]:.1f}, {cam.C[1]:.1f}, {cam.C[2]:.1f}) m; "
+        f"pan {pan:.2f}, tilt {tilt:.2f}, roll {roll:.2f} deg",
         f"keypoints: {len(errs)}, median error {np.median(errs):.2f} px" if len(errs) else "keypoints: none",
         f"lines/circles: {len(line_errs)}, worst {line_errs.max():.1f} px" if len(line_errs) else "lines: none",
         f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, {len(res.inliers)} inliers; "
@@ -650,7 +652,8 @@ class Session:
         view = View2D.from_camera(plane, position, canvas[1])
         view = View2D(view.cu, view.cv, view.zoom * self.canvas[1] / canvas[1])
         clamped = view.clamped(plane, self.canvas)
-        if abs(math.log(clamped.zoom / view.zoom)) > 1e-3 or abs(clamped.cu - view.cu) + abs(clamped.cv - view.cv) > 0.5:
+        moved = abs(clamped.cu - view.cu) + abs(clamped.cv - view.cv)
+        if abs(math.log(clamped.zoom / view.zoom)) > 1e-3 or moved > 0.5:
             self._push_view(clamped)
             return
         self.view2d = view

@@ -327,7 +327,8 @@ class AppState:
         if fc.ok and ann:
             fr = evaluate_frame(fc.result.camera.scaled(*EVAL_SIZE), ann)
             jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
-        return FrameView(stem, idx, image, size, ann, fc.observations, fc.result, jac, error=image_error or engine_error,
+        return FrameView(stem, idx, image, size, ann, fc.observations, fc.result, jac,
+                         error=image_error or engine_error,
                          ms=fc.ms, reference_camera=ref, detections=inputs.detections, origin=fc.origin,
                          settings=settings)
 
@@ -350,7 +351,8 @@ class AppState:
             raise EditError(f"a position must be two numbers, got {x!r}, {y!r}") from None
         m = PLACEMENT_MARGIN
         if not (math.isfinite(x) and math.isfinite(y) and -m * W <= x <= (1 + m) * W and -m * H <= y <= (1 + m) * H):
-            raise EditError(f"position ({x:.6g}, {y:.6g}) is off the {W}x{H} frame of {stem} by more than half its size")
+            raise EditError(f"position ({x:.6g}, {y:.6g}) is off the {W}x{H} frame of {stem} "
+                            "by more than half its size")
         return x, y
 
     @staticmethod
@@ -385,7 +387,8 @@ class AppState:
 
     def set_review(self, stem: str, status: str | None) -> None:
         if status is not None and status not in REVIEW_STATES:
-            raise EditError(f"review status must be one of {', '.join(REVIEW_STATES)} or none, got {str(status)[:20]!r}")
+            raise EditError(f"review status must be one of {', '.join(REVIEW_STATES)} or none, "
+                            f"got {str(status)[:20]!r}")
         self._edit(stem, lambda rec: rec.__setitem__("review", status), corrected=False)
 
     def set_annotation(self, stem: str, annotation: dict[str, np.ndarray]) -> None:

@@ -280,7 +280,8 @@ class Workspace:
         x0, x1, y0, y1 = -w / 2, w / 2, -h / 2, h / 2
         X0, X1, Y0, Y1 = x0 - m * w, x1 + m * w, y0 - m * h, y1 + m * h
         quads = [(X0, Y0, X1, y0), (X0, y1, X1, Y1), (X0, y0, x0, y1), (x1, y0, X1, y1)]  # top, bottom, left, right
-        vertices = np.array([[[a, b, 0.0], [c, b, 0.0], [c, d, 0.0], [a, d, 0.0]] for a, b, c, d in quads]).reshape(-1, 3)
+        vertices = np.array([[[a, b, 0.0], [c, b, 0.0], [c, d, 0.0], [a, d, 0.0]] for a, b, c, d in quads])
+        vertices = vertices.reshape(-1, 3)
         vertices[:, 2] = PLANE_Z + 0.01
         faces = np.array([[k, k + 1, k + 2] for k in range(0, 16, 4)] + [[k, k + 2, k + 3] for k in range(0, 16, 4)])
         handle = self._backdrop.get("mesh")
