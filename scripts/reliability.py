@@ -393,7 +393,8 @@ def threads_section(tmp: Path) -> list[str]:
 def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
     """Two real tabs on the same frame drag different keypoints in turns, as fast as the browser
     takes them (each release recalibrates the frame, which moves the other tab's points: every
-    drag aims at where its point is on that tab's screen right then)."""
+    drag aims at where its point is on that tab's screen right then). The points are 40 px apart
+    at least, so that a dragged one never lands on the next one to be grabbed."""
     from playwright.sync_api import sync_playwright
 
     from pnlviz.app.server import PnlvizApp
@@ -424,8 +425,11 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
                 tabs.append((page, session))
             time.sleep(2.0)
             obs = tabs[0][1].view().observations
-            order = [int(obs.kp_ids[i]) for i in np.argsort(obs.kp_xy[:, 0])]  # leftmost first: away from the panel
-            dragged = order[:2 * drags_per_tab]
+            dragged, spots = [], []  # leftmost first (away from the panel), none within 40 px of another
+            for i in np.argsort(obs.kp_xy[:, 0]):
+                if len(dragged) < 2 * drags_per_tab and all(np.hypot(*(obs.kp_xy[i] - p)) > 40 for p in spots):
+                    dragged.append(int(obs.kp_ids[i]))
+                    spots.append(obs.kp_xy[i])
             for n, kid in enumerate(dragged):
                 page, session = tabs[n % 2]
                 page.bring_to_front()  # a page in the background does not draw (nor pick)

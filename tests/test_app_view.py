@@ -328,3 +328,20 @@ def test_steps_already_in_the_history_are_kept_and_a_new_bad_one_is_refused(data
         assert st.edits.get("00000") == before  # a copy's changes stay in the copy
     with AppState(data) as st:  # and what was written reads back whole
         assert st.history("00000") == (5, 0) and st.edits.get("00000")["keypoints"][str(kid)] == [x + 5, y]
+
+
+def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_names():
+    """Another tab's edit can reorder the points after this browser picked instance i: the point
+    where the pointer hit wins over the instance number."""
+    from pnlviz.app.workspace import GRAB_PX, _PointNodes
+
+    nodes = _PointNodes(None, "/t", "keypoints", "keypoints")
+    nodes.plane = ImagePlane(960, 540)
+    nodes.world_per_px = nodes.plane.scale  # 1 screen pixel per image pixel
+    nodes.keys, nodes.uv = [11, 40, 57], np.array([[100.0, 100.0], [300.0, 200.0], [305.0, 260.0]])
+    assert nodes._instance(1, np.array([301.0, 199.0])) == 1  # the instance is where the pointer is
+    assert nodes._instance(0, np.array([304.0, 258.0])) == 2  # instance 0 is elsewhere now: the one hit
+    assert nodes._instance(None, np.array([99.0, 101.0])) == 0  # no instance reported: the one hit
+    assert nodes._instance(2, np.array([600.0, 400.0])) is None  # nothing within reach of the pointer
+    assert nodes._instance(1, np.array([300.0 + 1.4 * GRAB_PX, 200.0])) == 1
+    assert nodes._instance(1, None) == 1 and nodes._instance(7, None) is None  # no hit position: trust it

@@ -156,15 +156,21 @@ class _PointNodes:
             self.grab.batched_positions = self._grab_layout(len(self.grab.batched_positions))[0]
 
     def _instance(self, index: int | None, at_uv) -> int | None:
-        """The point an event is about: its instance, or (viser sometimes reports none for a hit
-        on a batched mesh whose instances moved) the point nearest where the pointer hit."""
-        if index is not None and 0 <= index < len(self.keys):
-            return index
-        if at_uv is None or not self.keys:
+        """The point an event is about: the instance viser reports if that point is where the
+        pointer hit, else the point nearest the hit within reach. (The browser picks among the
+        instances it drew; when another tab's edit reorders the points, instance ``i`` there can
+        be another point here. viser also reports no instance at times for a mesh whose
+        instances moved.)"""
+        if at_uv is None or not np.all(np.isfinite(at_uv)):
+            return index if index is not None and 0 <= index < len(self.keys) else None
+        if not self.keys:
             return None
+        reach = 1.5 * GRAB_PX * self.world_per_px / self.plane.scale  # image pixels
         d = np.hypot(*(self.uv - at_uv).T)
+        if index is not None and 0 <= index < len(self.keys) and d[index] <= reach:
+            return index
         i = int(np.argmin(d))
-        return i if d[i] * self.plane.scale <= 1.5 * GRAB_PX * self.world_per_px else None
+        return i if d[i] <= reach else None
 
     def _bind(self, node, events: WorkspaceEvents) -> None:
         grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
