@@ -104,3 +104,17 @@ def test_detections_carry_the_detectors_calibration_settings(frames, tmp_path, c
     assert main(calibrate) == 2
     err = capsys.readouterr().err
     assert "unknown calibration setting" in err and "Traceback" not in err
+
+
+def test_default_threads_leave_a_core_and_the_busy_ones_alone(frames, tmp_path, capsys):
+    """More torch threads than free cores makes torch wait for itself (5-9x slower measured): the
+    default takes the idle cores less one, at least one; a negative count is refused."""
+    from pnlviz.detect.default import default_threads
+
+    assert default_threads(2, 0.0) == 1 and default_threads(1, 0.0) == 1
+    assert default_threads(8, 0.0) == 7 and default_threads(8, 0.2) == 7  # a little noise is idle
+    assert default_threads(8, 2.6) == 5 and default_threads(8, 7.9) == 1 and default_threads(8, 30.0) == 1
+    assert default_threads() >= 1
+    assert main(["detect", "--data", str(frames), "--out", str(tmp_path / "p.zip"), "--threads", "-2",
+                 "--no-progress"]) == 2
+    assert "--threads must be 0" in capsys.readouterr().err and not (tmp_path / "p.zip").exists()

@@ -29,7 +29,9 @@ def add_detect_parser(sub) -> None:
     p.add_argument("--line-threshold", type=float, default=None,
                    help="line heatmap threshold (default 0.1; the light default model: its sidecar's)")
     p.add_argument("--batch", type=int, default=1, help="frames per forward pass")
-    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: all cores)")
+    p.add_argument("--threads", type=int, default=0,
+                   help="torch CPU threads (default: the idle cores less one, at least 1; more threads than "
+                        "free cores makes torch wait for itself: 5-9x slower)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_detect)
 
@@ -79,15 +81,25 @@ def run_detect(args) -> int:
     from pnlviz.data import DataError, ZipStream, write_predictions_info
     from pnlviz.data.predictions import prediction_member, prediction_zip_order
     from pnlviz.detect.checkpoint import CheckpointError
+    from pnlviz.detect.default import default_threads, machine_load
     from pnlviz.detect.run import NoModelError
 
+    if args.threads < 0:
+        print(f"error: --threads must be 0 (the default: chosen from the idle cores) or more, got {args.threads}",
+              file=sys.stderr)
+        return 2
     _check_outputs(args)
     ds = open_input_dataset(args.data)
     stems = [s for s in ds.stems if ds.frame(s).has_image]
     if not stems:
         print(f"{args.data}: no images to detect on", file=sys.stderr)
         return 1
-    torch.set_num_threads(args.threads or os.cpu_count() or 1)
+    threads = args.threads or default_threads()
+    torch.set_num_threads(threads)
+    if not args.threads:
+        load = machine_load()
+        print(f"torch threads: {threads} (chosen from {os.cpu_count()} cores"
+              + (f", load {load:.1f}" if load is not None else "") + "; --threads N to set)")
     try:
         det = _load_detector(args)
     except (NoModelError, CheckpointError) as exc:
