@@ -99,3 +99,24 @@ def test_calibration_settings_defaults_then_detector_then_flags():
     assert not calib_params(frame_settings(ap.parse_args(base + ["--no-pnl"]), {"pnl": True}), "detections").pnl
     with pytest.raises(ValueError, match="unknown calibration setting"):
         calib_params(frame_settings(ap.parse_args(base), {"k_one": 0.1}), "detections")
+
+
+def test_calibrate_takes_a_prediction_zip_alone(shared_dir, tmp_path, capsys):
+    """``--detections`` without ``--data``: every frame of the zip calibrated at ``--size``, the same
+    cameras as with a dataset that has no images (annotations are not used for detected frames)."""
+    import zipfile
+
+    half = shared_dir / "data" / "wc14_test_half"
+    alone, with_data = tmp_path / "alone.zip", tmp_path / "with_data.zip"
+    assert main(["calibrate", "--detections", str(half / "detections_pnlcalib.zip"), "--size", "1280x720",
+                 "--out", str(alone), "--no-progress"]) == 0
+    assert "calibrated at 1280x720 (--size)" in capsys.readouterr().out
+    assert main(["calibrate", "--data", str(half / "annotations.zip"), "--detections",
+                 str(half / "detections_pnlcalib.zip"), "--size", "1280x720", "--out", str(with_data),
+                 "--no-progress"]) == 0
+    with zipfile.ZipFile(alone) as a, zipfile.ZipFile(with_data) as b:
+        assert len(a.namelist()) > 80 and a.namelist() == b.namelist()
+        assert all(a.read(n) == b.read(n) for n in a.namelist())
+    capsys.readouterr()
+    assert main(["calibrate", "--out", str(tmp_path / "none.zip"), "--no-progress"]) == 2
+    assert "give --data" in capsys.readouterr().err

@@ -27,7 +27,8 @@ def add_calibrate_parser(sub) -> None:
                        description="Calibrate every frame of a dataset and write camera_<stem>.json files "
                                    "(960x540, SoccerNet format) into a flat zip. Without --detections the "
                                    "cameras come from the frames' line annotations.")
-    p.add_argument("--data", required=True, type=Path, help="dataset folder or zip")
+    p.add_argument("--data", type=Path, help="dataset folder or zip (may be left out with --detections: every "
+                                             "frame of the prediction zip is then calibrated at --size)")
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip (default: use the annotations); "
                                                    "the calibration settings recorded beside it by pnlviz detect "
                                                    "(preds.json) apply")
@@ -37,7 +38,8 @@ def add_calibrate_parser(sub) -> None:
                    help=f"PnL weight of lines vs points (default {DEFAULT_ALPHA})")
     p.add_argument("--no-k1", action="store_true", help="do not refine radial distortion k1")
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE,
-                   help="image size for frames without an image (default 960x540)")
+                   help="image size for frames without an image, and for every frame without --data: the pixel "
+                        "size the detections were made at (default 960x540; the cameras are written at 960x540)")
     p.add_argument("--workers", type=int, default=1, help="worker processes (0: all cores)")
     p.add_argument("--report", type=Path, help="also write one JSON line per frame with the evidence")
     p.add_argument("--no-progress", action="store_true")
@@ -89,6 +91,16 @@ def calibrate_stem(ds, stem: str, prediction, size, settings) -> tuple[str, dict
     return stem, res.camera.scaled(*EVAL_SIZE).to_soccernet(), report
 
 
+class _NoDataset:
+    """What ``--detections`` alone calibrates against: no frame known (no image sizes, no
+    annotations), so every frame of the prediction zip is calibrated at ``--size``."""
+
+    stems: list[str] = []
+
+    def __contains__(self, stem) -> bool:
+        return False
+
+
 class _Worker:
     """Picklable per-frame job for process pools (the dataset re-opens lazily in each worker)."""
 
@@ -114,9 +126,10 @@ def _check_outputs(args) -> None:
     from pnlviz.data import check_output, predictions_info_path
 
     inputs = [args.detections, predictions_info_path(args.detections)] if args.detections else []
-    check_output(args.out, inputs=inputs, datasets=[args.data])
+    datasets = [args.data] if args.data is not None else []
+    check_output(args.out, inputs=inputs, datasets=datasets)
     if args.report:
-        check_output(args.report, inputs=[*inputs, args.out], datasets=[args.data], what="--report")
+        check_output(args.report, inputs=[*inputs, args.out], datasets=datasets, what="--report")
 
 
 def _frames(ds, predictions) -> list[str]:
@@ -149,13 +162,18 @@ def run_calibrate(args) -> int:
     from pnlviz.data import DataError, LineStream, ZipStream, predictions_info_path, read_predictions
     from pnlviz.data.cameras import camera_member, camera_zip_order
 
+    if args.data is None and args.detections is None:
+        print("error: give --data (a dataset), --detections (a prediction zip), or both", file=sys.stderr)
+        return 2
     _check_outputs(args)
-    ds = open_input_dataset(args.data)
+    ds = open_input_dataset(args.data) if args.data is not None else _NoDataset()
     predictions = read_predictions(args.detections, on_error=lambda e: print_skipped([e])) if args.detections else None
     stems = _frames(ds, predictions)
     if not stems:
-        print(f"{args.data}: no frame to calibrate", file=sys.stderr)
+        print(f"{args.data or args.detections}: no frame to calibrate", file=sys.stderr)
         return 1
+    if args.data is None:
+        print(f"{len(stems)} frames of {args.detections.name}, calibrated at {args.size[0]}x{args.size[1]} (--size)")
     try:  # the detector's settings, recorded beside its prediction zip by pnlviz detect
         recorded, settings = _detection_settings(args)
     except (DataError, ValueError) as exc:
