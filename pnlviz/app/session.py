@@ -804,7 +804,7 @@ class Session:
         line = f"review: **{review}** · {saved}" + (f" · {detection}" if detection else "")
         # why a frame has no camera, where it is seen first (the card below says more)
         if view.error:
-            line += f"  \n**cannot be shown**: {view.error}"
+            line += f"  \n**problem**: {view.error}"
         elif view.result is not None and not view.result.ok:
             line += f"  \n**not calibrated**: {view.result.failure}"
         return line

@@ -216,7 +216,7 @@ class Workspace:
         self.world_per_px = 0.01  # scene units per screen pixel at the current zoom
         self._slots: list[dict] = []  # image nodes: the frame shown, and frames sent ahead (hidden)
         self._clock = 0
-        self._backdrop: dict[str, object] = {}
+        self._backdrop = None
         self._ring = None
         self._lines: dict[str, object] = {}
         self.points = {kind: _PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity)
@@ -252,10 +252,6 @@ class Workspace:
         if all(sl["key"] != key for sl in self._slots):
             self._load(key, image_rgb())
 
-    def loaded(self) -> list[tuple]:
-        """The frames whose pixels are in the browser."""
-        return [sl["key"] for sl in self._slots if sl["key"] is not None]
-
     def _load(self, key: tuple, image_rgb: np.ndarray) -> dict:
         """Pixels into a hidden slot (a new one while there are fewer than :data:`FRAME_SLOTS`,
         else the one shown longest ago)."""
@@ -278,9 +274,8 @@ class Workspace:
         return slot
 
     def _frame_backdrop(self, plane: ImagePlane) -> None:
-        """A dark frame around the image (four quads, none under it: nothing is drawn twice; an
-        opaque toon material, the cheapest viser has) that pans the view when dragged, like the
-        image itself."""
+        """A dark frame around the image (one mesh of four quads, none under the image: no pixel
+        is drawn twice) that pans the view when dragged, like the image itself."""
         w, h = plane.extent
         m = BACKDROP_MARGIN
         x0, x1, y0, y1 = -w / 2, w / 2, -h / 2, h / 2
@@ -290,14 +285,13 @@ class Workspace:
         vertices = vertices.reshape(-1, 3)
         vertices[:, 2] = PLANE_Z + 0.01
         faces = np.array([[k, k + 1, k + 2] for k in range(0, 16, 4)] + [[k, k + 2, k + 3] for k in range(0, 16, 4)])
-        handle = self._backdrop.get("mesh")
-        if handle is None:
-            self._backdrop["mesh"] = self.scene.add_mesh_simple(
+        if self._backdrop is None:
+            self._backdrop = self.scene.add_mesh_simple(
                 f"{self.root}/backdrop", vertices, faces, color=BACKDROP_RGB, material="toon3", side="double",
                 flat_shading=True, cast_shadow=False, receive_shadow=False)
-            self._bind_pan(self._backdrop["mesh"])
+            self._bind_pan(self._backdrop)
         else:
-            _update(handle, vertices=vertices.astype(np.float32))
+            _update(self._backdrop, vertices=vertices.astype(np.float32))
 
     def _bind_frame(self, node) -> None:
         ev = self.events
