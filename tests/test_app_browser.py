@@ -79,9 +79,12 @@ def tab(app, n: int = 1):
 
 
 def wait_until(condition, timeout=10.0):
-    """Poll the server-side state until ``condition()`` holds (or time runs out)."""
+    """Poll until ``condition()`` holds; an AssertionError when it does not within ``timeout`` s."""
     deadline = time.time() + timeout
-    while time.time() < deadline and not condition():
+    while not condition():
+        if time.time() > deadline:
+            raise AssertionError(f"not within {timeout:g} s: {condition.__code__.co_filename.split('/')[-1]}:"
+                                 f"{condition.__code__.co_firstlineno}")
         time.sleep(0.2)
 
 

@@ -136,9 +136,9 @@ class PnlvizApp:
                 self._detection_status.pop(stem, None)
             except Exception as exc:  # noqa: BLE001 - a detector failure is shown, never fatal
                 self._detection_status[stem] = f"**detection failed**: {type(exc).__name__}: {exc}"
-                self._frame_changed(stem)
             finally:
                 self._detecting.discard(stem)
+            self._frame_changed(stem)  # the status line too (it said "detecting" while they redrew)
 
         threading.Thread(target=work, daemon=True, name=f"detect-{stem}").start()
 
