@@ -30,7 +30,7 @@ from pnlviz.app.panels import DRAG_MODES, FILTERS, KEYPOINT_CHOICES, LAYERS, SOR
 from pnlviz.app.scene import OVERVIEW, Scene3D, behind_camera
 from pnlviz.app.state import REVIEW_STATES, SOURCES, AppState, EditError, FrameView, Settings
 from pnlviz.app.view2d import FOV_Y, PLANE_Z, View2D, snap
-from pnlviz.app.workspace import Workspace, WorkspaceEvents
+from pnlviz.app.workspace import Workspace, WorkspaceEvents, update_changed
 from pnlviz.viz import blank_canvas
 
 #: the canvas assumed until the browser reports its own (and for a session without a browser)
@@ -88,13 +88,6 @@ def keypoint_name(model, kid: int) -> str:
     return " x ".join(str(p) for p in parts) + f" ({kp.group})"
 
 
-def _put(handle, **props) -> None:
-    """Set the widget properties that differ from what it shows (each set is a message)."""
-    for name, value in props.items():
-        if getattr(handle, name) != value:
-            setattr(handle, name, value)
-
-
 class Session:
     """The panel and scene nodes of one tab (``gui``/``scene`` of its viser client), or of the
     server itself when ``client`` is None (a session without a browser, for scripts and tests)."""
@@ -132,6 +125,7 @@ class Session:
         self._bridge_seen = (-1, 0.0, (0, 0))  # (n, log_zoom, nudge) of the last bridge message
         self._overlay: Overlay | None = None
         self._shown: FrameView | None = None
+        self._shows = 0  # times this tab was drawn (an action that drew it need not draw it again)
         self._save_error: str | None = None  # why the last edit could not be written
         self._lock = threading.RLock()
         self._own_sets: dict[str, int] = {}  # widget -> values set by this tab whose callbacks are to come
@@ -168,8 +162,10 @@ class Session:
         self.client.add_notification(title, body, auto_close_seconds=8.0, color="red" if error else None)
 
     def _guarded(self, action: Callable[[], object]) -> object:
-        """Run a user action; a refused value or a failed save is shown, never lost silently."""
-        result = None
+        """Run a user action; a refused value or a failed save is shown, never lost silently. The
+        tab is redrawn after it, unless the change already redrew it (an edit announces itself to
+        every tab on its frame) and there is no save error to show or clear."""
+        result, shows, clean = None, self._shows, self._save_error is None
         try:
             result = action()
             self._save_error = None
@@ -178,7 +174,8 @@ class Session:
         except OSError as exc:
             self._save_error = exc.strerror or str(exc)
             self.notify("not saved", f"the edits folder cannot be written: {self._save_error}")
-        self.show()
+        if self._shows == shows or not clean or self._save_error is not None:
+            self.show()
         return result
 
     def _act(self, stem: str, action: Callable[[], object]) -> None:
@@ -341,18 +338,17 @@ class Session:
 
     def undo(self) -> None:
         """Take back this tab's last change (going back to its frame), else the frame's last one."""
-        stem = self.actions.pop() if self.actions else self.stem
-        if stem != self.stem:
-            self.goto(self.state.index_of(stem))
-        if self._guarded(lambda: self.state.undo(stem)):
-            self.undone.append(stem)
+        self._history_step(self.actions, self.undone, self.state.undo)
 
     def redo(self) -> None:
-        stem = self.undone.pop() if self.undone else self.stem
+        self._history_step(self.undone, self.actions, self.state.redo)
+
+    def _history_step(self, trail: list[str], other: list[str], step: Callable[[str], bool]) -> None:
+        stem = trail.pop() if trail else self.stem
         if stem != self.stem:
             self.goto(self.state.index_of(stem))
-        if self._guarded(lambda: self.state.redo(stem)):
-            self.actions.append(stem)
+        if self._guarded(lambda: step(stem)):
+            other.append(stem)
 
     # ------------------------------------------------------------------ settings
     def set_pnl(self, value) -> None:
@@ -707,6 +703,7 @@ class Session:
                 self.app.detect_in_background(self.stem)
             view = self.view()
             self._shown = view
+            self._shows += 1
             with self._atomic():
                 self._show_image(view)
                 self._show_overlay(view)
@@ -780,12 +777,13 @@ class Session:
         pos = self.order.index(self.index) + 1 if self.index in self.order else 0
         where = (f"not in the filter '{p.filter.value}' (no frame is)" if self.outside_filter
                  else f"{pos}/{len(self.order)}" + (f" of '{p.filter.value}'" if p.filter.value != "all" else ""))
-        _put(p.title, content=f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}")
-        _put(p.status, content=self._status_line(view))
+        title = f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}"
+        update_changed(p.title, content=title)
+        update_changed(p.status, content=self._status_line(view))
         n = len(self.order)
-        _put(p.filter_text, content=f"**no frame matches '{p.filter.value}'**: showing {view.stem}"
-             if self.outside_filter else f"{n} frame" + ("s" if n != 1 else ""))
-        _put(p.card, content=calibration_card(view, st))
+        update_changed(p.filter_text, content=f"**no frame matches '{p.filter.value}'**: showing {view.stem}"
+                       if self.outside_filter else f"{n} frame" + ("s" if n != 1 else ""))
+        update_changed(p.card, content=calibration_card(view, st))
         self._show_points_list(view)
         self._show_selected()
         self.show_progress()
@@ -827,7 +825,8 @@ class Session:
     def _show_selected(self) -> None:
         sel, overlay, model = self.selected, self._overlay, self.state.model
         if sel is None or overlay is None:
-            _put(self.panels.selected, content=f"nothing selected · shift+click places id **{self.place_id}**")
+            text = f"nothing selected · shift+click places id **{self.place_id}**"
+            update_changed(self.panels.selected, content=text)
             return
         kind, key = sel
         if kind == "line_points":
@@ -843,14 +842,14 @@ class Session:
         if key in m.keys:
             u, v = m.uv[m.keys.index(key)]
             text += f" · at ({u:.1f}, {v:.1f})"
-        _put(self.panels.selected, content=text)
+        update_changed(self.panels.selected, content=text)
 
     def show_progress(self) -> None:
         done, total = self.state.review_progress()
         counts = self.state.edits.counts()
-        _put(self.panels.progress, value=100.0 * done / total)
-        _put(self.panels.progress_text, content=f"{done} of {total} reviewed: " + ", ".join(
-            f"{k} {v}" for k, v in counts.items()))
+        update_changed(self.panels.progress, value=100.0 * done / total)
+        update_changed(self.panels.progress_text, content=f"{done} of {total} reviewed: " + ", ".join(
+                       f"{k} {v}" for k, v in counts.items()))
 
     def _atomic(self):
         return self.client.atomic() if self.client is not None else self.app.server.atomic()

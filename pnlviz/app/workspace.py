@@ -52,9 +52,9 @@ class WorkspaceEvents:
     screen_to_pixel: Callable[[np.ndarray], np.ndarray]  # screen fractions of the canvas -> image pixel
 
 
-def _update(handle, **props) -> None:
-    """Set those ``props`` of a scene node that differ from what it has: an unchanged value is not
-    sent again (every message makes the browser draw the scene again)."""
+def update_changed(handle, **props) -> None:
+    """Set those ``props`` of a viser handle (scene node or widget) that differ from what it has:
+    an unchanged value is not sent again (every scene message makes the browser draw again)."""
     for name, value in props.items():
         old = getattr(handle, name)
         if isinstance(old, np.ndarray):  # viser keeps arrays in their wire type (float32, uint8)
@@ -101,14 +101,14 @@ class _PointNodes:
                 cast_shadow=False, receive_shadow=False, lod="off")
             self._bind(self.grab, events)
         else:
-            _update(self.grab, batched_positions=pos, batched_scales=scales)
+            update_changed(self.grab, batched_positions=pos, batched_scales=scales)
 
     def _draw(self) -> None:
         """The visible discs and rims, where ``uv`` says (none: hidden)."""
         if not self.keys:
             for node in (self.disc, self.rim):
                 if node is not None:
-                    _update(node, visible=False)
+                    update_changed(node, visible=False)
             return
         pos = self.plane.world(self.uv, self.layer).astype(np.float32)
         rim_pos = pos + np.float32([0.0, 0.0, 0.0002])
@@ -119,8 +119,8 @@ class _PointNodes:
             self.disc = self.scene.add_point_cloud(f"{self.path}/disc", pos, self._shade(self.colors),
                                                    point_size=DISC_PX * self.world_per_px, **common)
             return
-        _update(self.rim, points=rim_pos, colors=np.zeros_like(self.colors), visible=True)
-        _update(self.disc, points=pos, colors=self._shade(self.colors), visible=True)
+        update_changed(self.rim, points=rim_pos, colors=np.zeros_like(self.colors), visible=True)
+        update_changed(self.disc, points=pos, colors=self._shade(self.colors), visible=True)
 
     def _shade(self, colors: np.ndarray) -> np.ndarray:
         """Colours at this kind's opacity (ghosts: mixed with grey)."""
@@ -291,7 +291,7 @@ class Workspace:
                 flat_shading=True, cast_shadow=False, receive_shadow=False)
             self._bind_pan(self._backdrop)
         else:
-            _update(self._backdrop, vertices=vertices.astype(np.float32))
+            update_changed(self._backdrop, vertices=vertices.astype(np.float32))
 
     def _bind_frame(self, node) -> None:
         ev = self.events
@@ -336,7 +336,7 @@ class Workspace:
             handle = self._lines.get(name)
             if not len(seg):
                 if handle is not None:
-                    _update(handle, visible=False)
+                    update_changed(handle, visible=False)
                 continue
             pts = plane.world(seg.points, "residuals" if name == "residuals" else "pitch")
             cols = line_colors[name] if line_colors and name in line_colors else np.repeat(seg.colors[:, None], 2, 1)
@@ -345,7 +345,7 @@ class Workspace:
                                                                  thickness=THICKNESS.get(name, 1.5),
                                                                  thickness_units="screen")
             else:
-                _update(handle, points=pts, colors=cols, visible=True)
+                update_changed(handle, points=pts, colors=cols, visible=True)
         shown = {"keypoints": overlay.keypoints if keypoints else Markers(),
                  "ghosts": overlay.ghosts if ghosts else Markers(),
                  "line_points": overlay.line_points if line_points else Markers()}
@@ -400,7 +400,7 @@ class Workspace:
                 uv = nodes.uv[nodes.keys.index(self.selected[1])]
         if uv is None:
             if self._ring is not None:
-                _update(self._ring, visible=False)
+                update_changed(self._ring, visible=False)
             return
         a = np.linspace(0, 2 * math.pi, 33)
         circle = uv + RING_PX * self.world_per_px / self.plane.scale * np.stack([np.cos(a), np.sin(a)], 1)
@@ -409,7 +409,7 @@ class Workspace:
             self._ring = self.scene.add_line_segments(f"{self.root}/selection", pts, SELECTED_RGB, thickness=2.0,
                                                       thickness_units="screen")
         else:
-            _update(self._ring, points=pts, visible=True)
+            update_changed(self._ring, points=pts, visible=True)
 
     def set_zoom(self, world_per_px: float) -> None:
         """The camera zoomed: points keep their size on screen, ids are decluttered again."""
