@@ -113,9 +113,11 @@ def keypoint_mask(labels: KeypointLabels, *, model: FieldModel | None = None) ->
 
 
 def heatmap_targets(labels: KeypointLabels, extremities: Mapping[int, LineExtremities], width: int, height: int,
-                    *, sigma: float = 2.0, downsample: int = 2, model: FieldModel | None = None) -> HeatmapTargets:
+                    *, sigma: float = 2.0, downsample: int = 2, model: FieldModel | None = None,
+                    boundary: bool = True) -> HeatmapTargets:
     """Keypoint and line heatmaps (output resolution ``height // downsample`` x ``width //
-    downsample``) with their loss masks; see the module docstring for the layout."""
+    downsample``) with their loss masks; see the module docstring for the layout. ``boundary=False``
+    leaves the boundary channel empty (for callers that mask it out of the loss)."""
     h, w = int(height) // downsample, int(width) // downsample
     kp = np.zeros((N_KEYPOINT_CHANNELS, h, w), np.float32)
     ids = [k for k in NETWORK_KEYPOINT_IDS if k in labels.keypoints and labels.keypoints[k].visible]
@@ -131,7 +133,7 @@ def heatmap_targets(labels: KeypointLabels, extremities: Mapping[int, LineExtrem
         ends = np.vstack([np.vstack([e.p1, e.p2]) for e in ext]) / downsample
         g = _gaussians(ends, h, w, sigma).reshape(len(ext), 2, h, w).max(axis=1)
         lines[np.array([e.line_id for e in ext]) - 1] = g
-        for e in ext:
+        for e in ext if boundary else ():
             _draw_polyline(lines[N_LINE_CHANNELS - 1], e.points / downsample, sigma, radius=4 * sigma)
     return HeatmapTargets(kp, keypoint_mask(labels, model=model), lines, np.ones(N_LINE_CHANNELS, np.float32),
                           downsample)
