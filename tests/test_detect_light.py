@@ -11,6 +11,7 @@ torch = pytest.importorskip("torch")
 
 from pnlviz.detect.light import LightNet, load_light, read_sidecar  # noqa: E402
 from pnlviz.detect.run import light_detector  # noqa: E402
+from pnlviz.detect.train_data import View  # noqa: E402
 from pnlviz.detect.train import (FrameCache, TrainConfig, focal_heatmap_loss, load_config, loss_fn,  # noqa: E402
                                  masked_mse, peak_pixels, train)
 
@@ -241,7 +242,7 @@ def test_flipped_sample_mirrors_image_and_targets(tiny_cache):
     from pnlviz.field.names import CLASS_TO_LINE_ID, FLIP_X, LINE_ID_TO_CLASS
 
     x, kp, kpm, ln, lnm = tiny_cache.sample(1, SMOKE_SIZE)
-    xf, kpf, kpmf, lnf, lnmf = tiny_cache.sample(1, SMOKE_SIZE, flip=True)
+    xf, kpf, kpmf, lnf, lnmf = tiny_cache.sample(1, SMOKE_SIZE, view=View(flip=True))
     assert np.array_equal(xf, x[:, :, ::-1])
     w = kp.shape[2]
     line_map = {i - 1: CLASS_TO_LINE_ID[FLIP_X[c]] - 1 for i, c in LINE_ID_TO_CLASS.items()}

@@ -1,10 +1,16 @@
-"""``pnlviz train``: train the light default detector (LightNet) on synthetic frames.
+"""``pnlviz train``: train the light default detector (LightNet) on synthetic and real frames.
 
-    pnlviz train [--config assets/models/light_config.json] [--out assets/models/light.pt]
-                 [--frames N] [--epochs E] [--minutes M] [--cache DIR] [--no-progress]
+    pnlviz train [--config assets/models/light_config.json] [--out light.pt] [--init weights.pt]
+                 [--data DIR ... | --data DIR --labels EXPORT] [--frames N] [--epochs E] [--minutes M] [--cache DIR] [--no-progress]
+                 [--replace-default]
 
-``--frames`` / ``--epochs`` override the config (smoke runs); ``--minutes`` stops the training
-loop cleanly at that time budget and still saves the checkpoint and its JSON sidecar.
+The config names the sources (synthetic frames, homography datasets, SoccerNet folders) and their
+weights; ``--data`` replaces its real sources with the given folders (a folder holding a
+``homographies.json`` is a homography dataset, anything else a SoccerNet-Calibration dataset);
+``--labels`` trains on labels exported from the app, with the images of the one ``--data``.
+``--init`` starts from a checkpoint (fine-tuning). ``--frames`` / ``--epochs`` override the config
+(smoke runs); ``--minutes`` stops the training loop cleanly at that time budget and still saves
+the checkpoint and its JSON sidecar. The shipped model is only written with ``--replace-default``.
 """
 
 from __future__ import annotations
@@ -12,17 +18,33 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from pnlviz.detect.default import DEFAULT_MODEL as DEFAULT_OUT  # where pnlviz detect and the app look
+from pnlviz.detect.default import DEFAULT_MODEL  # where pnlviz detect and the app look
+
+DEFAULT_OUT = Path("light.pt")
 
 
 def add_train_parser(subparsers) -> None:
-    p = subparsers.add_parser("train", help="train the light default detector on synthetic frames (torch, CPU)",
+    p = subparsers.add_parser("train", help="train or fine-tune the light detector on synthetic and real frames",
                               description="Train LightNet (shared-trunk keypoint + line heatmap network) on "
-                                          "synthetic frames rendered in memory; writes a plain state dict and a "
+                                          "synthetic frames rendered in memory and on real datasets (homography "
+                                          "or SoccerNet-Calibration folders); writes a plain state dict and a "
                                           "JSON provenance sidecar next to it.")
     p.add_argument("--config", type=Path, default=None,
                    help="training config JSON (default assets/models/light_config.json)")
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output checkpoint (default {DEFAULT_OUT})")
+    p.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                   help=f"output checkpoint (default ./{DEFAULT_OUT}; the shipped model only with --replace-default)")
+    p.add_argument("--init", type=Path, default=None,
+                   help="start from these LightNet weights (e.g. assets/models/light.pt to fine-tune the default)")
+    p.add_argument("--data", type=Path, action="append", default=None, metavar="DIR",
+                   help="a real training dataset replacing the config's (repeatable): a SoccerNet-Calibration "
+                        "folder or zip with images and annotations, or an image folder with homographies.json")
+    p.add_argument("--labels", type=Path, default=None, metavar="EXPORT",
+                   help="labels exported from the app (pnlviz export folder or zip) for the images of the one --data "
+                        "dataset: corrected keypoints are trained as corrected")
+    p.add_argument("--data-weight", type=float, default=None,
+                   help="share of each --data dataset in an epoch (default: the config's real share, split)")
+    p.add_argument("--replace-default", action="store_true",
+                   help=f"allow --out to be the shipped model {DEFAULT_MODEL}")
     p.add_argument("--frames", type=int, default=None, help="override the number of synthetic frames")
     p.add_argument("--epochs", type=int, default=None, help="override the number of epochs")
     p.add_argument("--minutes", type=float, default=None, help="stop training after this many minutes and save")
@@ -53,8 +75,47 @@ def run_train(args) -> int:
     if args.minutes is not None and args.minutes <= 0:
         print("error: --minutes must be > 0", file=sys.stderr)
         return 2
-    result = train(config, args.out, minutes=args.minutes, progress=not args.no_progress, cache_dir=args.cache)
+    if _same_file(args.out, DEFAULT_MODEL) and not args.replace_default:
+        print(f"error: --out {args.out} is the shipped default model; add --replace-default to overwrite it "
+              f"(or choose another --out)", file=sys.stderr)
+        return 2
+    if args.init is not None and not args.init.is_file():
+        print(f"error: --init {args.init}: no such file", file=sys.stderr)
+        return 2
+    if args.data:
+        missing = [d for d in args.data if not d.exists()]
+        if missing:
+            print(f"error: --data {missing[0]}: no such folder or file", file=sys.stderr)
+            return 2
+        share = sum(float(r.get("weight", 1.0)) for r in config.real) or 1.0
+        weight = args.data_weight if args.data_weight is not None else share / len(args.data)
+        if weight <= 0:
+            print("error: --data-weight must be > 0", file=sys.stderr)
+            return 2
+        if args.labels is not None:
+            if len(args.data) != 1:
+                print("error: --labels goes with exactly one --data (the dataset the labels were made on)",
+                      file=sys.stderr)
+                return 2
+            config.real = [{"kind": "labels", "path": str(args.labels.resolve()), "images": str(args.data[0].resolve()),
+                            "weight": weight}]
+        else:
+            config.real = [{"kind": "homography" if (d / "homographies.json").is_file() else "soccernet",
+                            "path": str(d.resolve()), "weight": weight} for d in args.data]
+    elif args.labels is not None:
+        print("error: --labels needs --data (the dataset the labels were made on)", file=sys.stderr)
+        return 2
+    try:
+        result = train(config, args.out, minutes=args.minutes, progress=not args.no_progress, cache_dir=args.cache,
+                       init=args.init)
+    except (OSError, ValueError) as exc:  # DataError is a ValueError: a bad dataset or checkpoint
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     note = " (stopped by --minutes)" if result.stopped_early else ""
     print(f"trained {result.epochs_done:.2f} epochs, {result.steps} steps in {result.seconds:.0f} s{note}; "
           f"final loss {result.final_loss:.6f} -> {result.path}")
     return 0
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    return Path(a).expanduser().resolve() == Path(b).resolve()

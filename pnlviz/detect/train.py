@@ -44,6 +44,8 @@ import torch
 
 from pnlviz.detect.checkpoint import save_checkpoint
 from pnlviz.detect.light import LightNet, sidecar_path
+from pnlviz.detect.train_data import (AnnotatedFrames, ExportedFrames, HomographyFrames, View, annotation_example,
+                                     draw_view)
 
 __all__ = ["TrainConfig", "TrainResult", "FrameCache", "load_config", "masked_mse", "train",
            "DEFAULT_CONFIG_PATH"]
@@ -54,7 +56,8 @@ DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / "assets" / "models" 
 @dataclass
 class TrainConfig:
     data_seed: int = 5
-    frames: int = 1400
+    frames: int = 1400  # synthetic frames (0: none)
+    data_weight: float = 1.0  # share of the synthetic frames in a mixed epoch
     size: tuple[int, int] = (480, 272)  # rendering size (W, H)
     input_size: tuple[int, int] = (480, 272)  # network input size in training, and at inference
     epochs: int = 20
@@ -72,6 +75,14 @@ class TrainConfig:
     threads: int = 2
     augment: dict = field(default_factory=lambda: {"brightness": 0.3, "contrast": 0.3, "saturation": 0.3,
                                                    "gain": 0.08, "noise": 0.03})
+    #: real sources: ``{"kind": "homography" | "soccernet", "path": ..., "weight": w, ...}`` (see
+    #: :func:`build_sources`); relative paths are taken from ``base_dir`` (the config's folder)
+    real: list = field(default_factory=list)
+    #: weights to start from (a LightNet checkpoint), instead of a random initialisation
+    init: str | None = None
+    #: samples per epoch (default: the frames of every source, once)
+    epoch_frames: int | None = None
+    base_dir: str | None = field(default=None, compare=False)
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrainConfig":
@@ -84,9 +95,11 @@ class TrainConfig:
             kw["frames"] = int(data["frames"])
         if "size" in data:
             kw["size"] = tuple(int(v) for v in data["size"])
+        if "weight" in data:
+            kw["data_weight"] = float(data["weight"])
         known = {f for f in cls.__dataclass_fields__}
         for k, v in d.items():
-            if k.startswith("_") or k in ("comment", "estimate"):
+            if k.startswith("_") or k in ("comment", "estimate", "base_dir"):
                 continue
             if k not in known:
                 raise ValueError(f"unknown training config key {k!r}")
@@ -98,7 +111,9 @@ class TrainConfig:
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        out = {"data": {"seed": d.pop("data_seed"), "frames": d.pop("frames"), "size": list(d.pop("size"))}}
+        d.pop("base_dir")
+        out = {"data": {"seed": d.pop("data_seed"), "frames": d.pop("frames"), "size": list(d.pop("size")),
+                        "weight": d.pop("data_weight")}}
         d["input_size"] = list(d["input_size"])
         out.update(d)
         return out
@@ -106,7 +121,92 @@ class TrainConfig:
 
 def load_config(path: str | Path | None = None) -> TrainConfig:
     path = Path(path) if path is not None else DEFAULT_CONFIG_PATH
-    return TrainConfig.from_dict(json.loads(Path(path).read_text()))
+    cfg = TrainConfig.from_dict(json.loads(Path(path).read_text()))
+    cfg.base_dir = str(Path(path).resolve().parent)
+    return cfg
+
+
+def _resolve(path: str, base_dir: str | None) -> Path:
+    p = Path(path).expanduser()
+    return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
+
+
+@dataclass
+class Source:
+    """One source of training frames, its share of an epoch and its augmentation overrides."""
+
+    name: str
+    frames: object  # FrameCache | HomographyFrames | AnnotatedFrames
+    weight: float
+    augment: dict
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+
+def build_sources(config: TrainConfig, *, cache: "FrameCache | None" = None, cache_dir: str | Path | None = None,
+                  progress: bool = True) -> list[Source]:
+    """The training sources of ``config``: the synthetic frames (``data``; ``cache`` when given) and
+    every entry of ``real``:
+
+    * ``{"kind": "homography", "path": image folder, "homographies": json (default
+      path/homographies.json), "source_size": [1280, 720], "exclude": [stems], "weight", "augment"}``;
+    * ``{"kind": "soccernet", "path": dataset folder or zip, "exclude": [stems], "weight", "augment"}``;
+    * ``{"kind": "labels", "path": a pnlviz export (folder or zip), "images": the dataset it was
+      made on, "exclude", "weight", "augment"}``.
+    """
+    base = dict(config.augment or {})
+    sources: list[Source] = []
+    if cache is None and config.frames > 0:
+        cache = FrameCache(config.frames, config.data_seed, tuple(config.size), cache_dir, progress)
+    if cache is not None and len(cache):
+        sources.append(Source(f"synthetic seed {config.data_seed}", cache, float(config.data_weight), base))
+    for k, entry in enumerate(config.real or []):
+        entry = dict(entry)
+        kind = entry.get("kind")
+        if "path" not in entry:
+            raise ValueError(f"real source {k}: no 'path'")
+        path = _resolve(entry["path"], config.base_dir)
+        exclude = [str(s) for s in entry.get("exclude", [])]
+        if kind == "homography":
+            hom = entry.get("homographies")
+            frames = HomographyFrames(path, _resolve(hom, config.base_dir) if hom else None,
+                                      source_size=tuple(entry.get("source_size", (1280, 720))), exclude=exclude)
+        elif kind == "soccernet":
+            frames = AnnotatedFrames(path, exclude=exclude)
+        elif kind == "labels":
+            if "images" not in entry:
+                raise ValueError(f"real source {k}: exported labels need 'images' (the dataset they were made on)")
+            frames = ExportedFrames(path, _resolve(entry["images"], config.base_dir), exclude=exclude)
+        else:
+            raise ValueError(f"real source {k}: unknown kind {kind!r} (homography, soccernet or labels)")
+        sources.append(Source(f"{kind} {entry['path']}", frames, float(entry.get("weight", 1.0)),
+                              {**base, **dict(entry.get("augment", {}))}))
+    if not sources:
+        raise ValueError("no training frames")
+    if any(s.weight <= 0 for s in sources):
+        raise ValueError("source weights must be > 0")
+    return sources
+
+
+def epoch_plan(sources: list[Source], rng: np.random.Generator, epoch_frames: int | None = None
+               ) -> list[tuple[int, int]]:
+    """The ``(source, frame)`` order of one epoch: ``epoch_frames`` samples (default: every frame
+    of every source once), each source's share by its weight (its frames cycled in fresh random
+    orders when it has fewer), shuffled. One source: a permutation of its frames."""
+    if len(sources) == 1 and epoch_frames is None:
+        return [(0, int(i)) for i in rng.permutation(len(sources[0]))]
+    total = int(epoch_frames or sum(len(s) for s in sources))
+    weights = np.array([s.weight for s in sources], float)
+    counts = np.floor(total * weights / weights.sum()).astype(int)
+    counts[np.argmax(weights)] += total - counts.sum()
+    plan: list[tuple[int, int]] = []
+    for k, (src, n) in enumerate(zip(sources, counts)):
+        idx: list[int] = []
+        while len(idx) < n:
+            idx.extend(int(i) for i in rng.permutation(len(src)))
+        plan.extend((k, i) for i in idx[:n])
+    return [plan[j] for j in rng.permutation(len(plan))]
 
 
 @dataclass
@@ -162,36 +262,16 @@ class FrameCache:
     def __len__(self) -> int:
         return len(self.images)
 
-    def sample(self, i: int, input_size: tuple[int, int], sigma: float = 2.0, flip: bool = False):
+    def sample(self, i: int, input_size: tuple[int, int], sigma: float = 2.0, view: View | None = None):
         """(RGB float32 (3, H, W) in [0, 1], keypoints (58, h, w), kp mask (58,), lines (24, h, w),
-        line mask (24,)) at ``input_size``; ``flip``: of the horizontally flipped frame."""
-        from pnlviz.labels import flip_annotation, training_targets
-
-        W, H = input_size
-        img = self.images[i]
-        annotation = self.annotations[i]
-        if (img.shape[1], img.shape[0]) != (W, H):
-            img = cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA if img.shape[1] > W else cv2.INTER_LINEAR)
-        if flip:
-            img = img[:, ::-1]
-            annotation = flip_annotation(annotation)
-        x = np.ascontiguousarray(img[:, :, ::-1].transpose(2, 0, 1), dtype=np.float32) / 255.0
-        _, _, t = training_targets(annotation, W, H, sigma=sigma)
-        # The network answers at ceil(H/2) x ceil(W/2); the targets are floor: pad odd sizes.
-        h, w = (H + 1) // 2, (W + 1) // 2
-        kp, lines = t.keypoints, t.lines
-        if kp.shape[1:] != (h, w):
-            kp = np.pad(kp, ((0, 0), (0, h - kp.shape[1]), (0, w - kp.shape[2])))
-            kp[-1, t.keypoints.shape[1]:, :] = 1.0
-            kp[-1, :, t.keypoints.shape[2]:] = 1.0
-            lines = np.pad(lines, ((0, 0), (0, h - lines.shape[1]), (0, w - lines.shape[2])))
-        return x, kp, t.keypoint_mask, lines, t.line_mask
+        line mask (24,)) at ``input_size``, drawn through ``view`` (flip, zoom, blur, JPEG)."""
+        return annotation_example(self.images[i], self.annotations[i], input_size, sigma, view or View())
 
 
-def _batch(cache: FrameCache, idx, input_size, sigma, flips=None):
-    flips = np.zeros(len(idx), bool) if flips is None else flips
-    items = [cache.sample(int(i), input_size, sigma, bool(f)) for i, f in zip(idx, flips)]
-    return [torch.from_numpy(np.stack(col)) for col in zip(*items)]
+def _batch(items: list, input_size, sigma):
+    """Stack ``(source, index, view)`` examples into tensors."""
+    rows = [src.sample(int(i), input_size, sigma, view) for src, i, view in items]
+    return [torch.from_numpy(np.stack(col)) for col in zip(*rows)]
 
 
 def augment(x: torch.Tensor, params: dict, gen: torch.Generator) -> torch.Tensor:
@@ -281,6 +361,12 @@ def _seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
+def _sha256(path: str | Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
 def write_sidecar(weights: Path, info: dict) -> Path:
     path = sidecar_path(weights)
     tmp = path.with_suffix(".json.tmp")
@@ -291,9 +377,10 @@ def write_sidecar(weights: Path, info: dict) -> Path:
 
 def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None, progress: bool = True,
           cache_dir: str | Path | None = None, log: Callable[[str], None] | None = print,
-          cache: FrameCache | None = None) -> TrainResult:
+          cache: FrameCache | None = None, init: str | Path | None = None) -> TrainResult:
     """Train a LightNet with ``config`` and save it to ``out`` (+ sidecar). ``minutes`` bounds the
-    training time (rendering excluded): the loop stops after the step that crosses it and saves."""
+    training time (rendering excluded): the loop stops after the step that crosses it and saves.
+    ``init`` (or ``config.init``): a LightNet checkpoint to start from."""
     out = Path(out)
     log = log or (lambda s: None)
     if config.threads:
@@ -301,18 +388,24 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
     torch.set_flush_denormal(True)  # tiny heatmap gradients otherwise hit slow denormal arithmetic
     _seed_everything(config.seed)
     t_render = time.perf_counter()
-    if cache is None:
-        cache = FrameCache(config.frames, config.data_seed, tuple(config.size), cache_dir, progress)
+    sources = build_sources(config, cache=cache, cache_dir=cache_dir, progress=progress)
     render_s = time.perf_counter() - t_render
-    if len(cache) == 0:
-        raise ValueError("no training frames")
+    for src in sources:
+        log(f"source {src.name}: {len(src)} frames, weight {src.weight:g}")
+    init = init if init is not None else (str(_resolve(config.init, config.base_dir)) if config.init else None)
     net = LightNet()
+    if init is not None:
+        from pnlviz.detect.checkpoint import load_checkpoint
+
+        load_checkpoint(net, init)
+        log(f"starting from {init}")
     net.train()
-    run = _train_loop(net, cache, config, None if minutes is None else float(minutes) * 60.0, progress, log)
+    run = _train_loop(net, sources, config, None if minutes is None else float(minutes) * 60.0, progress, log)
     torch.set_flush_denormal(False)  # back to torch's default for the rest of the process
     net.eval()
+    out.parent.mkdir(parents=True, exist_ok=True)
     save_checkpoint(net, out)
-    info = _provenance(config, cache, net, run, render_s)
+    info = _provenance(config, sources, net, run, render_s, init)
     write_sidecar(out, info)
     per_step = run.seconds / max(1, run.steps)
     log(f"saved {out} (+ {sidecar_path(out).name}); final loss {info['final_loss']:.6f}, "
@@ -334,31 +427,31 @@ class _Run:
     batch_size: int
 
 
-def _train_loop(net: LightNet, cache: FrameCache, config: TrainConfig, budget: float | None, progress: bool,
+def _train_loop(net: LightNet, sources: list[Source], config: TrainConfig, budget: float | None, progress: bool,
                 log: Callable[[str], None]) -> _Run:
     """Adam with a cosine learning rate over ``config.epochs`` epochs of shuffled batches, until
     ``budget`` seconds have passed (None: no limit)."""
     from tqdm import tqdm
 
     opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    bs = max(1, min(int(config.batch_size), len(cache)))
-    steps_per_epoch = math.ceil(len(cache) / bs)
+    epoch_len = int(config.epoch_frames or sum(len(s) for s in sources))
+    bs = max(1, min(int(config.batch_size), epoch_len))
+    steps_per_epoch = math.ceil(epoch_len / bs)
     total_steps = max(1, steps_per_epoch * int(config.epochs))
     rng = np.random.default_rng(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
-    flip_p = float((config.augment or {}).get("flip", 0.0))
+    size = tuple(config.input_size)
     run = _Run([], 0, False, 0.0, [], 0.0, bs)
     t0 = time.perf_counter()
     bar = tqdm(total=total_steps, desc="train", unit="step", disable=not progress)
     for epoch in range(int(config.epochs)):
-        order = rng.permutation(len(cache))
+        order = epoch_plan(sources, rng, config.epoch_frames)
         losses = []
         for b in range(steps_per_epoch):
             t_step = time.perf_counter()
-            idx = order[b * bs:(b + 1) * bs]
-            # drawn only when flipping is on, so a run without it keeps its exact shuffling
-            flips = rng.random(len(idx)) < flip_p if flip_p > 0 else None
-            x, kp_t, kp_m, ln_t, ln_m = _batch(cache, idx, tuple(config.input_size), config.sigma, flips)
+            items = [(sources[k].frames, i, draw_view(sources[k].augment, rng, size))
+                     for k, i in order[b * bs:(b + 1) * bs]]
+            x, kp_t, kp_m, ln_t, ln_m = _batch(items, size, config.sigma)
             x = augment(x, config.augment or {}, gen)
             cosine = 0.5 * (1 + math.cos(math.pi * min(run.steps, total_steps) / total_steps))
             for g in opt.param_groups:
@@ -386,7 +479,8 @@ def _train_loop(net: LightNet, cache: FrameCache, config: TrainConfig, budget: f
     return run
 
 
-def _provenance(config: TrainConfig, cache: FrameCache, net: LightNet, run: _Run, render_s: float) -> dict:
+def _provenance(config: TrainConfig, sources: list[Source], net: LightNet, run: _Run, render_s: float,
+                init: str | Path | None) -> dict:
     """The sidecar written next to the weights: what was trained, on what, how long."""
     return {
         "model": "LightNet",
@@ -398,12 +492,14 @@ def _provenance(config: TrainConfig, cache: FrameCache, net: LightNet, run: _Run
         "calibration": dict(config.calibration),
         "config": config.to_dict(),
         "seed": config.seed,
-        "data": {"generator": "pnlviz.synth.make_frame", "seed": config.data_seed, "frames": len(cache),
+        "data": {"generator": "pnlviz.synth.make_frame", "seed": config.data_seed, "frames": config.frames,
                  "size": list(config.size)},
+        "sources": [{"name": s.name, "frames": len(s), "weight": s.weight} for s in sources],
+        "init": None if init is None else {"path": str(init), "sha256": _sha256(init)},
         "epochs_planned": int(config.epochs),
         "epochs": round(run.epochs_done, 3),
         "steps": run.steps,
-        "frames": len(cache),
+        "frames": sum(len(s) for s in sources),
         "loss_history": [round(v, 7) for v in run.history],
         "final_loss": run.history[-1] if run.history else None,
         "stopped_by_time_budget": run.stopped,
