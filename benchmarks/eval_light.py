@@ -53,19 +53,12 @@ def draw_detections(img: np.ndarray, pred) -> np.ndarray:
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=60)
-    ap.add_argument("--seed", type=int, default=777)
-    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "detections_real.jpg")
-    ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
-    ap.add_argument("--weights", type=Path, default=None, help=f"a LightNet checkpoint (default {DEFAULT_MODEL})")
-    args = ap.parse_args()
-    det = light_detector(args.weights) if args.weights else Detector.from_weights(None, None)
-    print(f"model: {args.weights or DEFAULT_MODEL} (input {det.input_size[0]}x{det.input_size[1]})")
+def evaluate_synthetic(det: Detector, frames: int, seed: int) -> dict:
+    """Steps 1-3 of the module docstring on ``frames`` frames of data seed ``seed``; prints and
+    returns the figures."""
     tmp = Path(tempfile.mkdtemp())
     data = tmp / "heldout"
-    generate(data, args.frames, args.seed, progress=False)
+    generate(data, frames, seed, progress=False)
     ds = open_dataset(data)
     hits5 = hits10 = total = 0
     line_hits = line_total = line_found = 0
@@ -100,12 +93,26 @@ def main() -> None:
         if fc.ok:
             cams[stem] = fc.result.camera
     s = evaluate_dataset(data, cams, progress=False)
-    print(f"held-out synthetic frames: {len(ds.stems)} (seed {args.seed}), detection {1e3 * np.median(times):.0f} ms/frame")
+    print(f"held-out synthetic frames: {len(ds.stems)} (seed {seed}), detection {1e3 * np.median(times):.0f} ms/frame")
     print(f"PCK@5 {hits5 / max(total, 1):.3f}  PCK@10 {hits10 / max(total, 1):.3f}  ({total} visible keypoints)")
     print(f"line extremities within 10 px: recall {line_hits / max(line_total, 1):.3f} ({line_total} true lines), "
           f"precision {line_hits / max(line_found, 1):.3f} ({line_found} detected)")
     print(f"calibration from detections: JaC@5 {s.jac(5):.3f} @10 {s.jac(10):.3f} @20 {s.jac(20):.3f} "
           f"CR {s.completeness:.3f} FS@5 {s.final_score:.3f}")
+    return {"pck5": hits5 / max(total, 1), "pck10": hits10 / max(total, 1), "fs5": s.final_score}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--seed", type=int, default=777)
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "detections_real.jpg")
+    ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
+    ap.add_argument("--weights", type=Path, default=None, help=f"a LightNet checkpoint (default {DEFAULT_MODEL})")
+    args = ap.parse_args()
+    det = light_detector(args.weights) if args.weights else Detector.from_weights(None, None)
+    print(f"model: {args.weights or DEFAULT_MODEL} (input {det.input_size[0]}x{det.input_size[1]})")
+    evaluate_synthetic(det, args.frames, args.seed)
     tiles = []
     for name in ("messi_sample.png", "wc14_trainval_16.jpg"):
         img = cv2.imread(str(args.shared / "data" / "frames" / name))
