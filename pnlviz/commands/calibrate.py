@@ -40,6 +40,10 @@ def add_calibrate_parser(sub) -> None:
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE,
                    help="image size for frames without an image, and for every frame without --data: the pixel "
                         "size the detections were made at (default 960x540; the cameras are written at 960x540)")
+    p.add_argument("--temporal", action="store_true",
+                   help="video: group the frames into clips by their stems (<clip>-IMG_<n>, <clip>_frame<n>, ...), "
+                        "cut clips into shots and fit one broadcast camera per shot (fixed centre and k1, smooth "
+                        "pan/tilt/roll/zoom); frames with too few keypoints get their camera from the shot")
     p.add_argument("--workers", type=int, default=1, help="worker processes (0: all cores)")
     p.add_argument("--report", type=Path, help="also write one JSON line per frame with the evidence")
     p.add_argument("--no-progress", action="store_true")
@@ -89,6 +93,87 @@ def calibrate_stem(ds, stem: str, prediction, size, settings) -> tuple[str, dict
     if not res.ok:
         return stem, None, report
     return stem, res.camera.scaled(*EVAL_SIZE).to_soccernet(), report
+
+
+def frame_inputs(ds, stem: str, prediction, size):
+    """The :class:`pnlviz.calib.frame.FrameInputs` of one frame as :func:`calibrate_stem` reads
+    them; None when unreadable or empty."""
+    from pnlviz.calib.frame import FrameInputs
+    from pnlviz.data import DataError
+
+    try:
+        size = ds.image_size(stem) or size if stem in ds else size
+        ann = ds.annotation(stem) if prediction is None and stem in ds else None
+    except DataError:
+        return None
+    if prediction is None and ann is None:
+        return None
+    return FrameInputs(size, ann, prediction)
+
+
+def temporal_pass(ds, predictions, size, settings, stems: list[str], results: dict, progress: bool = True) -> dict:
+    """``--temporal``: per clip (:func:`pnlviz.data.layout.clips`), the per-frame cameras in
+    ``results`` (``{stem: (camera dict at 960x540 | None, report)}``) replaced by the broadcast
+    model of their shot (:func:`pnlviz.calib.temporal.calibrate_clip`); reports gain the clip, the
+    shot and the residuals. Image changes between consecutive frames mark cuts when the frames
+    have images."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from pnlviz.calib.frame import observations_for
+    from pnlviz.calib.temporal import calibrate_clip, image_change
+    from pnlviz.data import DataError
+    from pnlviz.data.layout import clips
+    from pnlviz.field import load_field_model
+    from pnlviz.geometry.camera import Camera
+
+    model = load_field_model()
+    out = dict(results)
+    groups = clips(stems)
+    bar = tqdm(total=len(stems), desc="temporal", unit="frame", disable=not progress or None)
+    for clip, members in groups.items():
+        inputs = [frame_inputs(ds, s, None if predictions is None else predictions.get(s), size) for s in members]
+        sizes = {tuple(i.size) for i in inputs if i is not None}
+        if len(sizes) != 1:  # nothing to fit, or frames of different sizes: left per-frame
+            bar.update(len(members))
+            continue
+        W, H = sizes.pop()
+        obs = [observations_for(i, settings.source, model)[0] if i is not None else None for i in inputs]
+        cams = []
+        for s in members:
+            d = results.get(s, (None, {}))[0]
+            cams.append(Camera.from_soccernet(d, *EVAL_SIZE).scaled(W, H) if d is not None else None)
+        changes = None
+        if all(s in ds and ds.frame(s).has_image for s in members):
+            changes, prev = [], None
+            for s in members:
+                try:
+                    img = ds.image(s)
+                except DataError:
+                    img = None
+                changes.append(image_change(prev, img) if prev is not None and img is not None else None)
+                prev = img
+            changes = changes[1:]
+        res = calibrate_clip(obs, cams, (W, H), changes=changes, model=model)
+        for t, s in enumerate(members):
+            cam_dict, report = results.get(s, (None, {"stem": s}))
+            report = dict(report)
+            fit = res.fits[res.shot_of[t]]
+            report["temporal"] = {"clip": clip, "shot": res.shot_of[t], "shots": len(res.shots),
+                                  "per_frame": cam_dict is not None}
+            if res.cameras[t] is not None and fit is not None:
+                i = t - res.shots[res.shot_of[t]].start
+                r = fit.residuals[i]
+                report["temporal"].update(residual_median=round(float(np.median(r)), 3) if len(r) else None,
+                                          dropped=fit.dropped[i])
+                report.pop("failure", None)
+                report.pop("failure_code", None)
+                out[s] = (res.cameras[t].scaled(*EVAL_SIZE).to_soccernet(), report)
+            else:
+                out[s] = (cam_dict, report)
+        bar.update(len(members))
+    bar.close()
+    return out
 
 
 class _NoDataset:
@@ -201,6 +286,16 @@ def run_calibrate(args) -> int:
             pool = stack.enter_context(mp.get_context("spawn").Pool(workers, initializer=_ignore_sigint))
             results = pool.imap_unordered(job, stems, chunksize=8)
         try:
+            if args.temporal:  # every frame first, then the clips' shots, then written
+                per_frame = {}
+                for stem, cam, report in results:
+                    per_frame[stem] = (cam, report)
+                    bar.update()
+                bar.close()
+                done = temporal_pass(ds, predictions, args.size, settings, stems, per_frame,
+                                     progress=not args.no_progress)
+                results = ((s, *done[s]) for s in stems)
+                bar = tqdm(total=len(stems), desc="write", unit="frame", disable=args.no_progress or None)
             for stem, cam, report in results:
                 if cam is not None:
                     try:  # written at once: an interrupted or failing batch keeps it

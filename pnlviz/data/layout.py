@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
-__all__ = ["natural_key", "sort_stems", "split_member", "find_root"]
+__all__ = ["clips", "clip_key", "natural_key", "sort_stems", "split_member", "find_root"]
 
 _DIGITS = re.compile(r"([0-9]+)")
 
@@ -24,6 +24,30 @@ def natural_key(stem: str) -> tuple:
 def sort_stems(stems: Iterable[str]) -> list[str]:
     """Stems in natural order (numeric when all digits)."""
     return sorted(stems, key=natural_key)
+
+
+_FRAME_NUMBER = re.compile(r"^(.*?)([0-9]+)$")
+_FRAME_WORD = re.compile(r"(?:img|image|frame)$", re.IGNORECASE)
+
+
+def clip_key(stem: str) -> tuple[str, int]:
+    """``(clip, frame number)`` of a video frame's stem: the trailing number is the frame, what
+    comes before it (less separators and a word such as ``IMG`` or ``frame``) names the clip.
+    ``"clip7-IMG_012"`` -> ``("clip7", 12)``; ``"00042"`` -> ``("", 42)``; no number -> ``(stem, 0)``."""
+    m = _FRAME_NUMBER.match(stem)
+    if m is None:
+        return stem, 0
+    prefix = m.group(1).rstrip("-_. ")
+    prefix = _FRAME_WORD.sub("", prefix).rstrip("-_. ")
+    return prefix, int(m.group(2))
+
+
+def clips(stems: Iterable[str]) -> dict[str, list[str]]:
+    """Stems grouped by :func:`clip_key`, each clip in frame order, clips in natural order."""
+    out: dict[str, list[str]] = {}
+    for stem in stems:
+        out.setdefault(clip_key(stem)[0], []).append(stem)
+    return {c: sorted(out[c], key=lambda s: (clip_key(s)[1], natural_key(s))) for c in sort_stems(out)}
 
 
 def is_junk(name: str) -> bool:

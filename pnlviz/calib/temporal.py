@@ -1,0 +1,376 @@
+"""Temporal calibration of broadcast clips: shots, and one broadcast camera per shot.
+
+A broadcast camera stands on a tripod head: within a shot its centre and its lens (k1) do not
+move, only pan, tilt, roll and the zoom (focal length) change, and they change smoothly. Per-frame
+calibration ignores that, so its cameras jitter with the detection noise (and fail on frames with
+too few keypoints). Here, per shot:
+
+* **parameters**: one centre ``C`` (3) and one ``k1`` for the shot; per frame ``t`` pan, tilt,
+  roll (radians, SoccerNet angles) and ``log f`` (square pixels, principal point at the centre);
+* **data residuals** (pixels, divided by ``noise_px``): keypoints, reprojected minus observed;
+  points observed on straight lines, their distance to the image of the line (computed in
+  undistorted coordinates, where the image of a 3D line is straight);
+* **smoothness prior**: the second difference (acceleration) of each per-frame parameter, divided
+  by its expected size (``accel_deg``, ``accel_log_f``);
+* **robust**: a soft-L1 loss on every residual (``robust`` in units of the residual's scale), and
+  after a first solve the observations farther than ``outlier_px`` from the shot's camera are
+  dropped and the shot solved again (outlier detections, outlier frames);
+* **solved jointly** by sparse least squares (``scipy.optimize.least_squares`` with the Jacobian's
+  sparsity: each frame's parameters touch only its own residuals and three prior rows), warm
+  started from the per-frame cameras (centre and k1: their medians; frames without a camera:
+  interpolated from their neighbours).
+
+Frames with fewer keypoints than a per-frame calibration needs still get a camera: their own
+observations and the prior place them. Everything here is pure (numpy / scipy, no I/O).
+
+:func:`segment_shots` finds the cuts: a large image change between consecutive frames (when the
+caller measured one, see :func:`image_change`), or per-frame cameras whose centres disagree
+(a different camera position).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+import scipy.sparse
+
+from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.geometry.camera import Camera, pan_tilt_roll_from_rotation
+
+from .observations import Observations
+
+__all__ = ["ClipResult", "ShotFit", "TemporalParams", "calibrate_clip", "fit_shot", "image_change", "rotations",
+           "segment_shots"]
+
+
+@dataclass(frozen=True)
+class TemporalParams:
+    #: detection noise (px): the scale of the data residuals
+    noise_px: float = 1.5
+    #: expected frame-to-frame acceleration of pan, tilt and roll (degrees / frame^2)
+    accel_deg: float = 0.01
+    #: ... of log focal length (1 / frame^2)
+    accel_log_f: float = 0.001
+    #: soft-L1 threshold, in units of each residual's scale
+    robust: float = 3.0
+    #: observations farther than this from the first solve are dropped (px)
+    outlier_px: float = 12.0
+    #: fit k1 for the shot
+    fit_k1: bool = True
+    #: consecutive per-frame centres farther apart than this (metres) make a cut
+    cut_centre_m: float = 10.0
+    #: an image change above this makes a cut (see :func:`image_change`)
+    cut_image: float = 0.5
+    max_nfev: int = 60
+
+
+@dataclass
+class ShotFit:
+    cameras: list[Camera]
+    C: np.ndarray
+    k1: float
+    #: per frame: pan, tilt, roll (radians), focal length (px)
+    angles: np.ndarray
+    focal: np.ndarray
+    #: per frame: residuals (px) of the observations kept, and how many were dropped
+    residuals: list[np.ndarray]
+    dropped: list[int]
+    cost: float
+    nfev: int
+
+
+# -- geometry, vectorised over frames ------------------------------------------------------------
+def rotations(pan: np.ndarray, tilt: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) world -> camera rotations ``(Rz(pan) Rx(tilt) Rz(roll))^T`` (see
+    :func:`pnlviz.geometry.camera.rotation_from_pan_tilt_roll`)."""
+    cp, sp, ct, st, cr, sr = np.cos(pan), np.sin(pan), np.cos(tilt), np.sin(tilt), np.cos(roll), np.sin(roll)
+    T = len(pan)
+    o = np.empty((T, 3, 3))  # orientation Rz(pan) Rx(tilt) Rz(roll)
+    o[:, 0, 0] = cp * cr - sp * ct * sr
+    o[:, 0, 1] = -cp * sr - sp * ct * cr
+    o[:, 0, 2] = sp * st
+    o[:, 1, 0] = sp * cr + cp * ct * sr
+    o[:, 1, 1] = -sp * sr + cp * ct * cr
+    o[:, 1, 2] = -cp * st
+    o[:, 2, 0] = st * sr
+    o[:, 2, 1] = st * cr
+    o[:, 2, 2] = ct
+    return np.transpose(o, (0, 2, 1))
+
+
+@dataclass
+class _Data:
+    """The observations of a shot, flattened: keypoints and line points with their frame index."""
+
+    kp_t: np.ndarray  # (N,)
+    kp_X: np.ndarray  # (N, 3)
+    kp_xy: np.ndarray  # (N, 2)
+    ln_t: np.ndarray  # (M,)
+    ln_A: np.ndarray  # (M, 3) world ends of the line
+    ln_B: np.ndarray
+    ln_q: np.ndarray  # (M, 2) observed pixels
+
+
+def _flatten(observations: Sequence[Observations | None], model: FieldModel) -> _Data:
+    kt, kX, kx, lt, lA, lB, lq = [], [], [], [], [], [], []
+    for t, obs in enumerate(observations):
+        if obs is None:
+            continue
+        n = obs.n_keypoints
+        kt.append(np.full(n, t))
+        kX.append(obs.kp_xyz)
+        kx.append(obs.kp_xy)
+        for name, pts in obs.lines.items():
+            seg = model.lines.get(name)
+            if seg is None or len(pts) == 0:
+                continue
+            m = len(pts)
+            lt.append(np.full(m, t))
+            lA.append(np.repeat(seg.start[None], m, 0))
+            lB.append(np.repeat(seg.end[None], m, 0))
+            lq.append(np.asarray(pts, float).reshape(-1, 2))
+
+    def cat(parts, shape):
+        return np.concatenate(parts) if parts else np.zeros(shape)
+
+    return _Data(cat(kt, (0,)).astype(int), cat(kX, (0, 3)), cat(kx, (0, 2)), cat(lt, (0,)).astype(int),
+                 cat(lA, (0, 3)), cat(lB, (0, 3)), cat(lq, (0, 2)))
+
+
+def _subset(d: _Data, kp_keep: np.ndarray, ln_keep: np.ndarray) -> _Data:
+    return _Data(d.kp_t[kp_keep], d.kp_X[kp_keep], d.kp_xy[kp_keep], d.ln_t[ln_keep], d.ln_A[ln_keep],
+                 d.ln_B[ln_keep], d.ln_q[ln_keep])
+
+
+class _Model:
+    """The shot's residual function over the parameter vector
+    ``[C (3), k1, pan_0, tilt_0, roll_0, logf_0, pan_1, ...]``."""
+
+    def __init__(self, data: _Data, T: int, size: tuple[float, float], params: TemporalParams):
+        self.d, self.T, self.params = data, T, params
+        self.cx, self.cy = size[0] / 2.0, size[1] / 2.0
+        self.prior_scale = np.array([math.radians(params.accel_deg)] * 3 + [params.accel_log_f])
+
+    def unpack(self, x: np.ndarray):
+        C, k1 = x[:3], (x[3] if self.params.fit_k1 else 0.0)
+        per = x[4:].reshape(self.T, 4)
+        return C, k1, per
+
+    def data_residuals(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Keypoint residuals (N, 2) and line distances (M,), pixels."""
+        d = self.d
+        C, k1, per = self.unpack(x)
+        R = rotations(per[:, 0], per[:, 1], per[:, 2])
+        f = np.exp(per[:, 3])
+        # keypoints
+        Xc = np.einsum("nij,nj->ni", R[d.kp_t], d.kp_X - C)
+        z = np.where(Xc[:, 2] > 1e-6, Xc[:, 2], 1e-6)
+        xn = Xc[:, :2] / z[:, None]
+        xd = xn * (1.0 + k1 * (xn * xn).sum(1))[:, None]
+        fk = f[d.kp_t][:, None]
+        r_kp = xd * fk + (self.cx, self.cy) - d.kp_xy
+        # lines: undistort the observed points, then distance to the pinhole image of the 3D line
+        fl = f[d.ln_t]
+        qd = (d.ln_q - (self.cx, self.cy)) / fl[:, None]
+        qu = qd.copy()
+        for _ in range(4):  # fixed point of qd = qu (1 + k1 |qu|^2)
+            qu = qd / (1.0 + k1 * (qu * qu).sum(1))[:, None]
+        Rl = R[d.ln_t]
+        a = np.einsum("nij,nj->ni", Rl, d.ln_A - C)
+        b = np.einsum("nij,nj->ni", Rl, d.ln_B - C)
+        l = np.cross(a, b)
+        nrm = np.maximum(np.hypot(l[:, 0], l[:, 1]), 1e-12)
+        r_ln = fl * (l[:, 0] * qu[:, 0] + l[:, 1] * qu[:, 1] + l[:, 2]) / nrm
+        return r_kp, r_ln
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        r_kp, r_ln = self.data_residuals(x)
+        per = self.unpack(x)[2]
+        acc = (per[:-2] - 2 * per[1:-1] + per[2:]) / self.prior_scale if self.T >= 3 else np.zeros((0, 4))
+        return np.concatenate([r_kp.ravel() / self.params.noise_px, r_ln / self.params.noise_px, acc.ravel()])
+
+    def sparsity(self) -> scipy.sparse.csr_matrix:
+        d, T = self.d, self.T
+        n_kp, n_ln, n_acc = 2 * len(d.kp_t), len(d.ln_t), 4 * max(T - 2, 0)
+        rows, cols = [], []
+        shared = [0, 1, 2] + ([3] if self.params.fit_k1 else [])
+        frame_of_row = np.concatenate([np.repeat(d.kp_t, 2), d.ln_t]).astype(int)
+        n_data = n_kp + n_ln
+        for c in shared:
+            rows.append(np.arange(n_data))
+            cols.append(np.full(n_data, c))
+        for j in range(4):
+            rows.append(np.arange(n_data))
+            cols.append(4 + 4 * frame_of_row + j)
+        for s in range(max(T - 2, 0)):  # prior row of the acceleration at s + 1: frames s, s+1, s+2
+            for j in range(4):
+                for t in (s, s + 1, s + 2):
+                    rows.append(np.array([n_data + 4 * s + j]))
+                    cols.append(np.array([4 + 4 * t + j]))
+        rows, cols = np.concatenate(rows), np.concatenate(cols)
+        return scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_data + n_acc, 4 + 4 * T))
+
+
+def _initial(cameras: Sequence[Camera | None], T: int) -> tuple[np.ndarray, float, np.ndarray]:
+    """Warm start: median centre and k1 of the per-frame cameras; per-frame angles and log f,
+    unwrapped, with the frames that have no camera interpolated (held at the ends)."""
+    known = [t for t in range(T) if cameras[t] is not None]
+    if not known:
+        raise ValueError("no frame of the shot has a camera to start from")
+    C = np.median(np.array([cameras[t].C for t in known]), axis=0)
+    k1 = float(np.median([cameras[t].radial[0] for t in known]))
+    vals = np.array([[*pan_tilt_roll_from_rotation(cameras[t].R), math.log(cameras[t].fx)] for t in known])
+    vals[:, 0] = np.unwrap(vals[:, 0])
+    vals[:, 2] = np.unwrap(vals[:, 2])
+    per = np.column_stack([np.interp(np.arange(T), known, vals[:, j]) for j in range(4)])
+    return C, k1, per
+
+
+def _cameras(x: np.ndarray, model: _Model, size: tuple[float, float]) -> list[Camera]:
+    C, k1, per = model.unpack(x)
+    R = rotations(per[:, 0], per[:, 1], per[:, 2])
+    radial = np.zeros(6)
+    radial[0] = k1
+    out = []
+    for t in range(model.T):
+        f = float(math.exp(per[t, 3]))
+        out.append(Camera(f, f, size[0] / 2.0, size[1] / 2.0, R[t], C, float(size[0]), float(size[1]), radial))
+    return out
+
+
+def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Camera | None],
+             size: tuple[float, float], params: TemporalParams = TemporalParams(),
+             model: FieldModel | None = None) -> ShotFit:
+    """The broadcast camera of one shot (see the module docstring): ``observations[t]`` and the
+    per-frame ``cameras[t]`` (None where a frame has none) of its T frames, in time order, for
+    images of ``size`` (W, H). Returns a camera for every frame."""
+    model = model or load_field_model()
+    T = len(observations)
+    if len(cameras) != T:
+        raise ValueError("one camera (or None) per frame")
+    data = _flatten(observations, model)
+    C0, k10, per0 = _initial(cameras, T)
+    x = np.concatenate([C0, [k10], per0.ravel()])
+    nfev = 0
+    kp_keep = np.ones(len(data.kp_t), bool)
+    ln_keep = np.ones(len(data.ln_t), bool)
+    for stage in range(2):
+        m = _Model(_subset(data, kp_keep, ln_keep), T, size, params)
+        sol = scipy.optimize.least_squares(m.residuals, x, jac_sparsity=m.sparsity(), method="trf",
+                                           loss="soft_l1", f_scale=params.robust, x_scale="jac",
+                                           max_nfev=params.max_nfev, tr_solver="lsmr")
+        x, nfev = sol.x, nfev + sol.nfev
+        if stage == 0:
+            full = _Model(data, T, size, params)
+            r_kp, r_ln = full.data_residuals(x)
+            new_kp = np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.outlier_px
+            new_ln = np.abs(r_ln) <= params.outlier_px
+            if np.array_equal(new_kp, kp_keep) and np.array_equal(new_ln, ln_keep):
+                break
+            kp_keep, ln_keep = new_kp, new_ln
+    final = _Model(data, T, size, params)
+    r_kp, r_ln = final.data_residuals(x)
+    res, dropped = [], []
+    for t in range(T):
+        k = (data.kp_t == t)
+        l = (data.ln_t == t)
+        res.append(np.concatenate([np.hypot(r_kp[k & kp_keep, 0], r_kp[k & kp_keep, 1]), np.abs(r_ln[l & ln_keep])]))
+        dropped.append(int((k & ~kp_keep).sum() + (l & ~ln_keep).sum()))
+    C, k1, per = final.unpack(x)
+    return ShotFit(_cameras(x, final, size), C.copy(), float(k1), per[:, :3].copy(), np.exp(per[:, 3]), res, dropped,
+                   float(sol.cost), nfev)
+
+
+# -- shots ---------------------------------------------------------------------------------------
+def image_change(a: np.ndarray, b: np.ndarray, bins: int = 16) -> float:
+    """How different two frames look, 0 (same) .. 1 (nothing in common): the total variation
+    distance of their hue-saturation histograms (coarse; insensitive to a camera's pan and zoom,
+    large across a cut to another view)."""
+    import cv2
+
+    hists = []
+    for img in (a, b):
+        small = cv2.resize(img, (64, 36), interpolation=cv2.INTER_AREA)
+        hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
+        h = cv2.calcHist([hsv], [0, 1], None, [bins, bins], [0, 180, 0, 256]).ravel()
+        hists.append(h / max(h.sum(), 1.0))
+    return float(0.5 * np.abs(hists[0] - hists[1]).sum())
+
+
+def segment_shots(cameras: Sequence[Camera | None], changes: Sequence[float | None] | None = None,
+                  params: TemporalParams = TemporalParams()) -> list[range]:
+    """Cut a clip into shots: ``range`` objects covering ``0 .. len(cameras) - 1`` in order. A cut
+    falls before frame t when ``changes[t - 1]`` (the image change from t - 1 to t) exceeds
+    ``cut_image``, or when frame t's per-frame camera centre is farther than ``cut_centre_m`` from
+    the median centre of the current shot's last five cameras *and* the next calibrated frame
+    agrees with frame t (one wrong per-frame camera is an outlier, not a cut). Frames without a
+    camera never cut."""
+    T = len(cameras)
+    if T == 0:
+        return []
+    calibrated = [t for t in range(T) if cameras[t] is not None]
+    cuts: list[int] = []
+    centres: list[np.ndarray] = []
+    for t in range(T):
+        if t > 0 and changes is not None and changes[t - 1] is not None and changes[t - 1] > params.cut_image:
+            cuts.append(t)
+            centres = []
+        cam = cameras[t]
+        if cam is None:
+            continue
+        C = np.asarray(cam.C, float)
+        if centres:
+            ref = np.median(np.array(centres[-5:]), axis=0)
+            if float(np.linalg.norm(C - ref)) > params.cut_centre_m:
+                later = [u for u in calibrated if u > t][:1]
+                confirmed = bool(later) and (
+                    float(np.linalg.norm(cameras[later[0]].C - ref)) > params.cut_centre_m
+                    and float(np.linalg.norm(cameras[later[0]].C - C)) <= params.cut_centre_m)
+                if not confirmed:
+                    continue  # an outlier frame: it neither cuts nor moves the reference
+                if not cuts or cuts[-1] != t:
+                    cuts.append(t)
+                centres = []
+        centres.append(C)
+    bounds = [0, *sorted(set(c for c in cuts if 0 < c < T)), T]
+    return [range(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+
+@dataclass
+class ClipResult:
+    #: per frame: the shot's camera, or None (a shot without any per-frame camera to start from)
+    cameras: list[Camera | None]
+    #: per frame: index of its shot
+    shot_of: list[int]
+    shots: list[range]
+    fits: list[ShotFit | None]
+
+
+def calibrate_clip(observations: Sequence[Observations | None], cameras: Sequence[Camera | None],
+                   size: tuple[float, float], params: TemporalParams = TemporalParams(),
+                   changes: Sequence[float | None] | None = None, model: FieldModel | None = None) -> ClipResult:
+    """A clip in time order: its shots (:func:`segment_shots`), and in each shot that has at least
+    one per-frame camera the broadcast camera (:func:`fit_shot`) of every frame that has
+    observations (frames with none keep no camera)."""
+    model = model or load_field_model()
+    T = len(observations)
+    shots = segment_shots(cameras, changes, params)
+    out: list[Camera | None] = [None] * T
+    shot_of = [0] * T
+    fits: list[ShotFit | None] = []
+    for k, shot in enumerate(shots):
+        for t in shot:
+            shot_of[t] = k
+        if all(cameras[t] is None for t in shot):
+            fits.append(None)
+            continue
+        fit = fit_shot([observations[t] for t in shot], [cameras[t] for t in shot], size, params, model)
+        fits.append(fit)
+        for t, cam in zip(shot, fit.cameras):
+            if observations[t] is not None:
+                out[t] = cam
+    return ClipResult(out, shot_of, shots, fits)

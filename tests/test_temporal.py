@@ -1,0 +1,184 @@
+"""Temporal calibration (issue #14): one broadcast camera per shot, recovered from noisy detections;
+cuts; frames with too few keypoints placed by their shot; the jitter metric."""
+
+import math
+
+import numpy as np
+import pytest
+
+from pnlviz.calib.calibrate import CalibParams, calibrate
+from pnlviz.calib.observations import Observations
+from pnlviz.calib.temporal import TemporalParams, fit_shot, image_change, rotations, segment_shots
+from pnlviz.field import load_field_model
+from pnlviz.geometry.camera import Camera, rotation_from_pan_tilt_roll
+
+W, H = 960, 540
+GRID = np.array([[x, y, 0.0] for x in np.arange(-50, 51, 5) for y in np.arange(-30, 31, 5)])
+
+
+def _shot(T, centre, seed, *, noise=1.0, sparse_frame=None, start=-30.0, span=None):
+    """A pan-tilt-zoom shot from ``centre``: the true cameras and noisy observations (keypoints and
+    two points per visible line); ``sparse_frame`` keeps only two keypoints and no line. The motion
+    takes ``span`` frames (default T): a longer span is a slower camera."""
+    model = load_field_model()
+    rng = np.random.default_rng(seed)
+    truth = []
+    for t in range(T):
+        s = t / (span or T)
+        target = np.array([start + 50 * s, 10 * math.sin(2 * s), 0.0])
+        truth.append(Camera.from_look_at(centre, target, hfov_deg=40 - 15 * math.sin(math.pi * s), width=W, height=H,
+                                         roll_deg=0.3, k1=-0.05))
+    ids = [k for k in model.keypoint_ids if k <= 57]
+    xyz = model.keypoint_xyz(ids)
+    obs = []
+    for t, cam in enumerate(truth):
+        uv, z = cam.project(xyz)
+        inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
+        keep = np.flatnonzero(inside)
+        if t == sparse_frame:
+            keep = keep[:2]
+        kp = {int(ids[i]): uv[i] + rng.normal(0, noise, 2) for i in keep}
+        lines = {}
+        for name, seg in model.lines.items():
+            if t == sparse_frame:
+                break
+            P = seg.start + np.linspace(0, 1, 30)[:, None] * (seg.end - seg.start)
+            puv, pz = cam.project(P)
+            m = (pz > 0) & (puv[:, 0] >= 0) & (puv[:, 0] < W) & (puv[:, 1] >= 0) & (puv[:, 1] < H)
+            if m.sum() >= 2:
+                lines[name] = puv[m][[0, -1]] + rng.normal(0, noise, (2, 2))
+        obs.append(Observations.from_keypoints(W, H, kp, lines=lines))
+    return truth, obs
+
+
+def _per_frame(obs):
+    out = []
+    for o in obs:
+        r = calibrate(o, CalibParams())
+        out.append(r.camera if r.ok else None)
+    return out
+
+
+def _grid_error(a: Camera, b: Camera) -> float:
+    pa, _ = a.project(GRID)
+    pb, _ = b.project(GRID)
+    m = np.all(np.isfinite(pa), 1) & (pa[:, 0] >= 0) & (pa[:, 0] < W) & (pa[:, 1] >= 0) & (pa[:, 1] < H)
+    return float(np.median(np.linalg.norm(pa[m] - pb[m], axis=1)))
+
+
+def test_rotations_match_the_soccernet_convention():
+    rng = np.random.default_rng(0)
+    a = rng.uniform(-3, 3, (5, 3))
+    R = rotations(a[:, 0], a[:, 1], a[:, 2])
+    assert all(np.allclose(R[i], rotation_from_pan_tilt_roll(*a[i])) for i in range(5))
+
+
+def test_a_shot_is_recovered_from_noisy_detections():
+    """90 frames, one centre, smooth pan and zoom, 1 px detection noise; frame 40 has two keypoints
+    and no line (per-frame calibration cannot place it). The shot's centre comes back to 1 cm, the
+    angles to 0.01 degree (median over frames), the two-keypoint frame within 1 px of the truth."""
+    centre = np.array([5.0, 58.0, -16.0])
+    truth, obs = _shot(90, centre, seed=1, sparse_frame=40)
+    cams = _per_frame(obs)
+    assert cams[40] is None and sum(c is not None for c in cams) == 89
+    fit = fit_shot(obs, cams, (W, H), TemporalParams(accel_deg=0.003, accel_log_f=0.0003))
+    assert np.linalg.norm(fit.C - centre) < 0.01
+    assert abs(fit.k1 - (-0.05)) < 0.002
+    err = np.array([np.abs(np.subtract(truth[t].pan_tilt_roll_deg, fit.cameras[t].pan_tilt_roll_deg))
+                    for t in range(90)])
+    assert np.all(np.median(err, axis=0) < 0.01), np.median(err, axis=0)
+    assert _grid_error(truth[40], fit.cameras[40]) < 1.0
+    temporal = np.median([_grid_error(truth[t], fit.cameras[t]) for t in range(90)])
+    per_frame = np.median([_grid_error(truth[t], cams[t]) for t in range(90) if cams[t] is not None])
+    assert temporal < 0.5 * per_frame, (temporal, per_frame)
+
+
+def test_outlier_detections_and_an_outlier_frame_do_not_pull_the_shot():
+    centre = np.array([-3.0, 60.0, -18.0])
+    truth, obs = _shot(40, centre, seed=2)
+    rng = np.random.default_rng(5)
+    for t in (5, 17, 29):  # one keypoint per frame 80 px off
+        obs[t].kp_xy[0] += rng.normal(0, 80, 2)
+    obs[20].kp_xy[:] += 40.0  # a whole frame shifted (a detector failure)
+    cams = _per_frame(obs)
+    fit = fit_shot(obs, cams, (W, H))
+    assert np.linalg.norm(fit.C - centre) < 0.05
+    assert sum(fit.dropped) >= 3 + obs[20].n_keypoints // 2
+    assert max(_grid_error(truth[t], fit.cameras[t]) for t in range(40) if t != 20) < 1.0
+
+
+def test_a_cut_is_found_between_two_camera_positions():
+    truth_a, obs_a = _shot(25, np.array([5.0, 58.0, -16.0]), seed=3)
+    truth_b, obs_b = _shot(20, np.array([-40.0, 45.0, -12.0]), seed=4, start=10.0)
+    cams = _per_frame(obs_a) + _per_frame(obs_b)
+    shots = segment_shots(cams)
+    assert [(s.start, s.stop) for s in shots] == [(0, 25), (25, 45)]
+    # a single bad per-frame camera inside a shot is not a cut
+    bad = list(cams)
+    bad[10] = Camera.from_look_at(np.array([0.0, -70.0, -20.0]), np.zeros(3), hfov_deg=30, width=W, height=H)
+    assert [(s.start, s.stop) for s in segment_shots(bad)] == [(0, 25), (25, 45)]
+    # an image change marks a cut the cameras cannot see
+    changes = [0.05] * 44
+    changes[9] = 0.9
+    assert [(s.start, s.stop) for s in segment_shots(cams, changes)] == [(0, 10), (10, 25), (25, 45)]
+
+
+def test_image_change_is_small_within_a_view_and_large_across_a_cut():
+    rng = np.random.default_rng(0)
+    grass = np.zeros((90, 160, 3), np.uint8)
+    grass[:] = (40, 140, 50)
+    grass[:30] = (120, 110, 100)  # stands
+    panned = np.roll(grass, 7, axis=1)
+    crowd = rng.integers(0, 255, (90, 160, 3), dtype=np.uint8)
+    assert image_change(grass, panned) < 0.1
+    assert image_change(grass, crowd) > 0.5
+
+
+def test_fit_shot_needs_a_camera_to_start_from():
+    _, obs = _shot(3, np.array([0.0, 60.0, -15.0]), seed=9)
+    with pytest.raises(ValueError, match="no frame"):
+        fit_shot(obs, [None, None, None], (W, H))
+
+
+def test_calibrate_temporal_on_a_prediction_zip(tmp_path, capsys):
+    """`pnlviz calibrate --detections clip.zip --size WxH --temporal`: the frames group into their
+    clip by stem, the frame with two keypoints (no per-frame camera) gets the shot's camera, and
+    the cameras jitter less than per-frame ones."""
+    from pnlviz.cli import main
+    from pnlviz.data import write_predictions
+    from pnlviz.metrics.soccernet import read_cameras
+    from pnlviz.data.predictions import Predictions
+    from pnlviz.metrics.temporal import jitter
+
+    centre = np.array([5.0, 58.0, -16.0])
+    truth, obs = _shot(30, centre, seed=6, sparse_frame=15, span=150)
+    preds = {}
+    for t, o in enumerate(obs):
+        kp = {int(k): (float(x) / W, float(y) / H, 0.9) for k, (x, y) in zip(o.kp_ids, o.kp_xy) if k != 52}
+        preds[f"match3-IMG_{t + 1:03d}"] = Predictions(keypoints=kp)
+    preds["other-IMG_001"] = preds["match3-IMG_001"]  # another clip: calibrated on its own
+    z = tmp_path / "clip.zip"
+    write_predictions(z, preds)
+    base = ["calibrate", "--detections", str(z), "--size", f"{W}x{H}", "--no-progress"]
+    assert main(base + ["--out", str(tmp_path / "per_frame.zip")]) == 0
+    assert main(base + ["--out", str(tmp_path / "temporal.zip"), "--temporal",
+                        "--report", str(tmp_path / "r.jsonl")]) == 0
+    per_frame, _ = read_cameras(tmp_path / "per_frame.zip")
+    temporal, _ = read_cameras(tmp_path / "temporal.zip")
+    stems = [f"match3-IMG_{t + 1:03d}" for t in range(30)]
+    assert "match3-IMG_016" not in per_frame and len(temporal) == 31
+
+    def cam(d):
+        return Camera.from_soccernet(d, 960, 540).scaled(W, H)
+
+    assert _grid_error(truth[15], cam(temporal["match3-IMG_016"])) < 1.0
+    jt = np.nanmedian(jitter([cam(temporal[s]) for s in stems]))
+    jp = np.nanmedian(jitter([cam(per_frame[s]) if s in per_frame else None for s in stems]))
+    jtrue = np.nanmedian(jitter(truth))
+    assert jt < 0.5 * jp and abs(jt - jtrue) < 0.2, (jt, jp, jtrue)
+    import json
+
+    reports = [json.loads(line) for line in (tmp_path / "r.jsonl").read_text().splitlines()]
+    clip_names = {r["temporal"]["clip"] for r in reports}
+    assert clip_names == {"match3", "other"}
+    assert next(r for r in reports if r["stem"] == "match3-IMG_016")["temporal"]["per_frame"] is False
