@@ -313,3 +313,41 @@ def test_cli_runs_and_reports_speed(tmp_path, capsys):
     args = _parser().parse_args(["synth", "--out", str(tmp_path / "cli2"), "-n", "1", "--no-progress"])
     assert args.func(args) == 2
     assert "--force" in capsys.readouterr().err
+
+
+def test_synthetic_clip_is_a_pan_tilt_zoom_video_with_cuts(tmp_path):
+    """`pnlviz synth --clip`: one clip, frames named so that they group into it, every frame with
+    its exact camera; within a shot one centre and one lens and a smooth motion, a cut moves the
+    camera; the players run between frames."""
+    import json
+
+    from pnlviz.cli import main
+    from pnlviz.data.layout import clips
+    from pnlviz.geometry.camera import Camera
+    from pnlviz.metrics.temporal import jitter
+    from pnlviz.synth.clip import plan_clip
+
+    out = tmp_path / "clip"
+    assert main(["synth", "--clip", "-n", "45", "--seed", "4", "--size", "320x180", "--out", str(out),
+                 "--no-progress"]) == 0
+    stems = sorted(p.stem for p in out.glob("*.jpg"))
+    assert len(stems) == 45 and list(clips(stems)) == ["clip4"]
+    cams = [json.loads((out / "cameras" / f"camera_{s}.json").read_text()) for s in clips(stems)["clip4"]]
+    shots = [c["synth"]["shot"] for c in cams]
+    cut = shots.index(1)
+    assert sorted(set(shots)) == [0, 1] and shots == sorted(shots) and 10 <= cut <= 35
+    centres = np.array([c["position_meters"] for c in cams])
+    assert np.allclose(centres[:cut], centres[0]) and np.allclose(centres[cut:], centres[cut])
+    assert np.linalg.norm(centres[cut] - centres[0]) > 1.0
+    k1 = [c["radial_distortion"][0] for c in cams]
+    assert len(set(k1[:cut])) == 1
+    cameras = [Camera.from_soccernet(c, 960, 540) for c in cams]
+    j = jitter(cameras)
+    assert np.nanmedian(j[1:cut - 1]) < 1.0  # smooth: the projected pitch barely accelerates
+    plan = plan_clip(4, 45, (320, 180))
+    assert np.median(np.linalg.norm(plan.feet[1] - plan.feet[0], axis=1)) > 0.02  # the players move
+    # a frame renders alone, the same as in the clip
+    from pnlviz.synth.clip import clip_frame
+
+    again = clip_frame(plan, 7)
+    assert again["stem"] == "clip4-IMG_0008" and again["camera"] == cams[7]

@@ -12,9 +12,10 @@ too few keypoints). Here, per shot:
   undistorted coordinates, where the image of a 3D line is straight);
 * **smoothness prior**: the second difference (acceleration) of each per-frame parameter, divided
   by its expected size (``accel_deg``, ``accel_log_f``);
-* **robust**: a soft-L1 loss on every residual (``robust`` in units of the residual's scale), and
-  after a first solve the observations farther than ``outlier_px`` from the shot's camera are
-  dropped and the shot solved again (outlier detections, outlier frames);
+* **robust**: the first solve uses the observations that their frame's own camera agrees with
+  (within ``start_outlier_px``; all of a frame that has none), then the ones the shot's camera agrees
+  with, until that set stops changing (outlier detections, wrong ids, outlier frames); and a
+  soft-L1 loss on every residual (``robust``, in units of the residual's scale);
 * **solved jointly** by sparse least squares (``scipy.optimize.least_squares`` with the Jacobian's
   sparsity: each frame's parameters touch only its own residuals and three prior rows), warm
   started from the per-frame cameras (centre and k1: their medians; frames without a camera:
@@ -32,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.optimize
@@ -57,15 +58,23 @@ class TemporalParams:
     accel_log_f: float = 0.001
     #: soft-L1 threshold, in units of each residual's scale
     robust: float = 3.0
-    #: observations farther than this from the first solve are dropped (px)
+    #: observations farther than this from the shot's camera are dropped (px)
     outlier_px: float = 12.0
-    #: fit k1 for the shot
+    #: ... and, for the first solve, those farther than this from their own frame's camera (px;
+    #: looser: a per-frame camera is itself a few pixels off where it extrapolates)
+    start_outlier_px: float = 30.0
+    #: fit k1 for the shot (off for detectors whose calibration settings say ``refine_k1: false``)
     fit_k1: bool = True
+    #: a weak prior on k1: its expected size (broadcast lenses: |k1| of a few hundredths)
+    k1_sigma: float = 0.3
     #: consecutive per-frame centres farther apart than this (metres) make a cut
     cut_centre_m: float = 10.0
+    #: ... and their views of the pitch differ by more than this share of the image width (median
+    #: displacement of a 5 m grid of pitch points between the two cameras)
+    cut_view: float = 0.15
     #: an image change above this makes a cut (see :func:`image_change`)
     cut_image: float = 0.5
-    max_nfev: int = 60
+    max_nfev: int = 200
 
 
 @dataclass
@@ -191,7 +200,8 @@ class _Model:
         r_kp, r_ln = self.data_residuals(x)
         per = self.unpack(x)[2]
         acc = (per[:-2] - 2 * per[1:-1] + per[2:]) / self.prior_scale if self.T >= 3 else np.zeros((0, 4))
-        return np.concatenate([r_kp.ravel() / self.params.noise_px, r_ln / self.params.noise_px, acc.ravel()])
+        k1 = [x[3] / self.params.k1_sigma] if self.params.fit_k1 else []
+        return np.concatenate([r_kp.ravel() / self.params.noise_px, r_ln / self.params.noise_px, acc.ravel(), k1])
 
     def sparsity(self) -> scipy.sparse.csr_matrix:
         d, T = self.d, self.T
@@ -211,8 +221,13 @@ class _Model:
                 for t in (s, s + 1, s + 2):
                     rows.append(np.array([n_data + 4 * s + j]))
                     cols.append(np.array([4 + 4 * t + j]))
+        n_k1 = 0
+        if self.params.fit_k1:  # the k1 prior row
+            rows.append(np.array([n_data + n_acc]))
+            cols.append(np.array([3]))
+            n_k1 = 1
         rows, cols = np.concatenate(rows), np.concatenate(cols)
-        return scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_data + n_acc, 4 + 4 * T))
+        return scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_data + n_acc + n_k1, 4 + 4 * T))
 
 
 def _initial(cameras: Sequence[Camera | None], T: int) -> tuple[np.ndarray, float, np.ndarray]:
@@ -228,6 +243,30 @@ def _initial(cameras: Sequence[Camera | None], T: int) -> tuple[np.ndarray, floa
     vals[:, 2] = np.unwrap(vals[:, 2])
     per = np.column_stack([np.interp(np.arange(T), known, vals[:, j]) for j in range(4)])
     return C, k1, per
+
+
+def _camera_vector(cam: Camera) -> np.ndarray:
+    """``[C, k1, pan, tilt, roll, log f]`` of one camera (its x focal length)."""
+    return np.concatenate([cam.C, [cam.radial[0]], pan_tilt_roll_from_rotation(cam.R), [math.log(cam.fx)]])
+
+
+def _agreeing(data: _Data, cameras: Sequence[Camera | None], size, params: TemporalParams
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of the keypoints and line points within ``start_outlier_px`` of their own frame's
+    camera (every observation of a frame without one)."""
+    kp_keep = np.ones(len(data.kp_t), bool)
+    ln_keep = np.ones(len(data.ln_t), bool)
+    one = replace(params, fit_k1=True)
+    for t, cam in enumerate(cameras):
+        if cam is None:
+            continue
+        k, l = data.kp_t == t, data.ln_t == t
+        frame = _Data(np.zeros(k.sum(), int), data.kp_X[k], data.kp_xy[k], np.zeros(l.sum(), int), data.ln_A[l],
+                      data.ln_B[l], data.ln_q[l])
+        r_kp, r_ln = _Model(frame, 1, size, one).data_residuals(_camera_vector(cam))
+        kp_keep[k] = np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.start_outlier_px
+        ln_keep[l] = np.abs(r_ln) <= params.start_outlier_px
+    return kp_keep, ln_keep
 
 
 def _cameras(x: np.ndarray, model: _Model, size: tuple[float, float]) -> list[Camera]:
@@ -254,24 +293,26 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
         raise ValueError("one camera (or None) per frame")
     data = _flatten(observations, model)
     C0, k10, per0 = _initial(cameras, T)
+    if not params.fit_k1:
+        k10 = 0.0
     x = np.concatenate([C0, [k10], per0.ravel()])
     nfev = 0
-    kp_keep = np.ones(len(data.kp_t), bool)
-    ln_keep = np.ones(len(data.ln_t), bool)
-    for stage in range(2):
+    # start from the observations each frame's own camera agrees with (all of a frame without one):
+    # a detector's wrong ids and lines would otherwise pull the first solve off
+    kp_keep, ln_keep = _agreeing(data, cameras, size, params)
+    for _ in range(3):
         m = _Model(_subset(data, kp_keep, ln_keep), T, size, params)
         sol = scipy.optimize.least_squares(m.residuals, x, jac_sparsity=m.sparsity(), method="trf",
                                            loss="soft_l1", f_scale=params.robust, x_scale="jac",
                                            max_nfev=params.max_nfev, tr_solver="lsmr")
         x, nfev = sol.x, nfev + sol.nfev
-        if stage == 0:
-            full = _Model(data, T, size, params)
-            r_kp, r_ln = full.data_residuals(x)
-            new_kp = np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.outlier_px
-            new_ln = np.abs(r_ln) <= params.outlier_px
-            if np.array_equal(new_kp, kp_keep) and np.array_equal(new_ln, ln_keep):
-                break
-            kp_keep, ln_keep = new_kp, new_ln
+        # then those the shot's camera agrees with, until the set stops changing
+        r_kp, r_ln = _Model(data, T, size, params).data_residuals(x)
+        new_kp = np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.outlier_px
+        new_ln = np.abs(r_ln) <= params.outlier_px
+        if np.array_equal(new_kp, kp_keep) and np.array_equal(new_ln, ln_keep):
+            break
+        kp_keep, ln_keep = new_kp, new_ln
     final = _Model(data, T, size, params)
     r_kp, r_ln = final.data_residuals(x)
     res, dropped = [], []
@@ -301,20 +342,40 @@ def image_change(a: np.ndarray, b: np.ndarray, bins: int = 16) -> float:
     return float(0.5 * np.abs(hists[0] - hists[1]).sum())
 
 
+_GRID = np.array([[x, y, 0.0] for x in np.arange(-50.0, 51.0, 5.0) for y in np.arange(-30.0, 31.0, 5.0)])
+
+
+def _view_change(a: Camera, b: Camera) -> float:
+    """Median displacement (pixels of ``a``) of the pitch grid points both cameras see (inf when
+    they see none in common)."""
+    pa, _ = a.project(_GRID)
+    pb, _ = b.scaled(a.width, a.height).project(_GRID)
+    seen = np.all(np.isfinite(pa), 1) & np.all(np.isfinite(pb), 1)
+    seen &= (pa[:, 0] >= 0) & (pa[:, 0] <= a.width) & (pa[:, 1] >= 0) & (pa[:, 1] <= a.height)
+    return float(np.median(np.linalg.norm(pa[seen] - pb[seen], axis=1))) if seen.any() else math.inf
+
+
 def segment_shots(cameras: Sequence[Camera | None], changes: Sequence[float | None] | None = None,
                   params: TemporalParams = TemporalParams()) -> list[range]:
     """Cut a clip into shots: ``range`` objects covering ``0 .. len(cameras) - 1`` in order. A cut
     falls before frame t when ``changes[t - 1]`` (the image change from t - 1 to t) exceeds
-    ``cut_image``, or when frame t's per-frame camera centre is farther than ``cut_centre_m`` from
-    the median centre of the current shot's last five cameras *and* the next calibrated frame
-    agrees with frame t (one wrong per-frame camera is an outlier, not a cut). Frames without a
-    camera never cut."""
+    ``cut_image``, or when frame t's per-frame camera is apart from the current shot (its centre
+    farther than ``cut_centre_m`` from the median of the shot's last five centres, and its view of
+    the pitch moved by more than ``cut_view`` of the image width from the shot's latest camera)
+    *and* the next calibrated frame agrees with frame t (one wrong per-frame camera is an outlier,
+    not a cut). Frames without a camera never cut."""
     T = len(cameras)
     if T == 0:
         return []
     calibrated = [t for t in range(T) if cameras[t] is not None]
     cuts: list[int] = []
     centres: list[np.ndarray] = []
+    last: Camera | None = None  # the shot's latest camera that was not an outlier
+
+    def apart(a: Camera, b: Camera, ref: np.ndarray) -> bool:
+        return (float(np.linalg.norm(a.C - ref)) > params.cut_centre_m
+                and _view_change(a, b) > params.cut_view * a.width)
+
     for t in range(T):
         if t > 0 and changes is not None and changes[t - 1] is not None and changes[t - 1] > params.cut_image:
             cuts.append(t)
@@ -323,19 +384,19 @@ def segment_shots(cameras: Sequence[Camera | None], changes: Sequence[float | No
         if cam is None:
             continue
         C = np.asarray(cam.C, float)
-        if centres:
+        if centres and last is not None:
             ref = np.median(np.array(centres[-5:]), axis=0)
-            if float(np.linalg.norm(C - ref)) > params.cut_centre_m:
+            if apart(cam, last, ref):
                 later = [u for u in calibrated if u > t][:1]
-                confirmed = bool(later) and (
-                    float(np.linalg.norm(cameras[later[0]].C - ref)) > params.cut_centre_m
-                    and float(np.linalg.norm(cameras[later[0]].C - C)) <= params.cut_centre_m)
+                confirmed = bool(later) and apart(cameras[later[0]], last, ref) and (
+                    float(np.linalg.norm(cameras[later[0]].C - C)) <= params.cut_centre_m)
                 if not confirmed:
                     continue  # an outlier frame: it neither cuts nor moves the reference
                 if not cuts or cuts[-1] != t:
                     cuts.append(t)
                 centres = []
         centres.append(C)
+        last = cam
     bounds = [0, *sorted(set(c for c in cuts if 0 < c < T)), T]
     return [range(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
 

@@ -120,8 +120,8 @@ def temporal_pass(ds, predictions, size, settings, stems: list[str], results: di
     import numpy as np
     from tqdm import tqdm
 
-    from pnlviz.calib.frame import observations_for
-    from pnlviz.calib.temporal import calibrate_clip, image_change
+    from pnlviz.calib.frame import calib_params, observations_for
+    from pnlviz.calib.temporal import TemporalParams, calibrate_clip, image_change
     from pnlviz.data import DataError
     from pnlviz.data.layout import clips
     from pnlviz.field import load_field_model
@@ -138,7 +138,11 @@ def temporal_pass(ds, predictions, size, settings, stems: list[str], results: di
             bar.update(len(members))
             continue
         W, H = sizes.pop()
-        obs = [observations_for(i, settings.source, model)[0] if i is not None else None for i in inputs]
+        found = [observations_for(i, settings.source, model) if i is not None else (None, None) for i in inputs]
+        obs = [o for o, _ in found]
+        origin = next((g for _, g in found if g is not None), None)
+        # the shot's lens as the frames' calibration would fit it (no k1 for the light model's detections)
+        params = TemporalParams(fit_k1=calib_params(settings, origin).refine_k1)
         cams = []
         for s in members:
             d = results.get(s, (None, {}))[0]
@@ -154,7 +158,7 @@ def temporal_pass(ds, predictions, size, settings, stems: list[str], results: di
                 changes.append(image_change(prev, img) if prev is not None and img is not None else None)
                 prev = img
             changes = changes[1:]
-        res = calibrate_clip(obs, cams, (W, H), changes=changes, model=model)
+        res = calibrate_clip(obs, cams, (W, H), params, changes=changes, model=model)
         for t, s in enumerate(members):
             cam_dict, report = results.get(s, (None, {"stem": s}))
             report = dict(report)

@@ -42,6 +42,9 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
                    help="image size (default 960x540); cameras and annotations stay at the 960x540 evaluation scale")
     p.add_argument("--start-index", type=_non_negative_int, default=0, metavar="I",
                    help="index (file stem) of the first frame (default 0)")
+    p.add_argument("--clip", action="store_true",
+                   help="one video clip of N frames instead: pan-tilt-zoom shots following play, players running, "
+                        "a cut every ~60 frames; stems clip<seed>-IMG_<nnnn>, the exact camera of every frame")
     p.add_argument("--workers", type=_positive_int, default=1, metavar="K", help="worker processes (default 1)")
     p.add_argument("--force", action="store_true",
                    help="write into a non-empty folder that is not a previous synthetic output")
@@ -56,7 +59,7 @@ def run_synth(args: argparse.Namespace) -> int:
 
     try:
         summary = generate(args.out, args.n, args.seed, size=tuple(args.size), start_index=args.start_index,
-                           workers=args.workers, progress=not args.no_progress, force=args.force)
+                           workers=args.workers, progress=not args.no_progress, force=args.force, clip=args.clip)
     except OutputFolderError as exc:
         print(f"pnlviz synth: error: {exc}", file=sys.stderr)
         return 2

@@ -42,11 +42,12 @@ from .render import render_frame
 
 CAMERA_DIR = "cameras"
 STEM_DIGITS = 5
-_IMAGE_RE = re.compile(r"^\d{5,}\.jpg$")
-_ANNOTATION_RE = re.compile(r"^\d{5,}\.json$")
-_CAMERA_RE = re.compile(r"^camera_\d{5,}\.json$")
+_STEM = r"(?:\d{5,}|clip\d+-IMG_\d{4,})"  # a frame, or a frame of a clip (pnlviz.synth.clip)
+_IMAGE_RE = re.compile(rf"^{_STEM}\.jpg$")
+_ANNOTATION_RE = re.compile(rf"^{_STEM}\.json$")
+_CAMERA_RE = re.compile(rf"^camera_{_STEM}\.json$")
 # Temporaries of pnlviz.data.atomic: ".<name>.<random>.tmp" next to the target.
-_TEMP_RE = re.compile(r"^\.(\d{5,}\.(jpg|json)|camera_\d{5,}\.json)\..+\.tmp$")
+_TEMP_RE = re.compile(rf"^\.({_STEM}\.(jpg|json)|camera_{_STEM}\.json)\..+\.tmp$")
 OPTIONAL_FILES = ("match_info.json",)
 
 
@@ -128,11 +129,18 @@ def make_frame(index: int, seed: int, size: tuple[int, int] = EVAL_SIZE) -> dict
             "kind": kind, "jpeg_quality": quality}
 
 
-def write_frame(out_dir: str | os.PathLike, index: int, seed: int, size: tuple[int, int] = EVAL_SIZE) -> str:
-    """Make frame ``index`` and write its three files; returns the stem."""
+def write_frame(out_dir: str | os.PathLike, index: int, seed: int, size: tuple[int, int] = EVAL_SIZE,
+                clip_frames: int | None = None) -> str:
+    """Make frame ``index`` (of the clip of ``clip_frames`` frames of ``seed``, when given) and
+    write its three files; returns the stem."""
     root = Path(out_dir)
-    frame = make_frame(index, seed, size)
-    stem = frame_stem(index)
+    if clip_frames is not None:
+        from .clip import clip_frame
+
+        frame = clip_frame(_clip_plan(seed, clip_frames, tuple(size)), index)
+    else:
+        frame = make_frame(index, seed, size)
+    stem = frame["stem"] if clip_frames is not None else frame_stem(index)
     ok, jpg = cv2.imencode(".jpg", frame["image"], [cv2.IMWRITE_JPEG_QUALITY, frame["jpeg_quality"]])
     if not ok:
         raise RuntimeError(f"JPEG encoding failed for frame {stem}")
@@ -140,6 +148,20 @@ def write_frame(out_dir: str | os.PathLike, index: int, seed: int, size: tuple[i
     atomic_write_bytes(root / f"{stem}.json", _dumps(frame["annotation"]))
     atomic_write_bytes(root / f"{stem}.jpg", jpg.tobytes())
     return stem
+
+
+_PLANS: dict = {}
+
+
+def _clip_plan(seed: int, frames: int, size: tuple[int, int]):
+    """The clip's plan, drawn once per process."""
+    from .clip import plan_clip
+
+    key = (int(seed), int(frames), tuple(size))
+    if key not in _PLANS:
+        _PLANS.clear()
+        _PLANS[key] = plan_clip(*key)
+    return _PLANS[key]
 
 
 def _worker_init() -> None:
@@ -151,8 +173,11 @@ def _worker(job: tuple) -> str:
 
 
 def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int] = EVAL_SIZE,
-             start_index: int = 0, workers: int = 1, progress: bool = True, *, force: bool = False) -> SynthSummary:
-    """Write frames ``start_index .. start_index + n - 1`` of ``seed`` into ``out_dir``.
+             start_index: int = 0, workers: int = 1, progress: bool = True, *, force: bool = False,
+             clip: bool = False) -> SynthSummary:
+    """Write frames ``start_index .. start_index + n - 1`` of ``seed`` into ``out_dir``; with
+    ``clip``, the ``n`` frames of clip ``seed`` (:mod:`pnlviz.synth.clip`: pan-tilt-zoom shots and
+    cuts, stems ``clip<seed>-IMG_<nnnn>``).
 
     ``workers > 1`` renders in that many processes (same output). Refuses a non-empty folder
     that is not a previous synthetic output unless ``force`` (see :func:`check_output_folder`).
@@ -168,7 +193,10 @@ def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int
     check_output_folder(root, force)
     (root / CAMERA_DIR).mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(root)
-    jobs = [(str(root), i, int(seed), (width, height)) for i in range(start_index, start_index + n)]
+    if clip:
+        jobs = [(str(root), i, int(seed), (width, height), n) for i in range(n)]
+    else:
+        jobs = [(str(root), i, int(seed), (width, height)) for i in range(start_index, start_index + n)]
     from tqdm import tqdm
 
     start = time.perf_counter()
