@@ -191,3 +191,46 @@ def test_calibrate_temporal_on_a_prediction_zip(tmp_path, capsys):
     clip_names = {r["temporal"]["clip"] for r in reports}
     assert clip_names == {"match3", "other"}
     assert next(r for r in reports if r["stem"] == "match3-IMG_016")["temporal"]["per_frame"] is False
+
+
+def test_a_video_file_goes_through_detect_and_calibrate(tmp_path, capsys):
+    """`pnlviz detect --video clip.mp4` reads the frames one at a time (named <video>-IMG_<n>),
+    `pnlviz calibrate --video clip.mp4 --detections ... --temporal` calibrates them as one clip at
+    the video's size; the frames decode back in order and a jump seeks."""
+    pytest.importorskip("torch")
+    import cv2
+
+    from pnlviz.cli import main
+    from pnlviz.data import read_predictions
+    from pnlviz.data.video import VideoDataset
+    from pnlviz.metrics.soccernet import read_cameras
+    from pnlviz.synth.clip import clip_frame, plan_clip
+
+    plan = plan_clip(8, 12, (480, 270), cuts=0)
+    frames = [clip_frame(plan, t)["image"] for t in range(12)]
+    video = tmp_path / "match.mp4"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 25.0, (480, 270))
+    if not writer.isOpened():
+        pytest.skip("this OpenCV build cannot write mp4")
+    for img in frames:
+        writer.write(img)
+    writer.release()
+    ds = VideoDataset(video)
+    assert len(ds) == 12 and ds.stems[0] == "match-IMG_00001" and (ds.width, ds.height) == (480, 270)
+    # decoded frames are the written ones (up to the codec's loss), in order and after a jump
+    assert np.abs(ds.image("match-IMG_00003").astype(int) - frames[2]).mean() < 12
+    assert np.abs(ds.image("match-IMG_00004").astype(int) - frames[3]).mean() < 12
+    assert np.abs(ds.image("match-IMG_00002").astype(int) - frames[1]).mean() < 12
+    preds = tmp_path / "preds.zip"
+    assert main(["detect", "--video", str(video), "--out", str(preds), "--no-progress", "--threads", "1"]) == 0
+    assert sorted(read_predictions(preds)) == list(ds.stems)
+    cams = tmp_path / "cams.zip"
+    assert main(["calibrate", "--video", str(video), "--detections", str(preds), "--temporal", "--out", str(cams),
+                 "--no-progress"]) == 0
+    said = capsys.readouterr().out
+    assert "video match.mp4 at 480x270" in said
+    got, _ = read_cameras(cams)
+    assert len(got) >= 10
+    assert main(["calibrate", "--video", str(video), "--out", str(cams)]) == 2  # --video needs --detections
+    with pytest.raises(SystemExit):
+        main(["detect", "--video", str(video), "--data", str(tmp_path), "--out", str(preds)])

@@ -29,6 +29,8 @@ def add_calibrate_parser(sub) -> None:
                                    "cameras come from the frames' line annotations.")
     p.add_argument("--data", type=Path, help="dataset folder or zip (may be left out with --detections: every "
                                              "frame of the prediction zip is then calibrated at --size)")
+    p.add_argument("--video", type=Path, help="the video the --detections were made on (pnlviz detect --video): "
+                                              "its frame size, and its images to find cuts with --temporal")
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip (default: use the annotations); "
                                                    "the calibration settings recorded beside it by pnlviz detect "
                                                    "(preds.json) apply")
@@ -215,6 +217,7 @@ def _check_outputs(args) -> None:
     from pnlviz.data import check_output, predictions_info_path
 
     inputs = [args.detections, predictions_info_path(args.detections)] if args.detections else []
+    inputs += [args.video] if getattr(args, "video", None) is not None else []
     datasets = [args.data] if args.data is not None else []
     check_output(args.out, inputs=inputs, datasets=datasets)
     if args.report:
@@ -254,14 +257,25 @@ def run_calibrate(args) -> int:
     if args.data is None and args.detections is None:
         print("error: give --data (a dataset), --detections (a prediction zip), or both", file=sys.stderr)
         return 2
+    if args.video is not None and (args.data is not None or args.detections is None):
+        print("error: --video goes with --detections (made by pnlviz detect --video), instead of --data",
+              file=sys.stderr)
+        return 2
     _check_outputs(args)
-    ds = open_input_dataset(args.data) if args.data is not None else _NoDataset()
+    if args.video is not None:
+        from pnlviz.data.video import VideoDataset
+
+        ds = VideoDataset(args.video)
+    else:
+        ds = open_input_dataset(args.data) if args.data is not None else _NoDataset()
     predictions = read_predictions(args.detections, on_error=lambda e: print_skipped([e])) if args.detections else None
     stems = _frames(ds, predictions)
     if not stems:
         print(f"{args.data or args.detections}: no frame to calibrate", file=sys.stderr)
         return 1
-    if args.data is None:
+    if args.video is not None:
+        print(f"{len(stems)} frames of {args.detections.name}, video {args.video.name} at {ds.width}x{ds.height}")
+    elif args.data is None:
         print(f"{len(stems)} frames of {args.detections.name}, calibrated at {args.size[0]}x{args.size[1]} (--size)")
     try:  # the detector's settings, recorded beside its prediction zip by pnlviz detect
         recorded, settings = _detection_settings(args)

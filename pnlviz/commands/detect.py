@@ -17,10 +17,16 @@ def add_detect_parser(sub) -> None:
                                    "PnLCalib 2D prediction zip. The published architecture takes 6-7 s per frame "
                                    "per network at 960x540 on a 2-core CPU; without weights, the light default model "
                                    "(assets/models/light.pt) takes about 50 ms.")
-    p.add_argument("--data", required=True, type=Path, help="dataset folder or zip with images")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--data", type=Path, help="dataset folder or zip with images")
+    src.add_argument("--video", type=Path, help="a video file (mp4, ...): every frame, decoded one at a time; "
+                                               "frames are named <video>-IMG_<n> (one clip for --temporal)")
     p.add_argument("--out", required=True, type=Path, help="output prediction zip")
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint (e.g. PnLCalib's SV_kp)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint (e.g. PnLCalib's SV_lines)")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="a light model (LightNet checkpoint from pnlviz train, with its .json sidecar) instead of "
+                        "the shipped default")
     p.add_argument("--input-size", type=parse_size, default=None,
                    help="network input size (default: the network's own, 960x540 for PnLCalib's networks, "
                         "480x272 for the light default model, as its sidecar says)")
@@ -44,9 +50,11 @@ def _check_outputs(args) -> None:
     if args.out.suffix.lower() != ".zip":
         raise OutputError(f"--out {args.out}", "must end in .zip (its sidecar, the .json of the same name, "
                                                "records the detector)")
-    inputs = [args.weights_kp, args.weights_lines]
-    check_output(args.out, inputs=inputs, datasets=[args.data])
-    check_output(predictions_info_path(args.out), inputs=inputs, datasets=[args.data], what="the sidecar of --out")
+    inputs = [args.weights_kp, args.weights_lines, args.weights]
+    datasets = [args.data] if args.data is not None else []
+    inputs = inputs + ([args.video] if args.video is not None else [])
+    check_output(args.out, inputs=inputs, datasets=datasets)
+    check_output(predictions_info_path(args.out), inputs=inputs, datasets=datasets, what="the sidecar of --out")
 
 
 def _load_detector(args):
@@ -54,16 +62,23 @@ def _load_detector(args):
 
     thresholds = {k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
                   if v is not None}
-    return Detector.from_weights(args.weights_kp, args.weights_lines, input_size=args.input_size, **thresholds)
+    return Detector.from_weights(args.weights_kp, args.weights_lines, light=args.weights, input_size=args.input_size,
+                                 **thresholds)
 
 
 def _sidecar(args, det, frames: int) -> dict:
     from pnlviz.detect.default import DEFAULT_MODEL
 
     weights = {"kp": args.weights_kp, "lines": args.weights_lines}
+    if args.weights is not None:
+        kind, named = "light model", str(args.weights)
+    elif any(weights.values()):
+        kind, named = "PnLCalib networks", {k: str(v) for k, v in weights.items() if v}
+    else:
+        kind, named = "light default model", str(DEFAULT_MODEL)
     return {
-        "detector": "light default model" if not any(weights.values()) else "PnLCalib networks",
-        "weights": {k: str(v) for k, v in weights.items() if v} or str(DEFAULT_MODEL),
+        "detector": kind,
+        "weights": named,
         "input_size": list(det.input_size), "kp_threshold": det.kp_threshold,
         "line_threshold": det.line_threshold, "peak_refine": det.refine,
         "calibration": det.calibration, "frames": frames,
@@ -89,10 +104,16 @@ def run_detect(args) -> int:
               file=sys.stderr)
         return 2
     _check_outputs(args)
-    ds = open_input_dataset(args.data)
+    if args.video is not None:
+        from pnlviz.data.video import VideoDataset
+
+        ds = VideoDataset(args.video)
+        print(f"{args.video.name}: {len(ds)} frames, {ds.width}x{ds.height}" + (f", {ds.fps:.2f} fps" if ds.fps else ""))
+    else:
+        ds = open_input_dataset(args.data)
     stems = [s for s in ds.stems if ds.frame(s).has_image]
     if not stems:
-        print(f"{args.data}: no images to detect on", file=sys.stderr)
+        print(f"{args.data or args.video}: no images to detect on", file=sys.stderr)
         return 1
     threads = args.threads or default_threads()
     torch.set_num_threads(threads)
@@ -102,7 +123,7 @@ def run_detect(args) -> int:
               + (f", load {load:.1f}" if load is not None else "") + "; --threads N to set)")
     try:
         det = _load_detector(args)
-    except (NoModelError, CheckpointError) as exc:
+    except (NoModelError, CheckpointError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     skipped: list[str] = []
