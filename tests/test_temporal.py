@@ -231,6 +231,21 @@ def test_a_video_file_goes_through_detect_and_calibrate(tmp_path, capsys):
     assert "video match.mp4 at 480x270" in said
     got, _ = read_cameras(cams)
     assert len(got) >= 10
+    # the overlay video: same frames, the pitch drawn where the camera puts it
+    overlay = tmp_path / "overlay.mp4"
+    assert main(["render", "--video", str(video), "--cameras", str(cams), "--out", str(overlay), "--no-progress"]) == 0
+    out = VideoDataset(overlay)
+    assert len(out) == 12 and (out.width, out.height) == (480, 270)
+    stem = sorted(got)[5]
+    drawn = out.image(out.stems[ds.stems.index(stem)]).astype(int)
+    plain = frames[ds.stems.index(stem)].astype(int)
+    from pnlviz.viz import draw_pitch
+
+    mask = draw_pitch(np.zeros((270, 480, 3), np.uint8), Camera.from_soccernet(got[stem], 960, 540),
+                      colour=(255, 255, 255), thickness=2)[:, :, 0] > 128
+    assert mask.sum() > 200
+    changed = np.abs(drawn - plain).sum(axis=2) > 60
+    assert changed[mask].mean() > 0.5 and changed[~mask].mean() < 0.05
     assert main(["calibrate", "--video", str(video), "--out", str(cams)]) == 2  # --video needs --detections
     with pytest.raises(SystemExit):
         main(["detect", "--video", str(video), "--data", str(tmp_path), "--out", str(preds)])

@@ -12,6 +12,7 @@ from pnlviz.commands.common import parse_size
 from pnlviz.commands.detect import add_detect_parser
 from pnlviz.commands.evaluate import add_eval_parser
 from pnlviz.commands.labels import add_labels_parser
+from pnlviz.commands.render import add_render_parser
 from pnlviz.commands.serve import add_export_parser, add_serve_parser
 from pnlviz.commands.sheet import add_sheet_parser
 from pnlviz.commands.synth import add_synth_parser
@@ -38,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_export_parser(sub)
     add_validate_parser(sub)
     add_sheet_parser(sub)
+    add_render_parser(sub)
     return parser
 
 
