@@ -118,3 +118,32 @@ def test_default_threads_leave_a_core_and_the_busy_ones_alone(frames, tmp_path, 
     assert main(["detect", "--data", str(frames), "--out", str(tmp_path / "p.zip"), "--threads", "-2",
                  "--no-progress"]) == 2
     assert "--threads must be 0" in capsys.readouterr().err and not (tmp_path / "p.zip").exists()
+
+
+def test_a_light_model_from_train_is_taken_with_weights(frames, tmp_path, capsys):
+    """`pnlviz detect --weights F` runs that light model (e.g. a fine-tuned one) with the settings
+    of its own sidecar: its detections are the in-process ones of that model and preds.json names
+    it; combined with PnLCalib's networks it is a clear error."""
+    from pnlviz.detect.run import DEFAULT_MODEL, light_detector
+    from pnlviz.detect.train import write_sidecar
+
+    weights = tmp_path / "mine.pt"
+    shutil.copy(DEFAULT_MODEL.with_name("light_synth.pt"), weights)
+    side = json.loads(DEFAULT_MODEL.with_name("light_synth.json").read_text())
+    side["kp_threshold"] = 0.5  # its own threshold, not the default model's
+    write_sidecar(weights, side)
+    out = tmp_path / "preds.zip"
+    assert main(["detect", "--data", str(frames), "--out", str(out), "--weights", str(weights), "--no-progress"]) == 0
+    info = read_predictions_info(out)
+    assert info["detector"] == "light model" and info["weights"] == str(weights) and info["kp_threshold"] == 0.5
+    det = light_detector(weights)
+    ds = open_dataset(frames)
+    preds = read_predictions(out)
+    for stem in ds.stems:
+        mine = det.detect([ds.image(stem)])[0]
+        assert preds[stem].keypoints.keys() == mine.keypoints.keys()
+        assert all(abs(preds[stem].keypoints[k][0] - mine.keypoints[k][0]) < 1e-6 for k in mine.keypoints)
+    capsys.readouterr()
+    assert main(["detect", "--data", str(frames), "--out", str(tmp_path / "p2.zip"), "--weights", str(weights),
+                 "--weights-kp", str(weights), "--no-progress"]) == 2
+    assert "not both" in capsys.readouterr().err

@@ -151,7 +151,9 @@ def test_train_cli_smoke(tmp_path, capsys):
 
     from pnlviz.commands.train import add_train_parser
 
-    cfg = load_config().to_dict()
+    from pnlviz.detect.train import DEFAULT_CONFIG_PATH
+
+    cfg = load_config(DEFAULT_CONFIG_PATH.with_name("light_synth_config.json")).to_dict()  # stage 1: synthetic only
     cfg["data"]["size"] = list(SMOKE_SIZE)
     cfg["input_size"] = list(SMOKE_SIZE)
     config = tmp_path / "config.json"

@@ -287,3 +287,27 @@ def test_exported_labels_train_as_corrected(tmp_path):
     moved = _peaks(kp2)
     assert abs(moved[k][0] - ours[k][0] - 6) <= 1 and abs(moved[k][1] - ours[k][1] + 4) <= 1
     assert all(moved[j] == ours[j] for j in ours if j != k)
+
+
+def test_the_shipped_recipe_names_what_it_was_trained_from(shared_dir):
+    """assets/models/light_config.json (stage 2) starts from the shipped stage-1 model, trains on the
+    WC14 train/val frames less the 30 held out (never a test frame), and the shipped sidecar
+    records exactly that start (same file hash) and those sources."""
+    import hashlib
+
+    from pnlviz.detect.default import DEFAULT_MODEL
+    from pnlviz.detect.light import read_sidecar
+    from pnlviz.detect.train import DEFAULT_CONFIG_PATH, _resolve, load_config
+
+    cfg = load_config(DEFAULT_CONFIG_PATH)
+    init = _resolve(cfg.init, cfg.base_dir)
+    side = read_sidecar(DEFAULT_MODEL)
+    assert init.is_file() and side["init"]["sha256"] == hashlib.sha256(init.read_bytes()).hexdigest()
+    real = cfg.real[0]
+    folder = _resolve(real["path"], cfg.base_dir)
+    assert folder.resolve() == (shared_dir / "data" / "wc14_real" / "trainval_300").resolve()
+    held_out = set(real["exclude"])
+    assert len(held_out) == 30
+    frames = HomographyFrames(folder, exclude=real["exclude"])
+    assert len(frames) == 179 and not held_out & set(frames.stems)
+    assert [s["frames"] for s in side["sources"]] == [cfg.frames, 179]

@@ -22,6 +22,8 @@ def add_serve_parser(sub) -> None:
     p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint: detect in the app (background)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint: detect in the app (background)")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="a light model from pnlviz train (LightNet checkpoint + sidecar) instead of the shipped one")
     p.add_argument("--no-detect", action="store_true",
                    help="do not run the light default detector (assets/models/light.pt) on frames without detections")
     p.add_argument("--host", default="127.0.0.1",
@@ -42,8 +44,8 @@ def _detector(args):
     from pnlviz.detect.default import DEFAULT_MODEL
     from pnlviz.detect.worker import DetectorProcess
 
-    if args.weights_kp or args.weights_lines:
-        return DetectorProcess(args.weights_kp, args.weights_lines, threads=args.detector_threads)
+    if args.weights_kp or args.weights_lines or args.weights:
+        return DetectorProcess(args.weights_kp, args.weights_lines, threads=args.detector_threads, light=args.weights)
     if not args.no_detect and not args.detections and DEFAULT_MODEL.is_file():
         return DetectorProcess(threads=args.detector_threads)
     return None
@@ -59,7 +61,7 @@ def run_serve(args) -> int:
 
     data = args.data or EXAMPLES_DIR / "sample"
     detector = _detector(args)
-    if detector is not None and not detector.light:
+    if detector is not None and (not detector.light or args.weights is not None):
         print("pnlviz: loading the detector's checkpoints...", flush=True)
         try:  # a checkpoint that does not fit is an error now, not on the first frame
             detector.load()

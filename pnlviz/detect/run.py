@@ -53,11 +53,17 @@ class Detector:
     calibration: dict = field(default_factory=dict)
 
     @classmethod
-    def from_weights(cls, weights_kp: Path | None, weights_lines: Path | None, **kw) -> "Detector":
-        """The published networks from their checkpoints, or with no weights the light default
-        model shipped in ``assets/models/light.pt`` (one file, both heads)."""
+    def from_weights(cls, weights_kp: Path | None, weights_lines: Path | None, *, light: Path | None = None,
+                     **kw) -> "Detector":
+        """The published networks from their checkpoints, a light model from ``light`` (a LightNet
+        checkpoint with its sidecar, e.g. one ``pnlviz train`` wrote), or with no weights the light
+        default model shipped in ``assets/models/light.pt`` (one file, both heads)."""
         if kw.get("input_size") is None:  # each network's own: 960x540, or the light model's sidecar
             kw.pop("input_size", None)
+        if light is not None:
+            if weights_kp is not None or weights_lines is not None:
+                raise ValueError("give either a light model or PnLCalib's networks, not both")
+            return light_detector(light, **kw)
         if weights_kp is None and weights_lines is None:
             if not DEFAULT_MODEL.exists():
                 raise NoModelError(f"no detector weights: pass --weights-kp and/or --weights-lines (PnLCalib's "

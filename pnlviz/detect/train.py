@@ -392,6 +392,8 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
     render_s = time.perf_counter() - t_render
     for src in sources:
         log(f"source {src.name}: {len(src)} frames, weight {src.weight:g}")
+    # recorded as given: on the command line, or as the config names it (relative to the config)
+    init_label = str(init) if init is not None else config.init
     init = init if init is not None else (str(_resolve(config.init, config.base_dir)) if config.init else None)
     net = LightNet()
     if init is not None:
@@ -405,7 +407,7 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
     net.eval()
     out.parent.mkdir(parents=True, exist_ok=True)
     save_checkpoint(net, out)
-    info = _provenance(config, sources, net, run, render_s, init)
+    info = _provenance(config, sources, net, run, render_s, init, init_label)
     write_sidecar(out, info)
     per_step = run.seconds / max(1, run.steps)
     log(f"saved {out} (+ {sidecar_path(out).name}); final loss {info['final_loss']:.6f}, "
@@ -480,7 +482,7 @@ def _train_loop(net: LightNet, sources: list[Source], config: TrainConfig, budge
 
 
 def _provenance(config: TrainConfig, sources: list[Source], net: LightNet, run: _Run, render_s: float,
-                init: str | Path | None) -> dict:
+                init: str | Path | None, init_label: str | None) -> dict:
     """The sidecar written next to the weights: what was trained, on what, how long."""
     return {
         "model": "LightNet",
@@ -495,7 +497,7 @@ def _provenance(config: TrainConfig, sources: list[Source], net: LightNet, run: 
         "data": {"generator": "pnlviz.synth.make_frame", "seed": config.data_seed, "frames": config.frames,
                  "size": list(config.size)},
         "sources": [{"name": s.name, "frames": len(s), "weight": s.weight} for s in sources],
-        "init": None if init is None else {"path": str(init), "sha256": _sha256(init)},
+        "init": None if init is None else {"path": init_label, "sha256": _sha256(init)},
         "epochs_planned": int(config.epochs),
         "epochs": round(run.epochs_done, 3),
         "steps": run.steps,

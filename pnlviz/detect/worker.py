@@ -97,7 +97,9 @@ class DetectorProcess:
                  **kw) -> None:
         self._args = (weights_kp, weights_lines, kw)
         self.threads = max(1, int(threads))
-        self.light = weights_kp is None and weights_lines is None
+        #: the light model's checkpoint (its sidecar holds the calibration settings), else None
+        self.light_weights = kw.get("light") or (DEFAULT_MODEL if weights_kp is None and weights_lines is None else None)
+        self.light = self.light_weights is not None
         self._proc = self._conn = None
         self._lock = threading.Lock()
         self._calibration: dict | None = None
@@ -111,7 +113,7 @@ class DetectorProcess:
         """The calibration settings for these detections: the light model's sidecar (read here,
         without torch), else what the child reported on :meth:`load` ({} before)."""
         if self.light:
-            return dict(read_sidecar(DEFAULT_MODEL).get("calibration") or {})
+            return dict(read_sidecar(self.light_weights).get("calibration") or {})
         return dict(self._calibration or {})
 
     def _start(self) -> None:
