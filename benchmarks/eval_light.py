@@ -1,6 +1,6 @@
 """The light default model on held-out synthetic frames and on the two real frames.
 
-    python benchmarks/eval_light.py [--frames 60] [--seed 777] [--out docs/detections_real.jpg] [--weights F]
+    python benchmarks/eval_light.py [--frames 60] [--seed 777] [--out picture.jpg] [--weights F]
 
 1. ``pnlviz synth`` frames with a seed not used in training (the training recipe uses data seed 5);
 2. detections with the default model -> PCK@5 / PCK@10 px (keypoints 1-57 of the label generator
@@ -9,7 +9,9 @@
    its annotated extremities, either order) and precision (detected lines that are such hits);
 3. ``pnlviz calibrate --detections`` with the detector's calibration settings -> JaC / CR / FS
    under the official metric against the synthetic annotations (required: FS@5 >= 0.70);
-4. a picture of what it finds on ../shared/data/frames (messi_sample.png, wc14_trainval_16.jpg).
+4. with ``--out``, a picture of what it finds on ../shared/data/frames (messi_sample.png, and
+   wc14_trainval_16.jpg, which the default model was trained on: see benchmarks/eval_real.py for
+   real frames it has not seen).
 Prints the figures and the peak memory.
 """
 
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import resource
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -93,6 +96,7 @@ def evaluate_synthetic(det: Detector, frames: int, seed: int) -> dict:
         if fc.ok:
             cams[stem] = fc.result.camera
     s = evaluate_dataset(data, cams, progress=False)
+    shutil.rmtree(tmp, ignore_errors=True)
     print(f"held-out synthetic frames: {len(ds.stems)} (seed {seed}), detection {1e3 * np.median(times):.0f} ms/frame")
     print(f"PCK@5 {hits5 / max(total, 1):.3f}  PCK@10 {hits10 / max(total, 1):.3f}  ({total} visible keypoints)")
     print(f"line extremities within 10 px: recall {line_hits / max(line_total, 1):.3f} ({line_total} true lines), "
@@ -106,7 +110,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--seed", type=int, default=777)
-    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "detections_real.jpg")
+    ap.add_argument("--out", type=Path, default=None, help="write a picture of the detections on ../shared/data/frames")
     ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
     ap.add_argument("--weights", type=Path, default=None, help=f"a LightNet checkpoint (default {DEFAULT_MODEL})")
     args = ap.parse_args()
@@ -114,7 +118,7 @@ def main() -> None:
     print(f"model: {args.weights or DEFAULT_MODEL} (input {det.input_size[0]}x{det.input_size[1]})")
     evaluate_synthetic(det, args.frames, args.seed)
     tiles = []
-    for name in ("messi_sample.png", "wc14_trainval_16.jpg"):
+    for name in ("messi_sample.png", "wc14_trainval_16.jpg") if args.out is not None else ():
         img = cv2.imread(str(args.shared / "data" / "frames" / name))
         if img is None:
             continue

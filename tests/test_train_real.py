@@ -311,3 +311,32 @@ def test_the_shipped_recipe_names_what_it_was_trained_from(shared_dir):
     frames = HomographyFrames(folder, exclude=real["exclude"])
     assert len(frames) == 179 and not held_out & set(frames.stems)
     assert [s["frames"] for s in side["sources"]] == [cfg.frames, 179]
+
+
+def test_train_cli_fine_tunes_on_exported_labels(tmp_path, capsys):
+    """`pnlviz train --init W --data DIR --labels EXPORT`: the exported labels of DIR's frames
+    replace the config's real sources, training starts from W, and the sidecar says so."""
+    from pnlviz.cli import main
+    from pnlviz.detect.checkpoint import save_checkpoint
+    from pnlviz.detect.light import LightNet
+    from pnlviz.synth import generate
+
+    data = tmp_path / "frames"
+    generate(data, 2, 43, size=SMALL, progress=False)
+    export = tmp_path / "corrected.zip"
+    assert main(["export", "--data", str(data), "--edits", str(tmp_path / "edits"), "--out", str(export), "--all"]) == 0
+    save_checkpoint(LightNet(), tmp_path / "start.pt")
+    config = tmp_path / "config.json"
+    config.write_text(json.dumps({"data": {"seed": 1, "frames": 2, "size": list(SMALL)}, "input_size": list(SMALL),
+                                  "epochs": 1, "batch_size": 2, "epoch_frames": 4, "threads": 1,
+                                  "real": [{"kind": "homography", "path": "nowhere", "weight": 3.0}]}))
+    out = tmp_path / "mine.pt"
+    capsys.readouterr()
+    assert main(["train", "--config", str(config), "--init", str(tmp_path / "start.pt"), "--data", str(data),
+                 "--labels", str(export), "--out", str(out), "--no-progress"]) == 0
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert [s["frames"] for s in side["sources"]] == [2, 2] and side["sources"][1]["name"].startswith("labels")
+    assert side["sources"][1]["weight"] == 3.0 and side["init"]["path"].endswith("start.pt")
+    assert side["steps"] == 2
+    assert main(["train", "--config", str(config), "--labels", str(export), "--out", str(out)]) == 2
+    assert "--labels needs --data" in capsys.readouterr().err
