@@ -163,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
     ap.add_argument("--synthetic", type=int, default=3, help="synthetic clips (default 3)")
     ap.add_argument("--frames", type=int, default=120, help="frames per synthetic clip (default 120)")
-    ap.add_argument("--seed", type=int, default=101, help="first synthetic clip seed (default 101)")
+    ap.add_argument("--seed", type=int, default=201, help="first synthetic clip seed (default 201)")
     ap.add_argument("--real-only", action="store_true")
     args = ap.parse_args(argv)
     import torch
