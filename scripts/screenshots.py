@@ -111,9 +111,24 @@ def three_d(page, tab) -> None:
     page.keyboard.press("v")
 
 
+def clip_calibrated(page, tab) -> None:
+    """Every frame of the clip calibrated (the background worker would get there), the panel redrawn."""
+    for i in tab.clip_members():
+        tab.state.view(tab.state.stems[i], tab.settings)
+    tab.enqueue(tab.show)
+
+
 def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", choices=("sample", "failed", "clip"), default=None, help="one session only")
+    only = ap.parse_args().only
     OUT.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp())
+    from pnlviz.synth import generate
+
+    generate(tmp / "clip", 40, 11, clip=True, progress=False)  # a synthetic video clip with a cut
     # a frame whose annotation holds two lines only: too little to calibrate
     failed = tmp / "failed"
     (failed / "cameras").mkdir(parents=True)
@@ -122,13 +137,17 @@ def main() -> None:
     (failed / "00003.json").write_text(json.dumps(dict(list(ann.items())[:2])))
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=shutil.which("chromium"), args=FLAGS)
-        session(browser, EXAMPLES_DIR / "sample", tmp / "edits", [
-            ("workspace_synthetic", "00006", select_leftmost),
-            ("workspace_wc14", "wc14_trainval_16", select_leftmost),
-            ("workspace_zoomed", "00006", zoom_on_densest),
-            ("view_3d", "00006", three_d),
-        ], detect=True)
-        session(browser, failed, tmp / "edits2", [("failed_frame", "00003", None)])
+        if only in (None, "sample"):
+            session(browser, EXAMPLES_DIR / "sample", tmp / "edits", [
+                ("workspace_synthetic", "00006", select_leftmost),
+                ("workspace_wc14", "wc14_trainval_16", select_leftmost),
+                ("workspace_zoomed", "00006", zoom_on_densest),
+                ("view_3d", "00006", three_d),
+            ], detect=True)
+        if only in (None, "failed"):
+            session(browser, failed, tmp / "edits2", [("failed_frame", "00003", None)])
+        if only in (None, "clip"):
+            session(browser, tmp / "clip", tmp / "edits3", [("workspace_clip", "clip11-IMG_0012", clip_calibrated)])
         browser.close()
     shutil.rmtree(tmp)
 

@@ -36,6 +36,7 @@ KEYS = (
     ("Delete / Backspace", "mark the selected keypoint not visible"),
     ("Escape", "clear the selection"),
     ("Ctrl+Z / Ctrl+Shift+Z", "undo / redo (saved with the edits)"),
+    ("Space", "play / pause the clip (video datasets: the Clip panel, its error strip, worst frames)"),
     ("Ctrl+K", "all commands"),
 )
 
@@ -72,6 +73,15 @@ class Panels:
             self.filter = gui.add_dropdown("filter", FILTERS, initial_value="all")
             self.sort = gui.add_dropdown("sort", SORTS, initial_value="index")
             self.filter_text = gui.add_markdown("")
+        self.clip_text = self.clip_strip = self.clip_slider = self.clip_buttons = None
+        if s.clips:  # a video: the clip timeline
+            from pnlviz.app.timeline import strip_image
+
+            with gui.add_folder("Clip"):
+                self.clip_text = gui.add_markdown("")
+                self.clip_strip = gui.add_image(strip_image([], None), format="png")
+                self.clip_slider = gui.add_slider("clip frame", min=1, max=2, step=1, initial_value=1)
+                self.clip_buttons = gui.add_button_group("clip", ("play", "pause", "worst", "next worst"))
         with gui.add_folder("Review"):
             statuses = tuple(f"{k} ({v})" for k, v in REVIEW_KEYS.items()) + ("clear",)
             self.review = gui.add_button_group("status", statuses)
@@ -142,6 +152,11 @@ class Panels:
         self.alpha.on_update(on(lambda _: s.set_alpha(self.alpha.value)))
         self.source.on_update(on(lambda _: s.set_source(self.source.value)))
         self.bridge_field.on_update(on(lambda _: s.bridge_message(self.bridge_field.value)))
+        if self.clip_slider is not None:
+            self.clip_slider.on_update(on(lambda _: s.clip_slider_moved(self.clip_slider.value)))
+            actions = {"play": s.play, "pause": s.pause, "worst": lambda: s.jump_worst(restart=True),
+                       "next worst": s.jump_worst}
+            self.clip_buttons.on_click(on(lambda e: actions.get(e.target.value, lambda: None)()))
         self._bind_keys()
 
     def _bind_keys(self) -> None:
@@ -159,6 +174,8 @@ class Panels:
                 ("selected point not visible", "delete", None, s.hide_selected),
                 ("selected point not visible ", "backspace", None, s.hide_selected),
                 ("clear the selection", "escape", None, lambda: s.select(None)))
+        if s.clips:
+            keys += (("play / pause the clip", "space", None, s.toggle_play),)
         for label, key, modifier, action in keys:
             prefix = modifier.replace("cmd/ctrl", "Ctrl").replace("+shift", "+Shift") + "+" if modifier else ""
             description = prefix + key

@@ -29,6 +29,7 @@ from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
 from pnlviz.app.panels import DRAG_MODES, FILTERS, KEYPOINT_CHOICES, LAYERS, SORTS, Panels
 from pnlviz.app.scene import OVERVIEW, Scene3D, behind_camera
 from pnlviz.app.state import REVIEW_STATES, SOURCES, AppState, EditError, FrameView, Settings
+from pnlviz.app.timeline import clip_errors, clip_index, strip_image, worst_frames
 from pnlviz.app.view2d import FOV_Y, PLANE_Z, View2D, snap
 from pnlviz.app.workspace import Workspace, WorkspaceEvents, update_changed
 from pnlviz.viz import blank_canvas
@@ -36,6 +37,7 @@ from pnlviz.viz import blank_canvas
 #: the canvas assumed until the browser reports its own (and for a session without a browser)
 DEFAULT_CANVAS = (1280, 860)
 SNAP_PX = 8.0  # screen pixels
+PLAY_INTERVAL = 0.2  # seconds between frames while a clip plays
 FOV_3D = math.radians(50.0)
 
 
@@ -138,6 +140,11 @@ class Session:
         self._nodes = "/tab" if client is not None else f"/tab/session-{id(self):x}"
         events = WorkspaceEvents(place=self._on_place, click=self._on_click, pan=self._on_pan, pick=self._on_pick,
                                  drag=self._on_drag, screen_to_pixel=self._screen_to_pixel)
+        #: the clips of a video dataset (named clips of >= 3 frames) and which clip each frame is in
+        self.clips = clip_index(st.stems)
+        self.clip_of = {i: name for name, members in self.clips.items() for i in members}
+        self._playing = False
+        self._worst = 0  # how far "next worst" has gone down the current clip's list
         self.workspace = Workspace(scene, self._nodes, events)
         self.scene3d = Scene3D(scene, self._nodes)
         self.panels = Panels(self)
@@ -787,6 +794,93 @@ class Session:
         self._show_points_list(view)
         self._show_selected()
         self.show_progress()
+        self._show_clip()
+
+    # ------------------------------------------------------------------ the clip timeline
+    def clip_members(self) -> list[int]:
+        """Dataset indices of the frames of this tab's clip, in frame order ([] outside a clip)."""
+        name = self.clip_of.get(self.index)
+        return self.clips.get(name, []) if name is not None else []
+
+    def clip_errors(self) -> list[float]:
+        views = {v.stem: v for v in self.state.cached_views(self.settings)}
+        return clip_errors(self.clip_members(), self.state.stems, views)
+
+    def _show_clip(self) -> None:
+        p = self.panels
+        members = self.clip_members()
+        if p.clip_text is None:
+            return
+        if not members:
+            update_changed(p.clip_text, content="this frame is not part of a clip")
+            return
+        pos = members.index(self.index)
+        errors = self.clip_errors()
+        e = errors[pos]
+        said = ("not calibrated yet" if np.isnan(e) else "no camera" if np.isinf(e) else f"error {e:.1f} px")
+        done = sum(not np.isnan(v) for v in errors)
+        update_changed(p.clip_text, content=f"**{self.clip_of[self.index]}**: frame {pos + 1} of {len(members)} "
+                                            f"· {said}" + ("" if done == len(members) else f" · {done} calibrated")
+                                            + (" · playing" if self._playing else ""))
+        strip = strip_image(errors, pos)
+        if p.clip_strip.image is None or not np.array_equal(p.clip_strip.image, strip):
+            p.clip_strip.image = strip
+        p.clip_slider.max = max(2, len(members))
+        self.set_value(p.clip_slider, pos + 1)
+
+    def clip_slider_moved(self, value) -> None:
+        members = self.clip_members()
+        if not members:
+            return
+        try:
+            pos = int(value) - 1
+        except (TypeError, ValueError, OverflowError):
+            pos = 0
+        pos = int(np.clip(pos, 0, len(members) - 1))
+        if members[pos] != self.index:
+            self.goto(members[pos])
+
+    def jump_worst(self, restart: bool = False) -> None:
+        """To the clip's worst frame (``restart``), else the next worse one after the last jump."""
+        members = self.clip_members()
+        ranked = worst_frames(self.clip_errors())
+        if not ranked:
+            self.notify("nothing yet", "no frame of this clip is calibrated yet", error=False)
+            return
+        self._worst = 0 if restart else (self._worst + 1) % len(ranked)
+        self.goto(members[ranked[self._worst]])
+
+    def play(self) -> None:
+        """Step through the clip, about 5 frames a second, until its end, a pause or another action."""
+        if self._playing or not self.clip_members():
+            return
+        self._playing = True
+        threading.Thread(target=self._play_loop, name="pnlviz-play", daemon=True).start()
+
+    def pause(self) -> None:
+        self._playing = False
+        self._show_clip()
+
+    def toggle_play(self) -> None:
+        self.pause() if self._playing else self.play()
+
+    def _play_loop(self) -> None:
+        while self._playing and not self._closed:
+            t0 = time.monotonic()
+            done = threading.Event()
+
+            def advance() -> None:
+                members = self.clip_members()
+                if not members or self.index == members[-1] or not self._playing:
+                    self._playing = False
+                    self._show_clip()
+                else:
+                    self.goto(members[members.index(self.index) + 1])
+                done.set()
+
+            self.enqueue(advance)
+            done.wait(5.0)
+            time.sleep(max(0.0, PLAY_INTERVAL - (time.monotonic() - t0)))
 
     def _status_line(self, view: FrameView) -> str:
         st = self.state
@@ -871,4 +965,4 @@ class Session:
         self._queue.shutdown(wait=wait)
 
 
-__all__ = ["Session", "calibration_card", "keypoint_name"]
+__all__ = ["PLAY_INTERVAL", "Session", "calibration_card", "keypoint_name"]

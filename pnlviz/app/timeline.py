@@ -1,0 +1,82 @@
+"""The clip timeline of the app (no GUI here): which frames form a clip, each frame's calibration
+error, the error strip drawn under the frame slider, and the worst frames to jump to.
+
+A dataset is a video when its stems name clips (``<clip>-IMG_<n>``, see
+:func:`pnlviz.data.layout.clip_key`): a named clip of at least three frames. Plain numbered
+frames (``00001``) are separate pictures, not a clip.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from pnlviz.data.layout import clips
+
+__all__ = ["MIN_CLIP", "STRIP_SCALE_PX", "clip_index", "frame_error", "strip_image", "worst_frames"]
+
+MIN_CLIP = 3
+#: the error (px) drawn fully red in the strip
+STRIP_SCALE_PX = 10.0
+
+
+def clip_index(stems: Sequence[str]) -> dict[str, list[int]]:
+    """``{clip: [dataset indices in frame order]}`` of the named clips of at least
+    :data:`MIN_CLIP` frames."""
+    pos = {s: i for i, s in enumerate(stems)}
+    return {name: [pos[s] for s in members] for name, members in clips(stems).items()
+            if name and len(members) >= MIN_CLIP}
+
+
+def frame_error(view) -> float:
+    """A frame's calibration error for the strip: the median residual (px) of its keypoints and
+    lines under its camera; ``inf`` when it has no camera, NaN when it is not calibrated yet
+    (``view`` None)."""
+    if view is None:
+        return float("nan")
+    result = view.result
+    if result is None or not result.ok:
+        return float("inf")
+    r = list(result.point_residuals.values()) + list(result.line_residuals.values())
+    return float(np.median(r)) if r else 0.0
+
+
+def strip_image(errors: Sequence[float], current: int | None, width: int = 320, height: int = 26,
+                scale: float = STRIP_SCALE_PX) -> np.ndarray:
+    """An RGB strip, one band per frame in order: green (0 px) through yellow to red (``scale`` px
+    and more), dark red for no camera, grey for not calibrated yet; the current frame framed in
+    white."""
+    e = np.asarray(errors, float)
+    n = max(len(e), 1)
+    img = np.zeros((height, width, 3), np.uint8)
+    edges = np.linspace(0, width, n + 1).round().astype(int)
+    for i, v in enumerate(e):
+        if np.isnan(v):
+            colour = (90, 90, 90)
+        elif np.isinf(v):
+            colour = (120, 0, 0)
+        else:
+            t = float(np.clip(v / scale, 0.0, 1.0))
+            colour = (int(255 * min(1.0, 2 * t)), int(255 * min(1.0, 2 * (1 - t))), 40)
+        a, b = edges[i], max(edges[i + 1], edges[i] + 1)
+        img[3:height - 3, a:b] = colour
+    if current is not None and 0 <= current < n:
+        a, b = edges[current], max(edges[current + 1], edges[current] + 1)
+        img[:, max(0, a - 1):min(width, b + 1)][[0, 1, 2, -3, -2, -1]] = 255
+        img[:, max(0, a - 1)] = 255
+        img[:, min(width - 1, b)] = 255
+    return img
+
+
+def worst_frames(errors: Sequence[float], k: int | None = None) -> list[int]:
+    """Positions of the frames by decreasing error (no camera first; not calibrated yet left out)."""
+    e = np.asarray(errors, float)
+    known = [i for i in range(len(e)) if not np.isnan(e[i])]
+    known.sort(key=lambda i: (-e[i], i))
+    return known if k is None else known[:k]
+
+
+def clip_errors(members: Sequence[int], stems: Sequence[str], views: Mapping[str, object]) -> list[float]:
+    """:func:`frame_error` of each member (dataset indices) from ``{stem: view}``."""
+    return [frame_error(views.get(stems[i])) for i in members]

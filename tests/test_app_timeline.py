@@ -1,0 +1,106 @@
+"""The clip timeline (issue #14): a video dataset's frames form clips; the strip shows each frame's
+error; the worst frames are one click away; play steps through the clip and stops at its end."""
+
+import time
+
+import numpy as np
+import pytest
+
+from pnlviz.app.state import AppState
+from pnlviz.app.timeline import clip_index, frame_error, strip_image, worst_frames
+
+
+def test_clips_are_named_runs_of_frames_and_plain_numbers_are_not():
+    stems = ["b-IMG_2", "a-IMG_10", "a-IMG_9", "b-IMG_1", "b-IMG_3", "a-IMG_11", "00001", "00002", "00003"]
+    clips = clip_index(stems)
+    assert list(clips) == ["a", "b"]
+    assert [stems[i] for i in clips["a"]] == ["a-IMG_9", "a-IMG_10", "a-IMG_11"]
+    assert clip_index(["x-IMG_1", "x-IMG_2"]) == {}  # too short to be a clip
+
+
+def test_the_strip_colours_each_frame_by_its_error_and_frames_the_current_one():
+    errors = [0.0, 2.0, 10.0, float("inf"), float("nan")]
+    img = strip_image(errors, current=1, width=100, height=20)
+    mid = img[10]
+    centre = [mid[10], mid[30], mid[50], mid[70], mid[90]]
+    assert centre[0][1] > 200 and centre[0][0] < 10  # green: 0 px
+    assert centre[2][0] > 200 and centre[2][1] < 10  # red: 10 px and more
+    assert tuple(centre[3]) == (120, 0, 0) and tuple(centre[4]) == (90, 90, 90)  # no camera / not yet
+    assert (img[0, 20:40] == 255).all() and not (img[0, 60:80] == 255).all()  # the current frame framed
+    assert worst_frames(errors) == [3, 2, 1, 0] and worst_frames(errors, 2) == [3, 2]
+    assert np.isnan(frame_error(None))
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture()
+def clip_data(tmp_path):
+    from pnlviz.synth import generate
+
+    d = tmp_path / "clip"
+    generate(d, 8, 3, size=(320, 180), clip=True, progress=False)
+    generate(d, 2, 1, size=(320, 180), progress=False, force=True)  # two plain frames beside the clip
+    return d
+
+
+def test_the_app_shows_the_clip_timeline_jumps_to_the_worst_and_plays(clip_data):
+    from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.session import PLAY_INTERVAL
+
+    st = AppState(clip_data)
+    app = PnlvizApp(st, port=_free_port())
+    try:
+        tab = app.session()
+        first = st.find("clip3-IMG_0001")
+        tab.goto(first)
+        assert tab.clip_members()[0] == first and len(tab.clip_members()) == 8
+        for i in tab.clip_members():  # calibrate the clip (the background worker would, in time)
+            st.view(st.stems[i], tab.settings)
+        tab.show()
+        p = tab.panels
+        assert "frame 1 of 8" in p.clip_text.content and "error" in p.clip_text.content
+        assert p.clip_strip.image.shape == (26, 320, 3) and p.clip_slider.value == 1
+        errors = tab.clip_errors()
+        assert not any(np.isnan(errors))
+        tab.jump_worst(restart=True)
+        assert tab.index == tab.clip_members()[int(np.argmax(errors))]
+        tab.jump_worst()
+        second = sorted(range(8), key=lambda i: (-errors[i], i))[1]
+        assert tab.index == tab.clip_members()[second]
+        tab.clip_slider_moved(3)
+        assert tab.stem == "clip3-IMG_0003" and "frame 3 of 8" in p.clip_text.content
+        tab.play()
+        deadline = time.monotonic() + 30 * PLAY_INTERVAL + 20
+        while tab._playing and time.monotonic() < deadline:
+            time.sleep(0.05)
+        tab.flush()
+        assert not tab._playing and tab.stem == "clip3-IMG_0008"  # played to the end and stopped
+        tab.goto(st.find("00000"))
+        assert "not part of a clip" in p.clip_text.content
+        tab.play()
+        assert not tab._playing  # nothing to play outside a clip
+    finally:
+        app.stop()
+        st.close()
+
+
+def test_a_dataset_without_clips_has_no_clip_panel(tmp_path):
+    from pnlviz.app.server import PnlvizApp
+    from pnlviz.synth import generate
+
+    generate(tmp_path / "frames", 3, 2, size=(320, 180), progress=False)
+    st = AppState(tmp_path / "frames")
+    app = PnlvizApp(st, port=_free_port())
+    try:
+        tab = app.session()
+        assert tab.clips == {} and tab.panels.clip_text is None
+        tab.show()
+    finally:
+        app.stop()
+        st.close()
