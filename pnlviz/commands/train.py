@@ -82,28 +82,9 @@ def run_train(args) -> int:
     if args.init is not None and not args.init.is_file():
         print(f"error: --init {args.init}: no such file", file=sys.stderr)
         return 2
-    if args.data:
-        missing = [d for d in args.data if not d.exists()]
-        if missing:
-            print(f"error: --data {missing[0]}: no such folder or file", file=sys.stderr)
-            return 2
-        share = sum(float(r.get("weight", 1.0)) for r in config.real) or 1.0
-        weight = args.data_weight if args.data_weight is not None else share / len(args.data)
-        if weight <= 0:
-            print("error: --data-weight must be > 0", file=sys.stderr)
-            return 2
-        if args.labels is not None:
-            if len(args.data) != 1:
-                print("error: --labels goes with exactly one --data (the dataset the labels were made on)",
-                      file=sys.stderr)
-                return 2
-            config.real = [{"kind": "labels", "path": str(args.labels.resolve()), "images": str(args.data[0].resolve()),
-                            "weight": weight}]
-        else:
-            config.real = [{"kind": "homography" if (d / "homographies.json").is_file() else "soccernet",
-                            "path": str(d.resolve()), "weight": weight} for d in args.data]
-    elif args.labels is not None:
-        print("error: --labels needs --data (the dataset the labels were made on)", file=sys.stderr)
+    problem = _apply_data_args(args, config)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     try:
         result = train(config, args.out, minutes=args.minutes, progress=not args.no_progress, cache_dir=args.cache,
@@ -119,3 +100,26 @@ def run_train(args) -> int:
 
 def _same_file(a: Path, b: Path) -> bool:
     return Path(a).expanduser().resolve() == Path(b).resolve()
+
+
+def _apply_data_args(args, config) -> str | None:
+    """``--data`` / ``--labels`` / ``--data-weight``: the config's real sources replaced by them;
+    the problem with them, if any."""
+    if not args.data:
+        return "--labels needs --data (the dataset the labels were made on)" if args.labels is not None else None
+    missing = [d for d in args.data if not d.exists()]
+    if missing:
+        return f"--data {missing[0]}: no such folder or file"
+    share = sum(float(r.get("weight", 1.0)) for r in config.real) or 1.0
+    weight = args.data_weight if args.data_weight is not None else share / len(args.data)
+    if weight <= 0:
+        return "--data-weight must be > 0"
+    if args.labels is not None:
+        if len(args.data) != 1:
+            return "--labels goes with exactly one --data (the dataset the labels were made on)"
+        config.real = [{"kind": "labels", "path": str(args.labels.resolve()), "images": str(args.data[0].resolve()),
+                        "weight": weight}]
+    else:
+        config.real = [{"kind": "homography" if (d / "homographies.json").is_file() else "soccernet",
+                        "path": str(d.resolve()), "weight": weight} for d in args.data]
+    return None

@@ -1,6 +1,8 @@
-"""Training :class:`pnlviz.detect.light.LightNet` on synthetic frames (issue #5).
+"""Training :class:`pnlviz.detect.light.LightNet` on synthetic frames (issue #5), mixed with real
+ones (issue #13: :func:`build_sources`, :mod:`pnlviz.detect.train_data`; an epoch draws from each
+source by its weight, :func:`epoch_plan`), optionally from given weights (``init``).
 
-Data: frames ``0 .. frames - 1`` of ``pnlviz.synth.make_frame(i, data_seed, size)`` are rendered once
+Synthetic data: frames ``0 .. frames - 1`` of ``pnlviz.synth.make_frame(i, data_seed, size)`` are rendered once
 (JPEG round trip at the frame's own quality, like the written datasets) and kept in memory as
 uint8 images plus their annotations; optionally also in a cache folder (``cache_dir``) so a second
 run skips the rendering. Heatmap targets and their loss masks come from
@@ -136,7 +138,7 @@ class Source:
     """One source of training frames, its share of an epoch and its augmentation overrides."""
 
     name: str
-    frames: object  # FrameCache | HomographyFrames | AnnotatedFrames
+    frames: object  # FrameCache | HomographyFrames | AnnotatedFrames | ExportedFrames
     weight: float
     augment: dict
 
@@ -156,11 +158,7 @@ def build_sources(config: TrainConfig, *, cache: "FrameCache | None" = None, cac
       made on, "exclude", "weight", "augment"}``.
     """
     base = dict(config.augment or {})
-    sources: list[Source] = []
-    if cache is None and config.frames > 0:
-        cache = FrameCache(config.frames, config.data_seed, tuple(config.size), cache_dir, progress)
-    if cache is not None and len(cache):
-        sources.append(Source(f"synthetic seed {config.data_seed}", cache, float(config.data_weight), base))
+    real: list[Source] = []  # read first: a bad path fails before minutes of rendering
     for k, entry in enumerate(config.real or []):
         entry = dict(entry)
         kind = entry.get("kind")
@@ -180,8 +178,14 @@ def build_sources(config: TrainConfig, *, cache: "FrameCache | None" = None, cac
             frames = ExportedFrames(path, _resolve(entry["images"], config.base_dir), exclude=exclude)
         else:
             raise ValueError(f"real source {k}: unknown kind {kind!r} (homography, soccernet or labels)")
-        sources.append(Source(f"{kind} {entry['path']}", frames, float(entry.get("weight", 1.0)),
-                              {**base, **dict(entry.get("augment", {}))}))
+        real.append(Source(f"{kind} {entry['path']}", frames, float(entry.get("weight", 1.0)),
+                           {**base, **dict(entry.get("augment", {}))}))
+    sources: list[Source] = []
+    if cache is None and config.frames > 0:
+        cache = FrameCache(config.frames, config.data_seed, tuple(config.size), cache_dir, progress)
+    if cache is not None and len(cache):
+        sources.append(Source(f"synthetic seed {config.data_seed}", cache, float(config.data_weight), base))
+    sources += real
     if not sources:
         raise ValueError("no training frames")
     if any(s.weight <= 0 for s in sources):
