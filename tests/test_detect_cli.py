@@ -147,3 +147,22 @@ def test_a_light_model_from_train_is_taken_with_weights(frames, tmp_path, capsys
     assert main(["detect", "--data", str(frames), "--out", str(tmp_path / "p2.zip"), "--weights", str(weights),
                  "--weights-kp", str(weights), "--no-progress"]) == 2
     assert "not both" in capsys.readouterr().err
+
+
+def test_device_is_chosen_or_clearly_refused(frames, tmp_path, capsys):
+    """--device cpu / auto run here (no GPU: auto is the CPU, recorded in preds.json); cuda is a
+    one-line error naming why; an unknown device too."""
+    out = tmp_path / "preds.zip"
+    assert main(["detect", "--data", str(frames), "--out", str(out), "--device", "auto", "--no-progress",
+                 "--threads", "1"]) == 0
+    expected = "cuda" if torch.cuda.is_available() else "cpu"
+    assert read_predictions_info(out)["device"] == expected
+    if not torch.cuda.is_available():
+        capsys.readouterr()
+        assert main(["detect", "--data", str(frames), "--out", str(tmp_path / "p2.zip"), "--device", "cuda",
+                     "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert "no CUDA GPU" in err and "--device cpu or auto" in err and "Traceback" not in err
+    assert main(["detect", "--data", str(frames), "--out", str(tmp_path / "p3.zip"), "--device", "tpu",
+                 "--no-progress"]) == 2
+    assert "expected cpu, cuda" in capsys.readouterr().err

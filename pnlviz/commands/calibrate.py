@@ -46,6 +46,9 @@ def add_calibrate_parser(sub) -> None:
                    help="video: group the frames into clips by their stems (<clip>-IMG_<n>, <clip>_frame<n>, ...), "
                         "cut clips into shots and fit one broadcast camera per shot (fixed centre and k1, smooth "
                         "pan/tilt/roll/zoom); frames with too few keypoints get their camera from the shot")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run: frames already in --out (or in the progress a killed run "
+                        "left beside it) are kept, only the missing ones are calibrated")
     p.add_argument("--workers", type=int, default=1, help="worker processes (0: all cores)")
     p.add_argument("--report", type=Path, help="also write one JSON line per frame with the evidence")
     p.add_argument("--no-progress", action="store_true")
@@ -250,7 +253,7 @@ def run_calibrate(args) -> int:
 
     from tqdm import tqdm
 
-    from pnlviz.commands.common import open_input_dataset, print_skipped
+    from pnlviz.commands.common import open_input_dataset, previous_run, print_skipped
     from pnlviz.data import DataError, LineStream, ZipStream, predictions_info_path, read_predictions
     from pnlviz.data.cameras import camera_member, camera_zip_order
 
@@ -285,24 +288,35 @@ def run_calibrate(args) -> int:
     if recorded:
         print(f"calibration settings of the detector ({predictions_info_path(args.detections).name}): "
               + ", ".join(f"{k}={v}" for k, v in recorded.items()))
+    if args.resume and args.temporal:
+        print("error: --resume does not go with --temporal (a shot is fitted from all its frames at once)",
+              file=sys.stderr)
+        return 2
+    done = previous_run(args.out, args.resume)
+    kept = {f"camera_{s}.json": done[f"camera_{s}.json"] for s in stems if f"camera_{s}.json" in done}
+    todo = [s for s in stems if f"camera_{s}.json" not in kept]
+    if args.resume:
+        print(f"resuming: {len(kept)} of {len(stems)} frames already in {args.out.name}, {len(todo)} to calibrate")
     job = _Worker(ds, predictions, args.size, settings)
     workers = (os.cpu_count() or 1) if args.workers == 0 else max(1, args.workers)
     order = {s: i for i, s in enumerate(stems)}
     failures: list[tuple[str, str]] = []  # (code, message) of the frames without a camera
     interrupted = False
     t0 = time.perf_counter()
-    bar = tqdm(total=len(stems), desc="calibrate", unit="frame", disable=args.no_progress or None)
+    bar = tqdm(total=len(todo), desc="calibrate", unit="frame", disable=args.no_progress or None)
     with contextlib.ExitStack() as stack:
-        cams = stack.enter_context(ZipStream(args.out, key=camera_zip_order))
+        cams = stack.enter_context(ZipStream(args.out, key=camera_zip_order, journal=True))
+        for name, text in kept.items():  # what the interrupted run finished
+            cams.add(name, text)
         reports = stack.enter_context(LineStream(args.report)) if args.report else None
         pool = None
         if workers == 1:
-            results = map(job, stems)
+            results = map(job, todo)
         else:
             import multiprocessing as mp
 
             pool = stack.enter_context(mp.get_context("spawn").Pool(workers, initializer=_ignore_sigint))
-            results = pool.imap_unordered(job, stems, chunksize=8)
+            results = pool.imap_unordered(job, todo, chunksize=8)
         try:
             if args.temporal:  # every frame first, then the clips' shots, then written
                 per_frame = {}
@@ -310,9 +324,9 @@ def run_calibrate(args) -> int:
                     per_frame[stem] = (cam, report)
                     bar.update()
                 bar.close()
-                done = temporal_pass(ds, predictions, args.size, settings, stems, per_frame,
-                                     progress=not args.no_progress)
-                results = ((s, *done[s]) for s in stems)
+                fitted = temporal_pass(ds, predictions, args.size, settings, stems, per_frame,
+                                       progress=not args.no_progress)
+                results = ((s, *fitted[s]) for s in stems)
                 bar = tqdm(total=len(stems), desc="write", unit="frame", disable=args.no_progress or None)
             for stem, cam, report in results:
                 if cam is not None:
@@ -334,7 +348,7 @@ def run_calibrate(args) -> int:
         print(f"interrupted: kept {len(cams)} of {len(stems)} frames in {args.out}", file=sys.stderr)
         return 130
     print(f"calibrated {len(cams)}/{len(stems)} frames in {elapsed:.1f} s "
-          f"({1e3 * elapsed / len(stems):.1f} ms/frame with {workers} worker(s)) -> {args.out}")
+          f"({1e3 * elapsed / max(1, len(todo)):.1f} ms/frame with {workers} worker(s)) -> {args.out}")
     for code, n in Counter(code for code, _ in failures).most_common():
         example = next(message for c, message in failures if c == code)
         print(f"  {n:5d} not calibrated: {FAILURE_LABELS.get(code, code)}" + (f" (e.g. {example})" if n > 1 else f" ({example})"))

@@ -35,9 +35,14 @@ def add_detect_parser(sub) -> None:
     p.add_argument("--line-threshold", type=float, default=None,
                    help="line heatmap threshold (default 0.1; the light default model: its sidecar's)")
     p.add_argument("--batch", type=int, default=1, help="frames per forward pass")
+    p.add_argument("--device", default="cpu", help="where the networks run: cpu (default), cuda, cuda:N, or auto "
+                                                   "(a GPU if torch sees one)")
     p.add_argument("--threads", type=int, default=0,
                    help="torch CPU threads (default: the idle cores less one, at least 1; more threads than "
                         "free cores makes torch wait for itself: 5-9x slower)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run: frames already in --out (or in the progress a killed run "
+                        "left beside it) are kept, only the missing ones are detected")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_detect)
 
@@ -62,8 +67,10 @@ def _load_detector(args):
 
     thresholds = {k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
                   if v is not None}
+    from pnlviz.detect.run import resolve_device
+
     return Detector.from_weights(args.weights_kp, args.weights_lines, light=args.weights, input_size=args.input_size,
-                                 **thresholds)
+                                 device=resolve_device(args.device), **thresholds)
 
 
 def _sidecar(args, det, frames: int) -> dict:
@@ -79,7 +86,7 @@ def _sidecar(args, det, frames: int) -> dict:
     return {
         "detector": kind,
         "weights": named,
-        "input_size": list(det.input_size), "kp_threshold": det.kp_threshold,
+        "input_size": list(det.input_size), "device": det.device, "kp_threshold": det.kp_threshold,
         "line_threshold": det.line_threshold, "peak_refine": det.refine,
         "calibration": det.calibration, "frames": frames,
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -92,7 +99,7 @@ def run_detect(args) -> int:
     import torch
     from tqdm import tqdm
 
-    from pnlviz.commands.common import open_input_dataset, print_skipped
+    from pnlviz.commands.common import open_input_dataset, previous_run, print_skipped
     from pnlviz.data import DataError, ZipStream, write_predictions_info
     from pnlviz.data.predictions import prediction_member, prediction_zip_order
     from pnlviz.detect.checkpoint import CheckpointError
@@ -115,6 +122,11 @@ def run_detect(args) -> int:
     if not stems:
         print(f"{args.data or args.video}: no images to detect on", file=sys.stderr)
         return 1
+    done = previous_run(args.out, args.resume)
+    kept = {f"{s}.json": done[f"{s}.json"] for s in stems if f"{s}.json" in done}
+    all_stems, stems = stems, [s for s in stems if f"{s}.json" not in kept]
+    if args.resume:
+        print(f"resuming: {len(kept)} of {len(all_stems)} frames already in {args.out.name}, {len(stems)} to detect")
     threads = args.threads or default_threads()
     torch.set_num_threads(threads)
     if not args.threads:
@@ -131,7 +143,9 @@ def run_detect(args) -> int:
     step = max(1, args.batch)
     t0 = time.perf_counter()
     bar = tqdm(total=len(stems), desc="detect", unit="frame", disable=args.no_progress or None)
-    with ZipStream(args.out, key=prediction_zip_order) as preds:
+    with ZipStream(args.out, key=prediction_zip_order, journal=True) as preds:
+        for name, text in kept.items():  # what the interrupted run finished
+            preds.add(name, text)
         try:
             for i in range(0, len(stems), step):
                 batch, images = [], []
@@ -153,9 +167,9 @@ def run_detect(args) -> int:
     dt = time.perf_counter() - t0
     write_predictions_info(args.out, _sidecar(args, det, len(preds)))
     if interrupted:
-        print(f"interrupted: kept {len(preds)} of {len(stems)} frames in {args.out}", file=sys.stderr)
+        print(f"interrupted: kept {len(preds)} of {len(all_stems)} frames in {args.out}", file=sys.stderr)
         return 130
-    print(f"detected {len(preds)}/{len(stems)} frames in {dt:.1f} s ({1e3 * dt / max(1, len(stems)):.0f} ms/frame) "
+    print(f"detected {len(preds)}/{len(all_stems)} frames in {dt:.1f} s ({1e3 * dt / max(1, len(stems)):.0f} ms/frame) "
           f"-> {args.out}")
     print_skipped(skipped, prefix="  skipped: ")
     if not len(preds):

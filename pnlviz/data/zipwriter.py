@@ -6,11 +6,19 @@ whenever it exists under its name, and an interrupted batch keeps what it comput
 :class:`LineStream` a text file of one line per result. With a sort ``key``, results that came
 out of order are put in order when the file is closed (the zip is rewritten member by member
 with the same timestamps), so the bytes do not depend on the order of arrival.
+
+Resuming: with ``journal=True`` each member is also appended, as one JSON line, to a journal
+beside the output (``.<name>.partial``), flushed at once, and the journal is removed when the
+zip is in place. A run killed outright (no chance to close) leaves the journal; a run stopped by
+Ctrl+C closes its zip. Either way :func:`resume_members` gives back what was done (the members of
+the output zip, then those of the journal), for a command's ``--resume`` to skip.
 """
 
 from __future__ import annotations
 
+import base64
 import contextlib
+import json
 import os
 import tempfile
 import zipfile
@@ -21,7 +29,44 @@ from typing import IO, Any
 from .errors import DataError, member_source
 from .reading import is_utf8
 
-__all__ = ["ZipStream", "LineStream"]
+__all__ = ["ZipStream", "LineStream", "journal_path", "resume_members"]
+
+
+def journal_path(path: str | os.PathLike) -> Path:
+    """Where a :class:`ZipStream` with ``journal=True`` records its members as they are written."""
+    p = Path(path)
+    return p.with_name(f".{p.name}.partial")
+
+
+def resume_members(path: str | os.PathLike) -> dict[str, str | bytes]:
+    """What an earlier run of a batch writing ``path`` completed: the members of the zip at
+    ``path`` (when it is one), then those of its journal (a torn last line, from a kill in the
+    middle of a write, is ignored). ``{}`` when there is neither."""
+    done: dict[str, str | bytes] = {}
+    p = Path(path)
+    if p.is_file():
+        try:
+            with zipfile.ZipFile(p) as z:
+                for info in z.infolist():
+                    data = z.read(info)
+                    try:
+                        done[info.filename] = data.decode("utf-8")
+                    except UnicodeDecodeError:
+                        done[info.filename] = data
+        except (zipfile.BadZipFile, OSError) as exc:
+            raise DataError(os.fspath(p), f"cannot resume from it: not a readable zip ({exc})") from None
+    j = journal_path(p)
+    if j.is_file():
+        with open(j, encoding="utf-8", errors="replace") as f:
+            for line in f:
+                try:
+                    rec = json.loads(line)
+                    name = rec["name"]
+                    data = rec["text"] if "text" in rec else base64.b64decode(rec["bytes"])
+                except (ValueError, KeyError, TypeError):
+                    continue  # the line a kill cut short
+                done[name] = data
+    return done
 
 
 class _TempOutput:
@@ -86,12 +131,16 @@ class ZipStream(_TempOutput):
     (the default; for batches) instead of discarding it.
     """
 
-    def __init__(self, path: str | os.PathLike, key: Callable[[str], Any] | None = None, keep_partial: bool = True):
+    def __init__(self, path: str | os.PathLike, key: Callable[[str], Any] | None = None, keep_partial: bool = True,
+                 journal: bool = False):
         super().__init__(path, keep_partial)
         self.key = key
         self.names: list[str] = []
         self._seen: set[str] = set()
         self._zip = zipfile.ZipFile(self._tmp, "w", compression=zipfile.ZIP_DEFLATED)
+        self._journal: IO[str] | None = None
+        if journal:  # a fresh record: a resumed run adds the members it takes over again
+            self._journal = open(journal_path(self.path), "w", encoding="utf-8")
 
     def __len__(self) -> int:
         return len(self.names)
@@ -107,6 +156,18 @@ class ZipStream(_TempOutput):
         self._zip.writestr(name, data)
         self.names.append(name)
         self._seen.add(name)
+        if self._journal is not None:
+            rec = {"name": name, "text": data} if isinstance(data, str) else \
+                {"name": name, "bytes": base64.b64encode(data).decode("ascii")}
+            self._journal.write(json.dumps(rec) + "\n")
+            self._journal.flush()
+
+    def _end_journal(self) -> None:
+        if self._journal is not None:
+            self._journal.close()
+            self._journal = None
+            with contextlib.suppress(OSError):
+                os.unlink(journal_path(self.path))
 
     def close(self) -> Path:
         """Finish the zip, put its members in ``key`` order, and move it over ``path``."""
@@ -114,6 +175,7 @@ class ZipStream(_TempOutput):
         if self.key is not None and self.names != sorted(self.names, key=self.key):
             self._reorder()
         self._commit()
+        self._end_journal()  # only once the zip holds everything it recorded
         return self.path
 
     def _reorder(self) -> None:
@@ -131,9 +193,12 @@ class ZipStream(_TempOutput):
             raise
 
     def discard(self) -> None:
-        """Drop everything written; ``path`` is left as it was."""
+        """Drop everything written; ``path`` is left as it was (and the journal, if any, kept)."""
         with contextlib.suppress(Exception):
             self._zip.close()
+        if self._journal is not None:
+            self._journal.close()
+            self._journal = None
         self._remove_temp()
         self.closed = True
 

@@ -51,6 +51,14 @@ class Detector:
     #: :class:`pnlviz.calib.calibrate.CalibParams` overrides for calibrating from these detections
     #: (``pnlviz detect`` writes them next to its prediction zip; the app applies them).
     calibration: dict = field(default_factory=dict)
+    #: where the networks run: "cpu" or a CUDA device ("cuda", "cuda:1"); see :func:`resolve_device`
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if self.device != "cpu":
+            for net in (self.kp_net, self.line_net):
+                if net is not None:
+                    net.to(self.device)
 
     @classmethod
     def from_weights(cls, weights_kp: Path | None, weights_lines: Path | None, *, light: Path | None = None,
@@ -88,14 +96,14 @@ class Detector:
         W, H = self.input_size
         batch = [cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA if img.shape[1] > W else cv2.INTER_LINEAR)
                  [:, :, ::-1].astype(np.float32) / 255.0 for img in images_bgr]
-        return torch.from_numpy(np.stack(batch)).permute(0, 3, 1, 2).contiguous()
+        return torch.from_numpy(np.stack(batch)).permute(0, 3, 1, 2).contiguous().to(self.device)
 
     @torch.inference_mode()
     def heatmaps(self, images_bgr: list[np.ndarray]) -> tuple[np.ndarray | None, np.ndarray | None]:
         """(B, 58, H/2, W/2) keypoint and (B, 24, H/2, W/2) line heatmaps of a batch."""
         x = self._tensor(images_bgr)
-        kp = self.kp_net(x).numpy() if self.kp_net is not None else None
-        lines = self.line_net(x).numpy() if self.line_net is not None else None
+        kp = self.kp_net(x).cpu().numpy() if self.kp_net is not None else None
+        lines = self.line_net(x).cpu().numpy() if self.line_net is not None else None
         return kp, lines
 
     def detect(self, images_bgr: list[np.ndarray]) -> list[Predictions]:
@@ -110,6 +118,30 @@ class Detector:
                 pred = undo_centre_aligned_resize(pred, self.input_size, (img.shape[1], img.shape[0]))
             out.append(pred)
         return out
+
+
+class DeviceError(ValueError):
+    """A device was asked for that this machine does not have."""
+
+
+def resolve_device(name: str) -> str:
+    """``"cpu"``, ``"cuda"`` / ``"cuda:N"`` (an error when torch sees no such GPU), or ``"auto"``
+    (the first GPU if there is one, else the CPU)."""
+    name = str(name).strip().lower()
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cpu":
+        return "cpu"
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise DeviceError(f"--device {name}: torch sees no CUDA GPU here (torch {torch.__version__}, "
+                              f"{'a CPU-only build' if torch.version.cuda is None else 'CUDA ' + torch.version.cuda}); "
+                              f"use --device cpu or auto")
+        index = int(name.split(":")[1]) if ":" in name else 0
+        if index >= torch.cuda.device_count():
+            raise DeviceError(f"--device {name}: only {torch.cuda.device_count()} CUDA device(s) here")
+        return name
+    raise DeviceError(f"--device {name}: expected cpu, cuda, cuda:N or auto")
 
 
 def undo_centre_aligned_resize(pred: Predictions, input_size, frame_size) -> Predictions:
