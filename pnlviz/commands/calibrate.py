@@ -51,6 +51,9 @@ def add_calibrate_parser(sub) -> None:
                         "left beside it) are kept, only the missing ones are calibrated")
     p.add_argument("--workers", type=int, default=1, help="worker processes (0: all cores)")
     p.add_argument("--report", type=Path, help="also write one JSON line per frame with the evidence")
+    from pnlviz.commands.cluster import add_cluster_args
+
+    add_cluster_args(p)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_calibrate)
 
@@ -208,6 +211,15 @@ class _Worker:
         return calibrate_stem(self.ds, stem, pred, self.size, self.settings)
 
 
+def _calibrate_chunk(job: "_Worker", stems: list[str]) -> list:
+    """One cluster task: the frames ``stems`` (the worker opens the dataset where it is)."""
+    return [job(stem) for stem in stems]
+
+
+def _failed_on_cluster(stem: str, message: str) -> tuple:
+    return stem, None, {"stem": stem, "failure": message, "failure_code": "internal"}
+
+
 def _ignore_sigint() -> None:
     """Pool workers leave Ctrl+C to the main process, which keeps what was computed."""
     import signal
@@ -310,7 +322,13 @@ def run_calibrate(args) -> int:
             cams.add(name, text)
         reports = stack.enter_context(LineStream(args.report)) if args.report else None
         pool = None
-        if workers == 1:
+        from pnlviz.commands.cluster import cluster_client, map_on_cluster
+
+        client = stack.enter_context(cluster_client(args))
+        if client is not None:
+            workers = len(client.scheduler_info().get("workers", {}))
+            results = map_on_cluster(client, _calibrate_chunk, job, todo, args.chunk, _failed_on_cluster)
+        elif workers == 1:
             results = map(job, todo)
         else:
             import multiprocessing as mp
@@ -348,7 +366,8 @@ def run_calibrate(args) -> int:
         print(f"interrupted: kept {len(cams)} of {len(stems)} frames in {args.out}", file=sys.stderr)
         return 130
     print(f"calibrated {len(cams)}/{len(stems)} frames in {elapsed:.1f} s "
-          f"({1e3 * elapsed / max(1, len(todo)):.1f} ms/frame with {workers} worker(s)) -> {args.out}")
+          f"({1e3 * elapsed / max(1, len(todo)):.1f} ms/frame with {workers} worker(s)"
+          + (" on the dask cluster" if args.dask is not None or args.scheduler is not None else "") + f") -> {args.out}")
     for code, n in Counter(code for code, _ in failures).most_common():
         example = next(message for c, message in failures if c == code)
         print(f"  {n:5d} not calibrated: {FAILURE_LABELS.get(code, code)}" + (f" (e.g. {example})" if n > 1 else f" ({example})"))

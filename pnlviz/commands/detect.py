@@ -3,8 +3,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -44,6 +46,9 @@ def add_detect_parser(sub) -> None:
                    help="continue an interrupted run: frames already in --out (or in the progress a killed run "
                         "left beside it) are kept, only the missing ones are detected")
     p.add_argument("--no-progress", action="store_true")
+    from pnlviz.commands.cluster import add_cluster_args
+
+    add_cluster_args(p)
     p.set_defaults(func=run_detect)
 
 
@@ -62,15 +67,75 @@ def _check_outputs(args) -> None:
     check_output(predictions_info_path(args.out), inputs=inputs, datasets=datasets, what="the sidecar of --out")
 
 
+def _detector_kwargs(args) -> dict:
+    """What :meth:`pnlviz.detect.run.Detector.from_weights` is called with (here and on cluster workers)."""
+    from pnlviz.detect.run import resolve_device
+
+    kw = {"weights_kp": args.weights_kp, "weights_lines": args.weights_lines, "light": args.weights,
+          "input_size": args.input_size, "device": resolve_device(args.device)}
+    kw.update({k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
+               if v is not None})
+    return kw
+
+
 def _load_detector(args):
     from pnlviz.detect.run import Detector
 
-    thresholds = {k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
-                  if v is not None}
-    from pnlviz.detect.run import resolve_device
+    kw = _detector_kwargs(args)
+    return Detector.from_weights(kw.pop("weights_kp"), kw.pop("weights_lines"), **kw)
 
-    return Detector.from_weights(args.weights_kp, args.weights_lines, light=args.weights, input_size=args.input_size,
-                                 device=resolve_device(args.device), **thresholds)
+
+def _detect_here(ds, det, stems: list[str], step: int):
+    """``(stem, Predictions | None, problem | None)`` of every frame, ``step`` frames per pass."""
+    from pnlviz.data import DataError
+
+    for i in range(0, len(stems), step):
+        batch, images = [], []
+        for stem in stems[i:i + step]:
+            try:
+                images.append(ds.image(stem))
+                batch.append(stem)
+            except DataError as exc:
+                yield stem, None, str(exc)
+        yield from ((stem, p, None) for stem, p in zip(batch, det.detect(images) if images else []))
+
+
+@dataclass
+class _DetectJob:
+    """What a cluster worker needs to detect frames: where the data is, how to build the detector."""
+
+    source: str
+    video: bool
+    detector: dict
+    batch: int
+
+
+_WORKER_DETECTORS: dict = {}  # on a cluster worker: the detector, built once per process
+
+
+def _detect_chunk(job: _DetectJob, stems: list[str]) -> list:
+    """One cluster task: the frames ``stems`` read where they are and detected on this worker."""
+    import torch
+
+    from pnlviz.data import open_dataset
+    from pnlviz.detect.run import Detector
+
+    key = repr(sorted(job.detector.items()))
+    if key not in _WORKER_DETECTORS:
+        torch.set_num_threads(1)  # one thread per worker process: the cluster's processes are its parallelism
+        kw = dict(job.detector)
+        _WORKER_DETECTORS.clear()
+        _WORKER_DETECTORS[key] = Detector.from_weights(kw.pop("weights_kp"), kw.pop("weights_lines"), **kw)
+    if job.video:
+        from pnlviz.data.video import VideoDataset
+
+        ds = VideoDataset(job.source)
+    else:
+        ds = open_dataset(job.source)
+    try:
+        return list(_detect_here(ds, _WORKER_DETECTORS[key], stems, job.batch))
+    finally:
+        ds.close()
 
 
 def _sidecar(args, det, frames: int) -> dict:
@@ -143,24 +208,28 @@ def run_detect(args) -> int:
     step = max(1, args.batch)
     t0 = time.perf_counter()
     bar = tqdm(total=len(stems), desc="detect", unit="frame", disable=args.no_progress or None)
-    with ZipStream(args.out, key=prediction_zip_order, journal=True) as preds:
+    from pnlviz.commands.cluster import cluster_client, map_on_cluster
+
+    with contextlib.ExitStack() as stack:
+        preds = stack.enter_context(ZipStream(args.out, key=prediction_zip_order, journal=True))
         for name, text in kept.items():  # what the interrupted run finished
             preds.add(name, text)
+        client = stack.enter_context(cluster_client(args))
+        if client is not None:
+            job = _DetectJob(str(args.video or args.data), args.video is not None, _detector_kwargs(args), step)
+            results = map_on_cluster(client, _detect_chunk, job, stems, args.chunk, lambda s, m: (s, None, m))
+        else:
+            results = _detect_here(ds, det, stems, step)
         try:
-            for i in range(0, len(stems), step):
-                batch, images = [], []
-                for stem in stems[i:i + step]:
-                    try:
-                        images.append(ds.image(stem))
-                        batch.append(stem)
-                    except DataError as exc:
-                        skipped.append(str(exc))
-                for stem, p in zip(batch, det.detect(images) if images else []):
+            for stem, p, problem in results:
+                if p is not None:
                     try:  # written at once: an interrupted or failing batch keeps it
                         preds.add(*prediction_member(stem, p, args.out))
                     except DataError as exc:
-                        skipped.append(str(exc))
-                bar.update(len(stems[i:i + step]))
+                        problem = str(exc)
+                if problem is not None:
+                    skipped.append(problem)
+                bar.update()
         except KeyboardInterrupt:
             interrupted = True
         bar.close()

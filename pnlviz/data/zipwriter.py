@@ -5,7 +5,8 @@ whenever it exists under its name, and an interrupted batch keeps what it comput
 :class:`ZipStream` writes a zip (deflated members, as :meth:`zipfile.ZipFile.writestr` does) and
 :class:`LineStream` a text file of one line per result. With a sort ``key``, results that came
 out of order are put in order when the file is closed (the zip is rewritten member by member
-with the same timestamps), so the bytes do not depend on the order of arrival.
+with the same timestamps), so the bytes do not depend on the order of arrival; members carry a fixed timestamp
+(:data:`MEMBER_DATE`), so the same results make the same bytes, run here, resumed or on a cluster.
 
 Resuming: with ``journal=True`` each member is also appended, as one JSON line, to a journal
 beside the output (``.<name>.partial``), flushed at once, and the journal is removed when the
@@ -29,7 +30,10 @@ from typing import IO, Any
 from .errors import DataError, member_source
 from .reading import is_utf8
 
-__all__ = ["ZipStream", "LineStream", "journal_path", "resume_members"]
+__all__ = ["MEMBER_DATE", "ZipStream", "LineStream", "journal_path", "resume_members"]
+
+#: every member's timestamp: the same results give the same bytes, whatever ran them and when
+MEMBER_DATE = (1980, 1, 1, 0, 0, 0)
 
 
 def journal_path(path: str | os.PathLike) -> Path:
@@ -153,7 +157,9 @@ class ZipStream(_TempOutput):
             raise DataError(source, "member name is not valid UTF-8: not written")
         if name in self._seen:
             raise DataError(source, "written twice: the second copy is dropped")
-        self._zip.writestr(name, data)
+        info = zipfile.ZipInfo(name, date_time=MEMBER_DATE)
+        info.compress_type, info.external_attr = zipfile.ZIP_DEFLATED, 0o644 << 16
+        self._zip.writestr(info, data)
         self.names.append(name)
         self._seen.add(name)
         if self._journal is not None:

@@ -1,0 +1,84 @@
+"""Batches on a dask cluster (issue #15): the same bytes as a local run, a lost worker costs
+nothing but time."""
+
+import os
+import signal
+import threading
+import time
+import zipfile
+
+import pytest
+
+distributed = pytest.importorskip("distributed")
+
+from pnlviz.cli import main  # noqa: E402
+from pnlviz.data.zipwriter import journal_path  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                  silence_logs=40) as c, distributed.Client(c) as client:
+        yield c, client
+
+
+def test_calibrate_on_the_cluster_writes_the_local_bytes(tmp_path, shared_dir, cluster):
+    gt = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
+    local, remote = tmp_path / "local.zip", tmp_path / "remote.zip"
+    assert main(["calibrate", "--data", str(gt), "--out", str(local), "--no-progress"]) == 0
+    assert main(["calibrate", "--data", str(gt), "--out", str(remote), "--no-progress",
+                 "--scheduler", cluster[0].scheduler_address, "--chunk", "40"]) == 0
+    assert remote.read_bytes() == local.read_bytes()
+
+
+def test_detect_on_the_cluster_writes_the_local_bytes(tmp_path, cluster):
+    pytest.importorskip("torch")
+    import shutil
+
+    from pnlviz import EXAMPLES_DIR
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for p in sorted((EXAMPLES_DIR / "sample").glob("0000*.jpg"))[:6]:
+        shutil.copy(p, frames / p.name)
+    local, remote = tmp_path / "local.zip", tmp_path / "remote.zip"
+    assert main(["detect", "--data", str(frames), "--out", str(local), "--no-progress", "--threads", "1"]) == 0
+    assert main(["detect", "--data", str(frames), "--out", str(remote), "--no-progress",
+                 "--scheduler", cluster[0].scheduler_address, "--chunk", "2"]) == 0
+    assert remote.read_bytes() == local.read_bytes()
+
+
+def test_a_worker_killed_mid_run_loses_no_frame(tmp_path, shared_dir):
+    """One of two workers is killed (SIGKILL) once the first results are in: its tasks are redone
+    elsewhere and the output is the local run's, frame for frame."""
+    gt = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
+    local, remote = tmp_path / "local.zip", tmp_path / "remote.zip"
+    assert main(["calibrate", "--data", str(gt), "--out", str(local), "--no-progress"]) == 0
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                  silence_logs=50) as c, distributed.Client(c) as client:
+        pids = list(client.run(os.getpid).values())
+        codes = []
+        run = threading.Thread(target=lambda: codes.append(main(
+            ["calibrate", "--data", str(gt), "--out", str(remote), "--no-progress", "--scheduler", c.scheduler_address,
+             "--chunk", "10"])))
+        run.start()
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            j = journal_path(remote)
+            if j.is_file() and j.read_text().count("\n") >= 10:
+                break
+            time.sleep(0.05)
+        os.kill(pids[0], signal.SIGKILL)
+        run.join(timeout=300)
+        assert codes == [0]
+        assert pids[0] not in client.run(os.getpid).values()  # that worker is gone (its nanny started another)
+    with zipfile.ZipFile(local) as a, zipfile.ZipFile(remote) as b:
+        assert a.namelist() == b.namelist() and all(a.read(n) == b.read(n) for n in a.namelist())
+
+
+def test_cluster_options_fail_clearly(tmp_path, shared_dir, capsys):
+    gt = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
+    with pytest.raises(SystemExit, match="cannot connect"):
+        main(["calibrate", "--data", str(gt), "--out", str(tmp_path / "c.zip"), "--scheduler", "tcp://127.0.0.1:1"])
+    with pytest.raises(SystemExit, match="--chunk must be"):
+        main(["calibrate", "--data", str(gt), "--out", str(tmp_path / "c.zip"), "--dask", "1", "--chunk", "0"])
