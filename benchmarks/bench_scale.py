@@ -1,0 +1,121 @@
+"""Scale: a 23,000-frame SN23-sized dataset calibrated on 1 and 2 workers, and the light detector
+on 1,000 frames on 1 and 2 workers.
+
+    python benchmarks/bench_scale.py [--frames 23000] [--detect 1000] [--skip-detect]
+
+* Calibration from labels: a zip of ``--frames`` SoccerNet annotations (the 400 real SN22 test
+  annotations of ``../shared/data/sn22_test_subset`` repeated under new stems; no images needed),
+  ``pnlviz calibrate`` locally (one process) and with ``--scheduler`` on a local dask cluster of 2
+  worker processes. Prints wall time, frames/s, speed-up, and peak memory: of the local process,
+  of the command's process and of each worker on the cluster. The two outputs are compared byte
+  for byte.
+* Detection: ``--detect`` frames (the bundled sample's images, linked under new stems),
+  ``pnlviz detect --threads 1`` locally and on the 2-worker cluster (1 torch thread per worker).
+
+All on this machine: the 2 workers share its 2 cores with the command itself.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _peak_mb_children() -> float:
+    return resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+
+
+def _run(cmd: list[str]) -> tuple[float, str]:
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed:\n{r.stderr}")
+    return time.perf_counter() - t0, r.stdout
+
+
+def _worker_peaks(client) -> list[float]:
+    return sorted(round(v / 1024) for v in client.run(
+        lambda: __import__("resource").getrusage(__import__("resource").RUSAGE_SELF).ru_maxrss).values())
+
+
+def build_annotations(src: Path, n: int, out: Path) -> None:
+    with zipfile.ZipFile(src) as z:
+        texts = [z.read(name) for name in sorted(z.namelist()) if name.endswith(".json")]
+    with zipfile.ZipFile(out, "w", compression=zipfile.ZIP_STORED) as dst:
+        for i in range(n):
+            dst.writestr(f"{i:05d}.json", texts[i % len(texts)])
+
+
+def build_images(n: int, out: Path) -> None:
+    from pnlviz import EXAMPLES_DIR
+
+    images = sorted((EXAMPLES_DIR / "sample").glob("0*.jpg"))
+    out.mkdir()
+    for i in range(n):
+        os.symlink(images[i % len(images)], out / f"{i:05d}.jpg")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
+    ap.add_argument("--frames", type=int, default=23000)
+    ap.add_argument("--detect", type=int, default=1000)
+    ap.add_argument("--skip-detect", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        import distributed
+    except ImportError:
+        print('bench_scale needs dask: pip install -e ".[dask]"', file=sys.stderr)
+        return 2
+    src = args.shared / "data" / "sn22_test_subset" / "annotations.zip"
+    tmp = Path(tempfile.mkdtemp())
+    pnlviz = [sys.executable, "-m", "pnlviz"]
+    try:
+        data = tmp / "sn23_sized.zip"
+        build_annotations(src, args.frames, data)
+        print(f"dataset: {args.frames} annotations ({data.stat().st_size / 2**20:.0f} MiB zip), no images")
+        t1, _ = _run(pnlviz + ["calibrate", "--data", str(data), "--out", str(tmp / "c1.zip"), "--no-progress"])
+        local_peak = _peak_mb_children()
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                      silence_logs=50) as c, distributed.Client(c) as client:
+            t2, _ = _run(pnlviz + ["calibrate", "--data", str(data), "--out", str(tmp / "c2.zip"), "--no-progress",
+                                   "--scheduler", c.scheduler_address, "--chunk", "64"])
+            workers = _worker_peaks(client)
+            same = (tmp / "c1.zip").read_bytes() == (tmp / "c2.zip").read_bytes()
+            print("| calibrate (from labels) | wall (s) | frames/s | speed-up | peak memory |")
+            print("|---|---|---|---|---|")
+            print(f"| 1 process | {t1:.0f} | {args.frames / t1:.0f} | 1.00 | {local_peak:.0f} MB |")
+            print(f"| 2 dask workers | {t2:.0f} | {args.frames / t2:.0f} | {t1 / t2:.2f} | "
+                  f"{' and '.join(f'{w} MB' for w in workers)} per worker |")
+            print(f"outputs identical byte for byte: {same}")
+            if not args.skip_detect:
+                frames = tmp / "frames"
+                build_images(args.detect, frames)
+                d1, _ = _run(pnlviz + ["detect", "--data", str(frames), "--out", str(tmp / "d1.zip"), "--no-progress",
+                                       "--threads", "1"])
+                d2, _ = _run(pnlviz + ["detect", "--data", str(frames), "--out", str(tmp / "d2.zip"), "--no-progress",
+                                       "--scheduler", c.scheduler_address, "--chunk", "25"])
+                workers = _worker_peaks(client)
+                same = (tmp / "d1.zip").read_bytes() == (tmp / "d2.zip").read_bytes()
+                print("| detect (light model, 960x540 frames) | wall (s) | frames/s | speed-up |")
+                print("|---|---|---|---|")
+                print(f"| 1 process, 1 thread | {d1:.0f} | {args.detect / d1:.1f} | 1.00 |")
+                print(f"| 2 dask workers, 1 thread each | {d2:.0f} | {args.detect / d2:.1f} | {d1 / d2:.2f} |")
+                print(f"outputs identical byte for byte: {same}; worker peaks {workers} MB")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
