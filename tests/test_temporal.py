@@ -250,3 +250,30 @@ def test_a_video_file_goes_through_detect_and_calibrate(tmp_path, capsys):
     assert main(["calibrate", "--video", str(video), "--out", str(cams)]) == 2  # --video needs --detections
     with pytest.raises(SystemExit):
         main(["detect", "--video", str(video), "--data", str(tmp_path), "--out", str(preds)])
+
+
+def test_the_jacobian_groups_share_no_row_and_match_plain_differences():
+    from pnlviz.calib.temporal import _flatten, _jacobian, _Model
+
+    _, obs = _shot(7, np.array([5.0, 58.0, -16.0]), seed=12)
+    cams = _per_frame(obs)
+    m = _Model(_flatten(obs, load_field_model()), 7, (W, H), TemporalParams())
+    from pnlviz.calib.temporal import _initial
+
+    C, k1, per = _initial(cams, 7)
+    x = np.concatenate([C, [k1], per.ravel()])
+    S = m.sparsity().tocsc()
+    groups = m.column_groups()
+    assert sorted(np.concatenate(groups).tolist()) == list(range(S.shape[1]))
+    for g in groups:
+        rows = [set(S.indices[S.indptr[c]:S.indptr[c + 1]]) for c in g]
+        assert sum(len(r) for r in rows) == len(set().union(*rows))  # disjoint
+    r0 = m.residuals(x)
+    J = _jacobian(m.residuals, x, r0, S, groups).toarray()
+    plain = np.empty_like(J)
+    for c in range(len(x)):  # one column at a time
+        xh = x.copy()
+        h = 1.5e-8 * max(1.0, abs(x[c]))
+        xh[c] += h
+        plain[:, c] = (m.residuals(xh) - r0) / h
+    assert np.allclose(J, plain, atol=1e-6 * np.abs(plain).max())

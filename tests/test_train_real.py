@@ -16,8 +16,7 @@ from pnlviz.detect.train_data import (AnnotatedFrames, ExportedFrames, Homograph
                                       clip_annotation, draw_view)
 from pnlviz.labels import LabelParams, keypoints_from_annotation, training_targets  # noqa: E402
 from pnlviz.labels.from_homography import (NON_PLANAR_KEYPOINT_IDS, NON_PLANAR_LINE_IDS,  # noqa: E402
-                                           annotation_from_homography, homography_for_size,
-                                           homography_training_targets, labels_from_homography)
+                                           annotation_from_homography, homography_for_size, labels_from_homography)
 
 SMALL = (160, 96)
 

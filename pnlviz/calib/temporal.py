@@ -16,17 +16,18 @@ too few keypoints). Here, per shot:
   (within ``start_outlier_px``; all of a frame that has none), then the ones the shot's camera agrees
   with, until that set stops changing (outlier detections, wrong ids, outlier frames); and a
   soft-L1 loss on every residual (``robust``, in units of the residual's scale);
-* **solved jointly** by sparse least squares (``scipy.optimize.least_squares`` with the Jacobian's
-  sparsity: each frame's parameters touch only its own residuals and three prior rows), warm
-  started from the per-frame cameras (centre and k1: their medians; frames without a camera:
-  interpolated from their neighbours), each frame's camera moved to that centre keeping its view.
+* **solved jointly** by robust Levenberg-Marquardt on the whole shot (:func:`_solve`: the Jacobian
+  by finite differences over column groups, since each frame's parameters touch only its own
+  residuals and three prior rows; the normal equations are small), warm started from the
+  per-frame cameras (centre and k1: their medians; each frame's camera moved to that centre
+  keeping its view; frames without a camera interpolated from their neighbours).
 
 Frames with fewer keypoints than a per-frame calibration needs still get a camera: their own
 observations and the prior place them. Everything here is pure (numpy / scipy, no I/O).
 
 :func:`segment_shots` finds the cuts: a large image change between consecutive frames (when the
-caller measured one, see :func:`image_change`), or per-frame cameras whose centres disagree
-(a different camera position).
+caller measured one, see :func:`image_change`), or per-frame cameras whose centres and views
+jump (a different camera position), confirmed by the next frame.
 """
 
 from __future__ import annotations
@@ -65,7 +66,8 @@ class TemporalParams:
     start_outlier_px: float = 30.0
     #: fit k1 for the shot (off for detectors whose calibration settings say ``refine_k1: false``)
     fit_k1: bool = True
-    #: a weak prior on k1: its expected size (broadcast lenses: |k1| of a few hundredths)
+    #: a weak prior on k1 (its scale): it only keeps k1 from running away on a shot that does not
+    #: determine it (broadcast lenses have |k1| of a few hundredths)
     k1_sigma: float = 0.3
     #: consecutive per-frame centres farther apart than this (metres) make a cut (per-frame centres
     #: scatter by 1-2 m within a shot; a missed cut costs far more than a false one)
@@ -205,6 +207,18 @@ class _Model:
         k1 = [x[3] / self.params.k1_sigma] if self.params.fit_k1 else []
         return np.concatenate([r_kp.ravel() / self.params.noise_px, r_ln / self.params.noise_px, acc.ravel(), k1])
 
+    def column_groups(self) -> list[np.ndarray]:
+        """Columns that share no row, to be differentiated together: each shared parameter alone;
+        a per-frame parameter with the same parameter of every third frame (frames t and t + 1
+        or t + 2 share a prior row, t and t + 3 do not)."""
+        groups = [np.array([c]) for c in ([0, 1, 2, 3] if self.params.fit_k1 else [0, 1, 2])]
+        for j in range(4):
+            for phase in range(3):
+                cols = 4 + 4 * np.arange(phase, self.T, 3) + j
+                if len(cols):
+                    groups.append(cols)
+        return groups
+
     def sparsity(self) -> scipy.sparse.csr_matrix:
         d, T = self.d, self.T
         n_kp, n_ln, n_acc = 2 * len(d.kp_t), len(d.ln_t), 4 * max(T - 2, 0)
@@ -300,6 +314,25 @@ def _cameras(x: np.ndarray, model: _Model, size: tuple[float, float]) -> list[Ca
     return out
 
 
+def _jacobian(fun, x: np.ndarray, r0: np.ndarray, sparsity: scipy.sparse.csc_matrix,
+              groups: list[np.ndarray]) -> scipy.sparse.csr_matrix:
+    """Forward differences, one evaluation per group of columns with disjoint rows (the sparsity
+    pattern says which rows each column touches)."""
+    rows, cols, vals = [], [], []
+    for group in groups:
+        h = 1.5e-8 * np.maximum(1.0, np.abs(x[group]))
+        xh = x.copy()
+        xh[group] += h
+        diff = fun(xh) - r0
+        for c, hc in zip(group, h):
+            rr = sparsity.indices[sparsity.indptr[c]:sparsity.indptr[c + 1]]
+            rows.append(rr)
+            cols.append(np.full(len(rr), c))
+            vals.append(diff[rr] / hc)
+    return scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                   shape=sparsity.shape)
+
+
 @dataclass
 class _Solution:
     x: np.ndarray
@@ -316,10 +349,8 @@ def _solve(m: _Model, x: np.ndarray, params: TemporalParams) -> _Solution:
     (4 per frame + 4 columns), so each step is one dense solve. (scipy's iterative trust-region
     solver needed hundreds of steps on the narrow valley that couples the centre's depth with the
     focal length; its exact one decomposes the whole Jacobian and is slow on long shots.)"""
-    from scipy.optimize._numdiff import approx_derivative, group_columns
-
-    sparsity = m.sparsity()
-    groups = group_columns(sparsity)
+    sparsity = m.sparsity().tocsc()
+    groups = m.column_groups()
     s2 = params.robust ** 2
 
     def cost_of(r: np.ndarray) -> float:  # scipy's soft_l1 cost: 0.5 s^2 sum 2 (sqrt(1 + (r/s)^2) - 1)
@@ -328,8 +359,8 @@ def _solve(m: _Model, x: np.ndarray, params: TemporalParams) -> _Solution:
     r = m.residuals(x)
     cost, nfev, lam = cost_of(r), 1, 1e-3
     for _ in range(params.max_iterations):
-        J = approx_derivative(m.residuals, x, method="2-point", sparsity=(sparsity, groups), f0=r)
-        nfev += len(np.unique(groups))
+        J = _jacobian(m.residuals, x, r, sparsity, groups)
+        nfev += len(groups)
         w = 1.0 / np.sqrt(1.0 + r * r / s2)
         Jw = scipy.sparse.diags(np.sqrt(w)) @ J
         A = (Jw.T @ Jw).toarray()

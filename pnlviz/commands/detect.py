@@ -67,21 +67,27 @@ def _check_outputs(args) -> None:
     check_output(predictions_info_path(args.out), inputs=inputs, datasets=datasets, what="the sidecar of --out")
 
 
-def _detector_kwargs(args) -> dict:
-    """What :meth:`pnlviz.detect.run.Detector.from_weights` is called with (here and on cluster workers)."""
-    from pnlviz.detect.run import resolve_device
+def _on_cluster(args) -> bool:
+    return getattr(args, "dask", None) is not None or getattr(args, "scheduler", None) is not None
 
+
+def _detector_kwargs(args) -> dict:
+    """What :meth:`pnlviz.detect.run.Detector.from_weights` is called with (here and on cluster
+    workers); ``device`` as asked: each process resolves it where the networks run."""
     kw = {"weights_kp": args.weights_kp, "weights_lines": args.weights_lines, "light": args.weights,
-          "input_size": args.input_size, "device": resolve_device(args.device)}
+          "input_size": args.input_size, "device": args.device}
     kw.update({k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
                if v is not None})
     return kw
 
 
 def _load_detector(args):
-    from pnlviz.detect.run import Detector
+    """The detector of this run, in this process. On a cluster the workers run the networks on the
+    device asked for; this copy (on the CPU) only states the settings."""
+    from pnlviz.detect.run import Detector, resolve_device
 
     kw = _detector_kwargs(args)
+    kw["device"] = "cpu" if _on_cluster(args) else resolve_device(kw["device"])
     return Detector.from_weights(kw.pop("weights_kp"), kw.pop("weights_lines"), **kw)
 
 
@@ -118,12 +124,13 @@ def _detect_chunk(job: _DetectJob, stems: list[str]) -> list:
     import torch
 
     from pnlviz.data import open_dataset
-    from pnlviz.detect.run import Detector
+    from pnlviz.detect.run import Detector, resolve_device
 
     key = repr(sorted(job.detector.items()))
     if key not in _WORKER_DETECTORS:
         torch.set_num_threads(1)  # one thread per worker process: the cluster's processes are its parallelism
         kw = dict(job.detector)
+        kw["device"] = resolve_device(kw["device"])  # this worker's GPU, or a clear error from it
         _WORKER_DETECTORS.clear()
         _WORKER_DETECTORS[key] = Detector.from_weights(kw.pop("weights_kp"), kw.pop("weights_lines"), **kw)
     if job.video:
@@ -151,7 +158,8 @@ def _sidecar(args, det, frames: int) -> dict:
     return {
         "detector": kind,
         "weights": named,
-        "input_size": list(det.input_size), "device": det.device, "kp_threshold": det.kp_threshold,
+        "input_size": list(det.input_size), "device": args.device if _on_cluster(args) else det.device,
+        "kp_threshold": det.kp_threshold,
         "line_threshold": det.line_threshold, "peak_refine": det.refine,
         "calibration": det.calibration, "frames": frames,
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),

@@ -31,7 +31,7 @@ from pnlviz.field.model import FieldModel
 from pnlviz.field.names import CLASS_TO_LINE_ID, STRAIGHT_CLASSES
 
 from .catalogue import NETWORK_KEYPOINT_IDS, get_catalogue
-from .heatmaps import N_KEYPOINT_CHANNELS, N_LINE_CHANNELS, HeatmapTargets, heatmap_targets
+from .heatmaps import N_KEYPOINT_CHANNELS, N_LINE_CHANNELS, heatmap_targets
 from .leftright import LRDecision, lr_decision
 from .types import KeypointLabel, KeypointLabels, LineExtremities
 
@@ -41,7 +41,7 @@ __all__ = ["HomographyLabels", "NON_PLANAR_KEYPOINT_IDS", "NON_PLANAR_LINE_IDS",
 #: WC14 / TS-WorldCup homographies are given for 1280 x 720 frames.
 WC14_SIZE = (1280, 720)
 
-#: Sample spacing (metres) along ground lines for the boundary channel and annotations.
+#: Sample spacing (metres) along the circles written by :func:`annotation_from_homography`.
 _SPACING = 1.0
 
 
