@@ -851,7 +851,8 @@ class Session:
         self.goto(members[ranked[self._worst]])
 
     def play(self) -> None:
-        """Step through the clip, about 5 frames a second, until its end, a pause or another action."""
+        """Step through the clip, about 5 frames a second, until its end or a pause (navigating meanwhile
+        moves where it plays from)."""
         if self._playing or not self.clip_members():
             return
         self._playing = True
