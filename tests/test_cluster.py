@@ -82,3 +82,20 @@ def test_cluster_options_fail_clearly(tmp_path, shared_dir, capsys):
         main(["calibrate", "--data", str(gt), "--out", str(tmp_path / "c.zip"), "--scheduler", "tcp://127.0.0.1:1"])
     with pytest.raises(SystemExit, match="--chunk must be"):
         main(["calibrate", "--data", str(gt), "--out", str(tmp_path / "c.zip"), "--dask", "1", "--chunk", "0"])
+
+
+def test_labels_on_the_cluster_write_the_local_files_and_resume(tmp_path, shared_dir, cluster, capsys):
+    gt = shared_dir / "data" / "wc14_test_half" / "annotations.zip"
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    assert main(["labels", "--data", str(gt), "--out", str(local)]) == 0
+    assert main(["labels", "--data", str(gt), "--out", str(remote), "--scheduler", cluster[0].scheduler_address,
+                 "--chunk", "10"]) == 0
+    names = sorted(p.name for p in local.glob("*.json"))
+    assert len(names) == 93 and names == sorted(p.name for p in remote.glob("*.json"))
+    assert all((local / n).read_bytes() == (remote / n).read_bytes() for n in names)
+    for n in names[:50]:  # as if the run had stopped after 43 frames
+        (remote / n).unlink()
+    capsys.readouterr()
+    assert main(["labels", "--data", str(gt), "--out", str(remote), "--resume"]) == 0
+    assert "resuming: 43 frames already labelled" in capsys.readouterr().out
+    assert all((local / n).read_bytes() == (remote / n).read_bytes() for n in names)

@@ -53,6 +53,14 @@ def _label_one(stem: str) -> tuple[str, str, object]:
         return stem, "failed", f"{stem}: labels failed: {type(exc).__name__}: {exc}"
 
 
+def _label_chunk(spec: tuple, stems: list[str]) -> list:
+    """One cluster task: ``spec`` = (dataset, out folder, size, params); the worker writes the label
+    files into the out folder itself (which it must reach: a shared filesystem) and returns only
+    the status of each frame."""
+    _init_worker(*spec)
+    return [_label_one(stem) for stem in stems]
+
+
 # ------------------------------------------------------------------------------- argparse
 def add_labels_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
@@ -71,6 +79,11 @@ def add_labels_parser(subparsers) -> argparse.ArgumentParser:
                    help="left-right disambiguation: mirror views along the long axis looking towards -x "
                         "(for training labels; off by default)")
     p.add_argument("--workers", type=int, default=1, help="worker processes (default 1; 0 = all cores)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run: frames whose label file is already in --out are kept")
+    from pnlviz.commands.cluster import add_cluster_args
+
+    add_cluster_args(p)
     p.set_defaults(func=run_labels)
     return p
 
@@ -99,6 +112,11 @@ def run_labels(args) -> int:
     size = tuple(getattr(args, "size", None) or DEFAULT_SIZE)
     workers = int(getattr(args, "workers", 1) or 0) or (os.cpu_count() or 1)
     stems = list(ds.stems)
+    if getattr(args, "resume", False):  # label files are written whole (atomically): one there is done
+        done = {p.stem for p in out_dir.glob("*.json")}
+        kept = [s for s in stems if s in done]
+        stems = [s for s in stems if s not in done]
+        print(f"resuming: {len(kept)} frames already labelled in {out_dir}, {len(stems)} to go")
 
     totals: Counter[str] = Counter()
     visible: Counter[str] = Counter()
@@ -125,8 +143,16 @@ def run_labels(args) -> int:
             tqdm.write(f"failed: {payload}", file=sys.stderr)
         bar.update(1)
 
+    from pnlviz.commands.cluster import cluster_client, map_on_cluster
+
     try:
-        if workers <= 1 or len(stems) < 2:
+        if getattr(args, "dask", None) is not None or getattr(args, "scheduler", None) is not None:
+            with cluster_client(args) as client:
+                spec = (ds, os.fspath(out_dir.resolve()), size, params)
+                for result in map_on_cluster(client, _label_chunk, spec, stems, args.chunk,
+                                             lambda s, m: (s, "failed", f"{s}: {m}")):
+                    handle(result)
+        elif workers <= 1 or len(stems) < 2:
             _init_worker(ds, os.fspath(out_dir), size, params)
             for stem in stems:
                 handle(_label_one(stem))
