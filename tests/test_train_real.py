@@ -339,3 +339,25 @@ def test_train_cli_fine_tunes_on_exported_labels(tmp_path, capsys):
     assert side["steps"] == 2
     assert main(["train", "--config", str(config), "--labels", str(export), "--out", str(out)]) == 2
     assert "--labels needs --data" in capsys.readouterr().err
+
+
+def test_worn_paint_hides_stretches_of_lines_and_keeps_the_targets():
+    """`wear`: grass painted over stretches of the annotated lines; the targets are those of the
+    unworn frame (the geometry is where it was), and only pixels on the lines change."""
+    import cv2
+
+    from pnlviz.detect.train_data import annotation_example
+
+    cache = FrameCache(1, seed=5, size=(480, 272), progress=False)
+    plain = annotation_example(cache.images[0], cache.annotations[0], (480, 272), 2.0, View())
+    worn = annotation_example(cache.images[0], cache.annotations[0], (480, 272), 2.0, View(wear=3))
+    assert all(np.array_equal(a, b) for a, b in zip(plain[1:], worn[1:]))
+    changed = np.abs(plain[0] - worn[0]).sum(axis=0) > 0.1
+    assert changed.sum() > 100
+    near = np.zeros((272, 480), np.uint8)
+    for pts in cache.annotations[0].values():
+        px = np.round(np.asarray(pts) * [479, 271]).astype(np.int32)
+        cv2.polylines(near, [px.reshape(-1, 1, 2)], False, 1, 9)
+    assert changed[near == 0].sum() <= 0.02 * changed.sum()
+    views = [draw_view({"wear": 1.0}, np.random.default_rng(k), SMALL) for k in range(5)]
+    assert all(v.wear is not None for v in views)

@@ -25,6 +25,8 @@ A :class:`View` says how one example is drawn, and every part of it keeps the la
 * ``down`` ``(fx, fy)``: down-up scaling, the blur of a low-resolution source (the image is shrunk
   by fx, fy <= 1 and enlarged back; labels unchanged);
 * ``jpeg``: a JPEG round trip at that quality (labels unchanged);
+* ``wear``: worn or partly hidden paint, gaps of grass colour painted over stretches of the
+  annotated lines (labels unchanged: the geometry is where it was; frames with a line annotation);
 * ``graphics``: a broadcast score bug (a box with team names, score and clock) drawn near a top
   corner, as live broadcasts show (labels unchanged: the pitch is still where it was).
 
@@ -53,6 +55,7 @@ class View:
     down: tuple[float, float] | None = None  # (fx, fy) down-up scaling factors
     jpeg: int | None = None  # JPEG quality
     graphics: int | None = None  # seed of a drawn score bug
+    wear: int | None = None  # seed of the worn stretches of line paint
 
     def affine(self, width: int, height: int) -> np.ndarray:
         """3x3 map from input pixels before the view to pixels after it (flip, then crop)."""
@@ -71,7 +74,8 @@ def draw_view(params: dict, rng: np.random.Generator, size: tuple[int, int]) -> 
     maximum zoom, drawn log-uniformly with probability ``zoom_p`` (default 0.5); ``downscale``:
     smallest down-up factor per axis, with probability ``downscale_p`` (default 0.5); ``jpeg``:
     lowest quality, with probability ``jpeg_p`` (default 0.5); ``graphics``: probability of a score
-    bug). Keys not set draw nothing, so a configuration without them keeps its random stream."""
+    bug; ``wear``: probability of worn line paint). Keys not set draw nothing, so a configuration
+    without them keeps its random stream."""
     W, H = size
     flip = bool(rng.random() < float(params["flip"])) if params.get("flip") else False
     crop = down = jpeg = graphics = None
@@ -85,7 +89,43 @@ def draw_view(params: dict, rng: np.random.Generator, size: tuple[int, int]) -> 
         jpeg = int(rng.integers(int(params["jpeg"]), 96))
     if params.get("graphics") and rng.random() < float(params["graphics"]):
         graphics = int(rng.integers(2 ** 31))
-    return View(flip, crop, down, jpeg, graphics)
+    wear = None
+    if params.get("wear") and rng.random() < float(params["wear"]):
+        wear = int(rng.integers(2 ** 31))
+    return View(flip, crop, down, jpeg, graphics, wear)
+
+
+def draw_wear(img: np.ndarray, lines: list[np.ndarray], seed: int) -> np.ndarray:
+    """Worn paint on a copy of ``img``: on about half of the pixel polylines ``lines``, one to three
+    stretches of 6-30 px painted over, partly or fully, with the grass colour found beside them."""
+    rng = np.random.default_rng(seed)
+    out = img.copy()
+    H, W = out.shape[:2]
+    for pts in lines:
+        if len(pts) < 2 or rng.random() < 0.5:
+            continue
+        seg = np.diff(pts, axis=0)
+        length = np.hypot(seg[:, 0], seg[:, 1])
+        total = float(length.sum())
+        if total < 12:
+            continue
+        cum = np.concatenate([[0.0], np.cumsum(length)])
+        for _ in range(int(rng.integers(1, 4))):
+            a = rng.uniform(0, total)
+            b = min(total, a + rng.uniform(6, 30))
+            pa = np.array([np.interp(a, cum, pts[:, 0]), np.interp(a, cum, pts[:, 1])])
+            pb = np.array([np.interp(b, cum, pts[:, 0]), np.interp(b, cum, pts[:, 1])])
+            d = pb - pa
+            n = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-6)
+            beside = [np.clip(np.round(p + k * 6 * n), [0, 0], [W - 1, H - 1]).astype(int)
+                      for p in (pa, pb) for k in (-1, 1)]
+            colour = np.median([out[y, x] for x, y in beside], axis=0)
+            layer = out.copy()
+            cv2.line(layer, tuple(int(v) for v in np.round(pa)), tuple(int(v) for v in np.round(pb)),
+                     tuple(float(c) for c in colour), int(rng.integers(3, 6)), cv2.LINE_AA)
+            alpha = float(rng.uniform(0.6, 1.0))
+            out = cv2.addWeighted(layer, alpha, out, 1.0 - alpha, 0.0)
+    return out
 
 
 def draw_score_bug(img: np.ndarray, seed: int) -> np.ndarray:
@@ -112,8 +152,9 @@ def draw_score_bug(img: np.ndarray, seed: int) -> np.ndarray:
     return out
 
 
-def apply_view_image(img: np.ndarray, view: View) -> np.ndarray:
-    """The uint8 BGR image (already at the input size) seen through ``view``."""
+def apply_view_image(img: np.ndarray, view: View, lines: list[np.ndarray] | None = None) -> np.ndarray:
+    """The uint8 BGR image (already at the input size) seen through ``view``; ``lines``: the
+    annotated polylines in the viewed image's pixels, for ``wear``."""
     H, W = img.shape[:2]
     if view.flip:
         img = img[:, ::-1]
@@ -122,6 +163,8 @@ def apply_view_image(img: np.ndarray, view: View) -> np.ndarray:
         M = np.array([[s, 0.0, -s * x0 + 0.5 * (s - 1)], [0.0, s, -s * y0 + 0.5 * (s - 1)]])
         img = cv2.warpAffine(np.ascontiguousarray(img), M, (W, H), flags=cv2.INTER_LINEAR,
                              borderMode=cv2.BORDER_REFLECT)
+    if view.wear is not None and lines:
+        img = draw_wear(np.ascontiguousarray(img), lines, view.wear)
     if view.down is not None:
         w, h = max(8, round(W * view.down[0])), max(8, round(H * view.down[1]))
         img = cv2.resize(cv2.resize(np.ascontiguousarray(img), (w, h), interpolation=cv2.INTER_AREA), (W, H),
@@ -211,9 +254,13 @@ def annotation_example(img: np.ndarray, annotation: dict[str, np.ndarray], input
     from pnlviz.labels import training_targets
 
     W, H = input_size
-    img = apply_view_image(_to_input(img, input_size), view)
     if view.flip or view.crop is not None:
         annotation = clip_annotation(annotation, view.affine(W, H), W, H)
+    lines = None
+    if view.wear is not None:
+        scale = np.array([W - 1.0, H - 1.0])
+        lines = [np.asarray(p, float).reshape(-1, 2) * scale for p in annotation.values()]
+    img = apply_view_image(_to_input(img, input_size), view, lines)
     _, _, t = training_targets(annotation, W, H, sigma=sigma)
     return _example(img, t, input_size)
 
