@@ -733,8 +733,14 @@ class Session:
                 return
             pos = self.order.index(self.index)
             stems = [self.state.stems[self.order[p]] for p in (pos + 1, pos - 1) if 0 <= p < len(self.order)]
-        for stem in stems:
-            self.workspace.preload(stem, lambda stem=stem: self._pixels(stem))
+        for stem in stems:  # the pixels are read outside the lock, the scene changed under it
+            with self._lock:
+                if self._closed or self.workspace.holds(stem):
+                    continue
+            pixels = self._pixels(stem)
+            with self._lock:
+                if not self._closed:
+                    self.workspace.preload(stem, lambda pixels=pixels: pixels)
 
     def _show_image(self, view: FrameView) -> None:
         before = self.workspace.plane

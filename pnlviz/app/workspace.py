@@ -247,6 +247,10 @@ class Workspace:
         self.plane, self.image_key = slot["plane"], key
         return True
 
+    def holds(self, key: tuple) -> bool:
+        """Whether frame ``key``'s pixels are in the browser already (shown or sent ahead)."""
+        return any(sl["key"] == key for sl in self._slots)
+
     def preload(self, key: tuple, image_rgb: Callable[[], np.ndarray]) -> None:
         """Send frame ``key``'s pixels ahead, hidden, so that going there shows them at once."""
         if all(sl["key"] != key for sl in self._slots):
@@ -262,9 +266,9 @@ class Workspace:
             handle = self.scene.add_image(f"{self.root}/frame{len(self._slots)}", image_rgb, w, h, format="jpeg",
                                           jpeg_quality=90, position=(0.0, 0.0, PLANE_Z + 50.0), visible=False,
                                           cast_shadow=False, receive_shadow=False)
-            slot = {"handle": handle, "visible": False, "used": 0}
-            self._slots.append(slot)
+            slot = {"handle": handle, "visible": False, "used": 0, "key": key, "plane": plane}
             self._bind_frame(handle)
+            self._slots.append(slot)  # complete before anyone can see it
         else:
             slot = min((sl for sl in self._slots if not sl["visible"]), key=lambda sl: sl["used"])
             if slot["plane"] != plane:
