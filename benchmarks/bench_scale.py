@@ -43,6 +43,18 @@ def _run(cmd: list[str]) -> tuple[float, str]:
     return time.perf_counter() - t0, r.stdout
 
 
+def _local_then_cluster(cmd: list[str], outputs: Path, name: str, scheduler: str, chunk: int,
+                        local: tuple[str, ...] = ()) -> tuple[float, float, float, bool]:
+    """``cmd`` once in one process (with ``local`` options) and once on the cluster at
+    ``scheduler``: (local s, its peak memory MB, cluster s, whether the two outputs are the same
+    bytes)."""
+    a, b = outputs / f"{name}_local.zip", outputs / f"{name}_cluster.zip"
+    t1, _ = _run(cmd + ["--out", str(a), "--no-progress", *local])
+    peak = _peak_mb_children()
+    t2, _ = _run(cmd + ["--out", str(b), "--no-progress", "--scheduler", scheduler, "--chunk", str(chunk)])
+    return t1, peak, t2, a.read_bytes() == b.read_bytes()
+
+
 def _worker_peaks(client) -> list[float]:
     return sorted(round(v / 1024) for v in client.run(
         lambda: __import__("resource").getrusage(__import__("resource").RUSAGE_SELF).ru_maxrss).values())
@@ -84,14 +96,11 @@ def main(argv: list[str] | None = None) -> int:
         data = tmp / "sn23_sized.zip"
         build_annotations(src, args.frames, data)
         print(f"dataset: {args.frames} annotations ({data.stat().st_size / 2**20:.0f} MiB zip), no images")
-        t1, _ = _run(pnlviz + ["calibrate", "--data", str(data), "--out", str(tmp / "c1.zip"), "--no-progress"])
-        local_peak = _peak_mb_children()
         with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                                       silence_logs=50) as c, distributed.Client(c) as client:
-            t2, _ = _run(pnlviz + ["calibrate", "--data", str(data), "--out", str(tmp / "c2.zip"), "--no-progress",
-                                   "--scheduler", c.scheduler_address, "--chunk", "64"])
+            t1, local_peak, t2, same = _local_then_cluster(pnlviz + ["calibrate", "--data", str(data)], tmp,
+                                                           "calibrate", c.scheduler_address, 64)
             workers = _worker_peaks(client)
-            same = (tmp / "c1.zip").read_bytes() == (tmp / "c2.zip").read_bytes()
             print("| calibrate (from labels) | wall (s) | frames/s | speed-up | peak memory |")
             print("|---|---|---|---|---|")
             print(f"| 1 process | {t1:.0f} | {args.frames / t1:.0f} | 1.00 | {local_peak:.0f} MB |")
@@ -101,12 +110,9 @@ def main(argv: list[str] | None = None) -> int:
             if not args.skip_detect:
                 frames = tmp / "frames"
                 build_images(args.detect, frames)
-                d1, _ = _run(pnlviz + ["detect", "--data", str(frames), "--out", str(tmp / "d1.zip"), "--no-progress",
-                                       "--threads", "1"])
-                d2, _ = _run(pnlviz + ["detect", "--data", str(frames), "--out", str(tmp / "d2.zip"), "--no-progress",
-                                       "--scheduler", c.scheduler_address, "--chunk", "25"])
+                d1, _, d2, same = _local_then_cluster(pnlviz + ["detect", "--data", str(frames)], tmp, "detect",
+                                                      c.scheduler_address, 25, local=("--threads", "1"))
                 workers = _worker_peaks(client)
-                same = (tmp / "d1.zip").read_bytes() == (tmp / "d2.zip").read_bytes()
                 print("| detect (light model, 960x540 frames) | wall (s) | frames/s | speed-up |")
                 print("|---|---|---|---|")
                 print(f"| 1 process, 1 thread | {d1:.0f} | {args.detect / d1:.1f} | 1.00 |")

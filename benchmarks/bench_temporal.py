@@ -40,29 +40,29 @@ def _clip_groups(stems):
 
 def per_frame_and_temporal(inputs: dict, size, detection_settings: dict, changes: dict | None = None):
     """``{stem: FrameInputs}`` -> (per-frame cameras, temporal cameras, observations, seconds of the
-    temporal pass), all ``{stem: Camera | None}`` at ``size``; ``detection_settings``: the
-    detector's calibration settings; ``changes``: ``{stem: image change from the previous frame}``
-    (as ``pnlviz calibrate --temporal`` measures when the frames have images)."""
-    from pnlviz.calib.frame import FrameSettings, calib_params, calibrate_frame, observations_for
-    from pnlviz.calib.temporal import TemporalParams, calibrate_clip
+    temporal pass), all ``{stem: Camera | None}`` at ``size``, clip by clip as ``pnlviz calibrate
+    --temporal`` does (:func:`pnlviz.calib.temporal.calibrate_clip_frames`); ``detection_settings``:
+    the detector's calibration settings; ``changes``: ``{stem: image change from the previous
+    frame}`` (as the command measures when the frames have images)."""
+    from pnlviz.calib.frame import FrameSettings, calibrate_frame
+    from pnlviz.calib.temporal import calibrate_clip_frames
     from pnlviz.field import load_field_model
 
     model = load_field_model()
+    settings = FrameSettings(detection_settings=detection_settings)
     per, temp, obs = {}, {}, {}
     seconds = 0.0
     for clip, members in _clip_groups(inputs).items():
-        cams, o = [], []
-        for s in members:
-            fc = calibrate_frame(inputs[s], FrameSettings(detection_settings=detection_settings))  # as pnlviz calibrate
+        frames = [inputs[s] for s in members]
+        cams = []
+        for i in frames:  # the per-frame pass, timed apart from the temporal one
+            fc = calibrate_frame(i, settings, model)
             cams.append(fc.result.camera if fc.ok else None)
-            o.append(observations_for(inputs[s], "annotation", model)[0])
         t0 = time.perf_counter()
-        settings = FrameSettings(detection_settings=detection_settings)
-        params = TemporalParams(fit_k1=calib_params(settings, "detections").refine_k1)
         ch = [changes.get(s) for s in members[1:]] if changes else None
-        res = calibrate_clip(o, cams, size, params, changes=ch, model=model)
+        fit = calibrate_clip_frames(frames, settings, cameras=cams, changes=ch, model=model)
         seconds += time.perf_counter() - t0
-        for s, a, b, ob in zip(members, cams, res.cameras, o):
+        for s, a, b, ob in zip(members, cams, fit.result.cameras, fit.observations):
             per[s], temp[s], obs[s] = a, b, ob
     return per, temp, obs, seconds
 

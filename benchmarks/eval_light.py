@@ -38,7 +38,9 @@ from pnlviz.viz import caption, contact_sheet
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def draw_detections(img: np.ndarray, pred) -> np.ndarray:
+def draw_detections(img: np.ndarray, pred, *, ids: bool = True, line_width: int = 2) -> np.ndarray:
+    """A copy of ``img`` with the detected line extremities joined (white) and the keypoints
+    coloured by set (with their ids unless ``ids`` is False)."""
     from pnlviz.app.overlay import SET_BGR
     from pnlviz.field import load_field_model
 
@@ -46,11 +48,13 @@ def draw_detections(img: np.ndarray, pred) -> np.ndarray:
     H, W = img.shape[:2]
     out = img.copy()
     for x1, y1, p1, x2, y2, p2 in pred.lines_px(W, H).values():
-        cv2.line(out, (int(x1), int(y1)), (int(x2), int(y2)), (255, 255, 255), 2, cv2.LINE_AA)
+        cv2.line(out, (int(x1), int(y1)), (int(x2), int(y2)), (255, 255, 255), line_width, cv2.LINE_AA)
     for kid, (x, y, p) in pred.keypoints_px(W, H).items():
         col = SET_BGR.get(model.keypoints[kid].group, (255, 255, 255))
         cv2.circle(out, (int(x), int(y)), 6, (0, 0, 0), 2, cv2.LINE_AA)
         cv2.circle(out, (int(x), int(y)), 5, col, -1, cv2.LINE_AA)
+        if not ids:
+            continue
         cv2.putText(out, str(kid), (int(x) + 7, int(y) - 7), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 3, cv2.LINE_AA)
         cv2.putText(out, str(kid), (int(x) + 7, int(y) - 7), cv2.FONT_HERSHEY_SIMPLEX, 0.5, col, 1, cv2.LINE_AA)
     return out

@@ -41,6 +41,9 @@ from pnlviz.labels.from_homography import homography_for_size, labels_from_homog
 from pnlviz.metrics.soccernet import evaluate_dataset
 from pnlviz.viz import caption, contact_sheet, draw_pitch
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from eval_light import draw_detections, evaluate_synthetic  # noqa: E402  (the other evaluation of this model)
+
 ROOT = Path(__file__).resolve().parents[1]
 SIZE = (960, 540)
 HOLDOUT_EVERY = 7  # the training recipe leaves out every 7th trainval frame (assets/models/light_config.json)
@@ -66,7 +69,8 @@ def run_frames(det: Detector, images: dict[str, np.ndarray], homographies: dict[
         pred = det.detect([img])[0]
         times.append(time.perf_counter() - t0)
         preds[stem] = pred
-        truth = labels_from_homography(homography_for_size(homographies[stem], SIZE), W, H).labels.keypoints
+        Hs = homography_for_size(homographies[stem], SIZE)
+        truth = labels_from_homography(Hs, W, H).labels.keypoints
         found = pred.keypoints_px(W, H)
         for kid, lab in truth.items():
             d_all.append(np.hypot(found[kid][0] - lab.x, found[kid][1] - lab.y) if kid in found else np.inf)
@@ -77,7 +81,7 @@ def run_frames(det: Detector, images: dict[str, np.ndarray], homographies: dict[
         # the camera against the truth, either way round (the evaluator accepts the mirrored pitch)
         errs = []
         for mirror in (False, True):
-            Hm = homography_for_size(homographies[stem], SIZE) @ (np.diag([-1.0, -1.0, 1.0]) if mirror else np.eye(3))
+            Hm = Hs @ (np.diag([-1.0, -1.0, 1.0]) if mirror else np.eye(3))
             lab = labels_from_homography(Hm, W, H, lr_disambiguation=False).labels.keypoints
             if not lab:
                 continue
@@ -93,20 +97,11 @@ def run_frames(det: Detector, images: dict[str, np.ndarray], homographies: dict[
 
 
 def draw(img: np.ndarray, pred, camera) -> np.ndarray:
-    from pnlviz.app.overlay import SET_BGR
-
-    model = load_field_model()
+    """The pitch through ``camera`` (yellow), then the detections (:func:`eval_light.draw_detections`)."""
     out = img.copy()
     if camera is not None:
         draw_pitch(out, camera, colour=(80, 255, 255), thickness=2)
-    H, W = out.shape[:2]
-    for x1, y1, _, x2, y2, _ in pred.lines_px(W, H).values():
-        cv2.line(out, (int(x1), int(y1)), (int(x2), int(y2)), (255, 255, 255), 1, cv2.LINE_AA)
-    for kid, (x, y, _) in pred.keypoints_px(W, H).items():
-        col = SET_BGR.get(model.keypoints[kid].group, (255, 255, 255))
-        cv2.circle(out, (int(x), int(y)), 6, (0, 0, 0), 2, cv2.LINE_AA)
-        cv2.circle(out, (int(x), int(y)), 5, col, -1, cv2.LINE_AA)
-    return out
+    return draw_detections(out, pred, ids=False, line_width=1)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -164,9 +159,6 @@ def main(argv: list[str] | None = None) -> int:
             cv2.imwrite(str(args.picture), contact_sheet(tiles, columns=2, tile_width=640), [cv2.IMWRITE_JPEG_QUALITY, 85])
             print(f"wrote {args.picture}")
     if args.synthetic:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from eval_light import evaluate_synthetic
-
         evaluate_synthetic(det, args.synthetic, 777)
     print(f"peak memory (ru_maxrss): {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
     return 0

@@ -16,8 +16,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame, observations_for
-from pnlviz.calib.temporal import calibrate_clip
+from pnlviz.calib.frame import FrameInputs, FrameSettings
+from pnlviz.calib.temporal import calibrate_clip_frames
 from pnlviz.data import read_predictions
 from pnlviz.data.layout import clips
 from pnlviz.field import load_field_model
@@ -38,12 +38,8 @@ def main() -> None:
     model = load_field_model()
     size = (1280, 720)
     inputs = [FrameInputs(size, detections=preds[s]) for s in members]
-    per = []
-    for i in inputs:
-        fc = calibrate_frame(i, FrameSettings())
-        per.append(fc.result.camera if fc.ok else None)
-    obs = [observations_for(i, "annotation", model)[0] for i in inputs]
-    temporal = calibrate_clip(obs, per, size, model=model).cameras
+    fit = calibrate_clip_frames(inputs, FrameSettings(), model=model)  # as pnlviz calibrate --temporal
+    per, temporal = fit.per_frame, fit.result.cameras
     W, H = 960, 540
     tiles = []
     for t in np.linspace(0, len(members) - 1, 4).astype(int):

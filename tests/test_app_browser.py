@@ -5,24 +5,18 @@ calibrated; the review keys advance; undo comes back; two tabs keep their own fr
 
 import json
 import shutil
-import socket
 import time
 
 import pytest
 
 from pnlviz import EXAMPLES_DIR
+from helpers import free_port
 
 CHROMIUM = shutil.which("chromium")
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed "
                                 "(scripts/install_test_deps.sh installs it)")
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
          "--disable-component-update", "--disable-sync"]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture()
@@ -49,7 +43,7 @@ def start(data):
     from pnlviz.app.server import PnlvizApp
     from pnlviz.app.state import AppState
 
-    return PnlvizApp(AppState(data), port=_free_port())
+    return PnlvizApp(AppState(data), port=free_port())
 
 
 def stop(app):
@@ -175,7 +169,7 @@ def test_the_image_view_holds_across_next_edit_pnl_and_source(tmp_path, shared_d
 
     half = shared_dir / "data" / "wc14_test_half"
     app = PnlvizApp(AppState(half / "annotations.zip", detections=half / "detections_pnlcalib.zip",
-                             edits=tmp_path / "edits"), port=_free_port())
+                             edits=tmp_path / "edits"), port=free_port())
     try:
         page = open_page(browser, app, "focal")
         session = tab(app)
@@ -269,7 +263,7 @@ def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(t
     chosen = [min(inside, key=lambda t: t[1][0] + t[1][1])]  # four points spread over the frame
     while len(chosen) < 4:
         chosen.append(max(inside, key=lambda t: min(np.hypot(*(t[1] - c[1])) for c in chosen)))
-    app = PnlvizApp(AppState(data, edits=tmp_path / "edits"), port=_free_port())
+    app = PnlvizApp(AppState(data, edits=tmp_path / "edits"), port=free_port())
     try:
         page = open_page(browser, app, "place four keypoints")
         session = tab(app)
@@ -466,7 +460,7 @@ def test_serve_starts_clean_with_a_client_while_the_detector_loads(tmp_path, bro
     burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
     try:
         for round_ in range(3):
-            port = _free_port()
+            port = free_port()
             proc = subprocess.Popen([sys.executable, "-m", "pnlviz.cli", "serve", "--data", str(data), "--port", str(port),
                                      "--edits", str(tmp_path / f"edits{round_}")],
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -5,7 +5,6 @@ values no honest browser sends, and requests from pages or hosts that are not th
 import json
 import math
 import shutil
-import socket
 import threading
 import urllib.error
 import urllib.request
@@ -17,6 +16,7 @@ import pytest
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app.edits import EditsFolderError, EditsStore
 from pnlviz.app.state import AppState, EditError
+from helpers import free_port
 
 
 @pytest.fixture()
@@ -28,12 +28,6 @@ def data(tmp_path):
         shutil.copy(src / f"{stem}.jpg", dst / f"{stem}.jpg")
         shutil.copy(src / f"{stem}.json", dst / f"{stem}.json")
     return dst
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 # ------------------------------------------------------------------------------ concurrent edits
@@ -69,7 +63,7 @@ def test_two_tabs_on_two_frames_never_touch_each_other(data):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         a, b = app.session(), app.session()
         a.goto(st.find("00003"))
@@ -97,7 +91,7 @@ def test_a_second_server_on_the_same_edits_refuses(data, capsys):
     first.edits.describe_holder("http://127.0.0.1:8080/")
     with pytest.raises(EditsFolderError, match="in use by another pnlviz process .*http://127.0.0.1:8080/"):
         AppState(data)
-    assert main(["serve", "--data", str(data), "--no-detect", "--port", str(_free_port())]) == 2
+    assert main(["serve", "--data", str(data), "--no-detect", "--port", str(free_port())]) == 2
     err = capsys.readouterr().err
     assert "in use by another pnlviz process" in err and "--edits" in err
     first.close()
@@ -120,7 +114,7 @@ def test_a_failed_write_is_shown_and_changes_nothing(data, monkeypatch):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         tab = app.session()
         said = []
@@ -198,7 +192,7 @@ def test_values_no_honest_browser_sends_are_refused(data):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         tab = app.session()
         said = []
@@ -249,7 +243,7 @@ def test_a_filter_with_one_match_and_the_slider_past_it(data):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         tab = app.session()
         st.set_review("00002", "accepted")
@@ -269,7 +263,7 @@ def test_an_empty_filter_says_so_instead_of_staying_silently(data):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         tab = app.session()
         tab.goto(st.find("00001"))
@@ -315,7 +309,7 @@ def test_loopback_server_refuses_foreign_origins_and_hosts(data):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     port = app.policy.port
     try:
         assert app.url == f"http://127.0.0.1:{port}/"
@@ -335,7 +329,7 @@ def test_a_non_loopback_server_needs_its_token(data):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, host="0.0.0.0", port=_free_port())
+    app = PnlvizApp(st, host="0.0.0.0", port=free_port())
     port, token = app.policy.port, app.policy.token
     try:
         assert token and len(token) >= 20
@@ -356,7 +350,7 @@ def test_serve_on_all_interfaces_warns_and_prints_an_openable_url(data, tmp_path
     import subprocess
     import sys
 
-    port = _free_port()
+    port = free_port()
     proc = subprocess.Popen([sys.executable, "-m", "pnlviz.cli", "serve", "--data", str(data), "--no-detect",
                              "--host", "0.0.0.0", "--port", str(port)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)

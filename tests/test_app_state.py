@@ -2,7 +2,6 @@
 
 import json
 import shutil
-import socket
 
 import numpy as np
 import pytest
@@ -11,6 +10,7 @@ from pnlviz import EXAMPLES_DIR
 from pnlviz.app.overlay import Layers, render
 from pnlviz.app.state import AppState, Settings, default_edits_dir
 from pnlviz.calib.calibrate import CalibParams
+from helpers import free_port
 
 
 @pytest.fixture()
@@ -98,17 +98,11 @@ def test_overlay_draws_keypoints_and_pitch(data):
     assert failed.shape == (540, 960, 3)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_server_panels_navigate_review_and_toggle_pnl(data):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         assert app.url.startswith("http://127.0.0.1:")
         tab = app.session()
@@ -220,7 +214,7 @@ def test_drag_end_recalibrates_on_the_server(data):
     from pnlviz.app.server import PnlvizApp
 
     st = AppState(data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         tab = app.session()
         tab.goto(st.find("00002"))

@@ -8,6 +8,7 @@ import pytest
 
 from pnlviz.app.state import AppState
 from pnlviz.app.timeline import clip_index, frame_error, strip_image, worst_frames
+from helpers import free_port
 
 
 def test_clips_are_named_runs_of_frames_and_plain_numbers_are_not():
@@ -31,14 +32,6 @@ def test_the_strip_colours_each_frame_by_its_error_and_frames_the_current_one():
     assert np.isnan(frame_error(None))
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture()
 def clip_data(tmp_path):
     from pnlviz.synth import generate
@@ -54,7 +47,7 @@ def test_the_app_shows_the_clip_timeline_jumps_to_the_worst_and_plays(clip_data)
     from pnlviz.app.session import PLAY_INTERVAL
 
     st = AppState(clip_data)
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         tab = app.session()
         first = st.find("clip3-IMG_0001")
@@ -96,7 +89,7 @@ def test_a_dataset_without_clips_has_no_clip_panel(tmp_path):
 
     generate(tmp_path / "frames", 3, 2, size=(320, 180), progress=False)
     st = AppState(tmp_path / "frames")
-    app = PnlvizApp(st, port=_free_port())
+    app = PnlvizApp(st, port=free_port())
     try:
         tab = app.session()
         assert tab.clips == {} and tab.panels.clip_text is None

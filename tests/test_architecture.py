@@ -25,7 +25,7 @@ ALLOWED = {
     "pnlviz.metrics": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data"},
     "pnlviz.calib": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.labels"},
     "pnlviz.synth": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data"},
-    "pnlviz.detect": {"pnlviz.field", "pnlviz.data", "pnlviz.labels", "pnlviz.synth"},
+    "pnlviz.detect": {"pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.labels", "pnlviz.synth"},
     "pnlviz.viz": {"pnlviz.field", "pnlviz.geometry"},
     "pnlviz.app": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.calib",
                    "pnlviz.metrics", "pnlviz.viz"},  # not detect: the app never imports torch

@@ -11,6 +11,7 @@ import pytest
 
 distributed = pytest.importorskip("distributed")
 
+from helpers import copy_sample_frames  # noqa: E402
 from pnlviz.cli import main  # noqa: E402
 from pnlviz.data.zipwriter import journal_path  # noqa: E402
 
@@ -33,14 +34,7 @@ def test_calibrate_on_the_cluster_writes_the_local_bytes(tmp_path, shared_dir, c
 
 def test_detect_on_the_cluster_writes_the_local_bytes(tmp_path, cluster):
     pytest.importorskip("torch")
-    import shutil
-
-    from pnlviz import EXAMPLES_DIR
-
-    frames = tmp_path / "frames"
-    frames.mkdir()
-    for p in sorted((EXAMPLES_DIR / "sample").glob("0000*.jpg"))[:6]:
-        shutil.copy(p, frames / p.name)
+    frames = copy_sample_frames(tmp_path / "frames", 6)
     local, remote = tmp_path / "local.zip", tmp_path / "remote.zip"
     assert main(["detect", "--data", str(frames), "--out", str(local), "--no-progress", "--threads", "1"]) == 0
     assert main(["detect", "--data", str(frames), "--out", str(remote), "--no-progress",

@@ -7,18 +7,14 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from pnlviz import EXAMPLES_DIR  # noqa: E402
+from helpers import copy_sample_frames  # noqa: E402
 from pnlviz.cli import main  # noqa: E402
 from pnlviz.data import open_dataset, predictions_info_path, read_predictions, read_predictions_info  # noqa: E402
 
 
 @pytest.fixture()
 def frames(tmp_path):
-    d = tmp_path / "frames"
-    d.mkdir()
-    for stem in ("00000", "00001"):
-        shutil.copy(EXAMPLES_DIR / "sample" / f"{stem}.jpg", d / f"{stem}.jpg")
-    return d
+    return copy_sample_frames(tmp_path / "frames", 2)
 
 
 def test_round_trip_save_detect_same_predictions(frames, tmp_path):

@@ -12,6 +12,7 @@ import zipfile
 
 import pytest
 
+from helpers import copy_sample_frames
 from pnlviz.cli import main
 from pnlviz.data.zipwriter import ZipStream, journal_path, resume_members
 
@@ -93,14 +94,7 @@ def test_calibrate_stopped_by_ctrl_c_resumes_from_its_output(tmp_path, shared_di
 
 def test_detect_resume_detects_only_the_missing_frames(tmp_path, capsys):
     pytest.importorskip("torch")
-    import shutil
-
-    from pnlviz import EXAMPLES_DIR
-
-    frames = tmp_path / "frames"
-    frames.mkdir()
-    for stem in ("00000", "00001", "00002"):
-        shutil.copy(EXAMPLES_DIR / "sample" / f"{stem}.jpg", frames / f"{stem}.jpg")
+    frames = copy_sample_frames(tmp_path / "frames", 3)
     out = tmp_path / "preds.zip"
     assert main(["detect", "--data", str(frames), "--out", str(out), "--no-progress", "--threads", "1"]) == 0
     full = _members(out)

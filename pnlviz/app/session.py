@@ -29,7 +29,7 @@ from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
 from pnlviz.app.panels import DRAG_MODES, FILTERS, KEYPOINT_CHOICES, LAYERS, SORTS, Panels
 from pnlviz.app.scene import OVERVIEW, Scene3D, behind_camera
 from pnlviz.app.state import REVIEW_STATES, SOURCES, AppState, EditError, FrameView, Settings
-from pnlviz.app.timeline import clip_errors, clip_index, strip_image, worst_frames
+from pnlviz.app.timeline import frame_error, strip_image, worst_frames
 from pnlviz.app.view2d import FOV_Y, PLANE_Z, View2D, snap
 from pnlviz.app.workspace import Workspace, WorkspaceEvents, update_changed
 from pnlviz.viz import blank_canvas
@@ -141,7 +141,7 @@ class Session:
         events = WorkspaceEvents(place=self._on_place, click=self._on_click, pan=self._on_pan, pick=self._on_pick,
                                  drag=self._on_drag, screen_to_pixel=self._screen_to_pixel)
         #: the clips of a video dataset (named clips of >= 3 frames) and which clip each frame is in
-        self.clips = clip_index(st.stems)
+        self.clips = st.clips
         self.clip_of = {i: name for name, members in self.clips.items() for i in members}
         self._playing = False
         self._worst = 0  # how far "next worst" has gone down the current clip's list
@@ -809,8 +809,10 @@ class Session:
         return self.clips.get(name, []) if name is not None else []
 
     def clip_errors(self) -> list[float]:
-        views = {v.stem: v for v in self.state.cached_views(self.settings)}
-        return clip_errors(self.clip_members(), self.state.stems, views)
+        """Each clip frame's error (:func:`pnlviz.app.timeline.frame_error`), from the views already
+        computed: a lookup per clip frame, not a pass over every cached frame."""
+        st = self.state
+        return [frame_error(st.cached_view(st.stems[i], self.settings)) for i in self.clip_members()]
 
     def _show_clip(self) -> None:
         p = self.panels

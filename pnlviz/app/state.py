@@ -11,6 +11,7 @@ time.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -190,6 +191,14 @@ class AppState:
             return str(exc)
         return None
 
+    @functools.cached_property
+    def clips(self) -> dict[str, list[int]]:
+        """The dataset's named clips (:func:`pnlviz.app.timeline.clip_index`), found once for all
+        tabs (60-90 ms for 23,000 stems)."""
+        from pnlviz.app.timeline import clip_index
+
+        return clip_index(self.stems)
+
     @property
     def problems(self) -> list[str]:
         """Files of the dataset that are not used (names that are not UTF-8, a second file for
@@ -280,6 +289,13 @@ class AppState:
         with self._lock:
             self._cache[key] = view
         return view
+
+    def cached_view(self, stem: str, settings: Settings | None = None) -> FrameView | None:
+        """The frame's view under ``settings`` if it is computed already, else None (nothing is
+        computed: for displays of many frames, such as the clip timeline)."""
+        key = self._key(stem, settings or self.default_settings)
+        with self._lock:
+            return self._cache.get(key)
 
     def cached_views(self, settings: Settings | None = None) -> list[FrameView]:
         """The views computed so far under ``settings`` for the frames as they are now."""

@@ -8,7 +8,7 @@ frames (``00001``) are separate pictures, not a clip.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -75,8 +75,3 @@ def worst_frames(errors: Sequence[float], k: int | None = None) -> list[int]:
     known = [i for i in range(len(e)) if not np.isnan(e[i])]
     known.sort(key=lambda i: (-e[i], i))
     return known if k is None else known[:k]
-
-
-def clip_errors(members: Sequence[int], stems: Sequence[str], views: Mapping[str, object]) -> list[float]:
-    """:func:`frame_error` of each member (dataset indices) from ``{stem: view}``."""
-    return [frame_error(views.get(stems[i])) for i in members]

@@ -33,20 +33,20 @@ jump (a different camera position), confirmed by the next frame.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.optimize
 import scipy.sparse
 
-from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.field.model import FieldModel, load_field_model, pitch_grid
 from pnlviz.geometry.camera import Camera, look_at_rotation, pan_tilt_roll_from_rotation
 
 from .observations import Observations
 
-__all__ = ["ClipResult", "ShotFit", "TemporalParams", "calibrate_clip", "fit_shot", "image_change", "rotations",
-           "segment_shots"]
+__all__ = ["ClipCalibration", "ClipResult", "ShotFit", "TemporalParams", "calibrate_clip", "calibrate_clip_frames",
+           "fit_shot", "image_change", "image_changes", "rotations", "segment_shots"]
 
 
 @dataclass(frozen=True)
@@ -449,7 +449,7 @@ def image_change(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean(np.abs(thumb(a) - thumb(b))) / 255.0)
 
 
-_GRID = np.array([[x, y, 0.0] for x in np.arange(-50.0, 51.0, 5.0) for y in np.arange(-30.0, 31.0, 5.0)])
+_GRID = pitch_grid(5.0)
 
 
 def _view_change(a: Camera, b: Camera) -> float:
@@ -541,3 +541,53 @@ def calibrate_clip(observations: Sequence[Observations | None], cameras: Sequenc
             if observations[t] is not None:
                 out[t] = cam
     return ClipResult(out, shot_of, shots, fits)
+
+
+def image_changes(images: Iterable[np.ndarray | None]) -> list[float | None]:
+    """:func:`image_change` from each frame to the next (one value fewer than frames; None where
+    either frame is missing), the ``changes`` of :func:`calibrate_clip`. ``images`` may be a
+    generator: two frames are held at a time."""
+    out: list[float | None] = []
+    prev, first = None, True
+    for img in images:
+        if not first:
+            out.append(image_change(prev, img) if prev is not None and img is not None else None)
+        prev, first = img, False
+    return out
+
+
+@dataclass
+class ClipCalibration:
+    #: per frame: its own camera (None without one), its observations (None without input)
+    per_frame: list[Camera | None]
+    observations: list[Observations | None]
+    result: ClipResult
+
+
+def calibrate_clip_frames(inputs: Sequence[object | None], settings: object, *,
+                          cameras: Sequence[Camera | None] | None = None,
+                          changes: Sequence[float | None] | None = None,
+                          model: FieldModel | None = None) -> ClipCalibration:
+    """A clip as ``pnlviz calibrate --temporal`` calibrates it: ``inputs`` are the frames'
+    :class:`pnlviz.calib.frame.FrameInputs` in time order (None: unreadable), all of one size, and
+    ``settings`` their :class:`~pnlviz.calib.frame.FrameSettings`. The per-frame cameras (computed
+    with :func:`~pnlviz.calib.frame.calibrate_frame` unless given), the frames' observations, and
+    :func:`calibrate_clip` with the shot's lens fitted the way the frames' calibration fits it (no
+    k1 for detections whose detector says ``refine_k1: false``)."""
+    from .frame import calib_params, calibrate_frame, observations_for
+
+    model = model or load_field_model()
+    sizes = {tuple(i.size) for i in inputs if i is not None}
+    if len(sizes) != 1:
+        raise ValueError("the frames of a clip must have one size")
+    if cameras is None:
+        cameras = []
+        for i in inputs:
+            fc = calibrate_frame(i, settings, model) if i is not None else None
+            cameras.append(fc.result.camera if fc is not None and fc.ok else None)
+    found = [observations_for(i, settings.source, model) if i is not None else (None, None) for i in inputs]
+    origin = next((g for _, g in found if g is not None), None)
+    params = TemporalParams(fit_k1=calib_params(settings, origin).refine_k1)
+    obs = [o for o, _ in found]
+    result = calibrate_clip(obs, list(cameras), sizes.pop(), params, changes=changes, model=model)
+    return ClipCalibration(list(cameras), obs, result)

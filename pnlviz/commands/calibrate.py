@@ -71,20 +71,14 @@ def frame_settings(args, detection_settings: dict | None = None):
 def calibrate_stem(ds, stem: str, prediction, size, settings) -> tuple[str, dict | None, dict]:
     """One frame: read its inputs, run the engine's one path (:func:`pnlviz.calib.frame.calibrate_frame`):
     (stem, camera dict at 960x540 or None, report). Never raises on bad input."""
-    from pnlviz.calib.frame import FrameInputs, calibrate_frame
-    from pnlviz.data import DataError
+    from pnlviz.calib.frame import calibrate_frame
 
     report: dict = {"stem": stem}
-    try:
-        size = ds.image_size(stem) or size if stem in ds else size
-        ann = ds.annotation(stem) if prediction is None and stem in ds else None
-    except DataError as exc:
-        report.update(failure=f"skipped: {exc}", failure_code="bad_input")
+    inputs, problem = read_frame_inputs(ds, stem, prediction, size)
+    if inputs is None:
+        report.update(problem)
         return stem, None, report
-    if prediction is None and ann is None:
-        report.update(failure="no annotation", failure_code="no_input")
-        return stem, None, report
-    fc = calibrate_frame(FrameInputs(size, ann, prediction), settings)
+    fc = calibrate_frame(inputs, settings)
     if fc.failure is not None:
         report.update(failure=fc.failure.message, failure_code=fc.failure.code)
     if fc.result is None:
@@ -103,20 +97,20 @@ def calibrate_stem(ds, stem: str, prediction, size, settings) -> tuple[str, dict
     return stem, res.camera.scaled(*EVAL_SIZE).to_soccernet(), report
 
 
-def frame_inputs(ds, stem: str, prediction, size):
-    """The :class:`pnlviz.calib.frame.FrameInputs` of one frame as :func:`calibrate_stem` reads
-    them; None when unreadable or empty."""
+def read_frame_inputs(ds, stem: str, prediction, size) -> tuple[object | None, dict | None]:
+    """The :class:`pnlviz.calib.frame.FrameInputs` of one frame (its image's size, else ``size``;
+    its annotation unless it has detections), or None with the report's failure fields."""
     from pnlviz.calib.frame import FrameInputs
     from pnlviz.data import DataError
 
     try:
         size = ds.image_size(stem) or size if stem in ds else size
         ann = ds.annotation(stem) if prediction is None and stem in ds else None
-    except DataError:
-        return None
+    except DataError as exc:
+        return None, {"failure": f"skipped: {exc}", "failure_code": "bad_input"}
     if prediction is None and ann is None:
-        return None
-    return FrameInputs(size, ann, prediction)
+        return None, {"failure": "no annotation", "failure_code": "no_input"}
+    return FrameInputs(size, ann, prediction), None
 
 
 def temporal_pass(ds, predictions, size, settings, stems: list[str], results: dict, progress: bool = True) -> dict:
@@ -128,45 +122,38 @@ def temporal_pass(ds, predictions, size, settings, stems: list[str], results: di
     import numpy as np
     from tqdm import tqdm
 
-    from pnlviz.calib.frame import calib_params, observations_for
-    from pnlviz.calib.temporal import TemporalParams, calibrate_clip, image_change
+    from pnlviz.calib.temporal import calibrate_clip_frames, image_changes
     from pnlviz.data import DataError
     from pnlviz.data.layout import clips
     from pnlviz.field import load_field_model
     from pnlviz.geometry.camera import Camera
+
+    def image_or_none(stem):
+        try:
+            return ds.image(stem)
+        except DataError:
+            return None
 
     model = load_field_model()
     out = dict(results)
     groups = clips(stems)
     bar = tqdm(total=len(stems), desc="temporal", unit="frame", disable=not progress or None)
     for clip, members in groups.items():
-        inputs = [frame_inputs(ds, s, None if predictions is None else predictions.get(s), size) for s in members]
+        inputs = [read_frame_inputs(ds, s, None if predictions is None else predictions.get(s), size)[0]
+                  for s in members]
         sizes = {tuple(i.size) for i in inputs if i is not None}
         if len(sizes) != 1:  # nothing to fit, or frames of different sizes: left per-frame
             bar.update(len(members))
             continue
         W, H = sizes.pop()
-        found = [observations_for(i, settings.source, model) if i is not None else (None, None) for i in inputs]
-        obs = [o for o, _ in found]
-        origin = next((g for _, g in found if g is not None), None)
-        # the shot's lens as the frames' calibration would fit it (no k1 for the light model's detections)
-        params = TemporalParams(fit_k1=calib_params(settings, origin).refine_k1)
         cams = []
         for s in members:
             d = results.get(s, (None, {}))[0]
             cams.append(Camera.from_soccernet(d, *EVAL_SIZE).scaled(W, H) if d is not None else None)
         changes = None
         if all(s in ds and ds.frame(s).has_image for s in members):
-            changes, prev = [], None
-            for s in members:
-                try:
-                    img = ds.image(s)
-                except DataError:
-                    img = None
-                changes.append(image_change(prev, img) if prev is not None and img is not None else None)
-                prev = img
-            changes = changes[1:]
-        res = calibrate_clip(obs, cams, (W, H), params, changes=changes, model=model)
+            changes = image_changes(image_or_none(s) for s in members)  # two frames in memory at a time
+        res = calibrate_clip_frames(inputs, settings, cameras=cams, changes=changes, model=model).result
         for t, s in enumerate(members):
             cam_dict, report = results.get(s, (None, {"stem": s}))
             report = dict(report)

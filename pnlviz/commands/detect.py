@@ -83,12 +83,19 @@ def _detector_kwargs(args) -> dict:
 
 def _load_detector(args):
     """The detector of this run, in this process. On a cluster the workers run the networks on the
-    device asked for; this copy (on the CPU) only states the settings."""
-    from pnlviz.detect.run import Detector, resolve_device
+    device asked for; here only its settings are needed (for ``preds.json``): PnLCalib's networks
+    (1.75 GB) are not loaded for that, the light model (6 MB, settings in its sidecar) is, on the CPU."""
+    from pnlviz.detect.run import DEFAULT_INPUT_SIZE, Detector, resolve_device
 
     kw = _detector_kwargs(args)
+    weights_kp, weights_lines = kw.pop("weights_kp"), kw.pop("weights_lines")
+    if _on_cluster(args) and (weights_kp is not None or weights_lines is not None):
+        kw.pop("light")
+        kw["device"] = "cpu"
+        kw["input_size"] = kw["input_size"] or DEFAULT_INPUT_SIZE
+        return Detector(None, None, **kw)
     kw["device"] = "cpu" if _on_cluster(args) else resolve_device(kw["device"])
-    return Detector.from_weights(kw.pop("weights_kp"), kw.pop("weights_lines"), **kw)
+    return Detector.from_weights(weights_kp, weights_lines, **kw)
 
 
 def _detect_here(ds, det, stems: list[str], step: int):

@@ -35,6 +35,7 @@ Photometric jitter and noise are applied to the batch afterwards (:func:`pnlviz.
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +44,7 @@ import cv2
 import numpy as np
 
 from pnlviz.field.names import FLIP_X, canonical_class_name
+from pnlviz.geometry.polylines import segment_in_image
 
 __all__ = ["AnnotatedFrames", "HomographyFrames", "View", "apply_view_image", "clip_annotation", "draw_view",
            "pad_targets"]
@@ -180,23 +182,13 @@ def apply_view_image(img: np.ndarray, view: View, lines: list[np.ndarray] | None
 
 def _clip_polyline(pts: np.ndarray, width: int, height: int) -> np.ndarray:
     """The parts of a pixel polyline inside [0, W-1] x [0, H-1] (segments clipped, in order)."""
-    out: list[np.ndarray] = []
-    inside = (pts[:, 0] >= 0) & (pts[:, 0] <= width - 1) & (pts[:, 1] >= 0) & (pts[:, 1] <= height - 1)
     if len(pts) == 1:
-        return pts[inside]
+        return pts[(pts[:, 0] >= 0) & (pts[:, 0] <= width - 1) & (pts[:, 1] >= 0) & (pts[:, 1] <= height - 1)]
+    out: list[np.ndarray] = []
     for a, b in zip(pts[:-1], pts[1:]):
-        d = b - a
-        s0, s1 = 0.0, 1.0
-        for P, Q in ((-d[0], a[0]), (d[0], width - 1 - a[0]), (-d[1], a[1]), (d[1], height - 1 - a[1])):
-            if abs(P) < 1e-12:
-                if Q < 0:
-                    s0, s1 = 1.0, 0.0
-            elif P < 0:
-                s0 = max(s0, Q / P)
-            else:
-                s1 = min(s1, Q / P)
-        if s0 <= s1:
-            for p in (a + s0 * d, a + s1 * d):
+        inside = segment_in_image(a, b, width, height)
+        if inside is not None:
+            for p in (a + inside[0] * (b - a), a + inside[1] * (b - a)):
                 if not out or np.hypot(*(out[-1] - p)) > 1e-6:
                     out.append(p)
     return np.array(out).reshape(-1, 2)
@@ -348,6 +340,7 @@ class AnnotatedFrames:
                                   view)
 
 
+@functools.lru_cache(maxsize=4)
 def _keypoint_id_map(sign_x: float, sign_y: float) -> dict[int, int]:
     """Network keypoint id -> the id at the reflected world position ``(sign_x X, sign_y Y, Z)``:
     the ids of a flipped image (-1, 1) or of the evaluator's mirror (-1, -1)."""

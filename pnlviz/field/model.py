@@ -223,4 +223,12 @@ def _load(path: Path) -> FieldModel:
 
 
 __all__ = ["Arc", "FieldModel", "FieldModelError", "Keypoint", "Segment", "load_field_model",
-           "parse_field_model", "DEFAULT_MODEL_PATH", "IGNORED_CLASSES"]
+           "parse_field_model", "pitch_grid", "DEFAULT_MODEL_PATH", "IGNORED_CLASSES"]
+
+
+def pitch_grid(spacing: float = 5.0, length: float = 105.0, width: float = 68.0) -> np.ndarray:
+    """(N, 3) ground points every ``spacing`` metres over the pitch, centred on the centre spot
+    (a camera's view of the pitch is compared on them: clip jitter, cuts between shots)."""
+    xs = np.arange(-length / 2, length / 2 + 1e-9, spacing)
+    ys = np.arange(-width / 2, width / 2 + 1e-9, spacing)
+    return np.array([[x, y, 0.0] for x in xs for y in ys])

@@ -44,6 +44,24 @@ def _project_like_evaluator(camera: Camera, X: np.ndarray, evaluator_precision: 
     return uv, ok
 
 
+def segment_in_image(p: np.ndarray, q: np.ndarray, width: float, height: float) -> tuple[float, float] | None:
+    """The part of segment p-q inside [0, W-1] x [0, H-1] as parameters (s0, s1) of p + s (q - p),
+    0 <= s0 <= s1 <= 1 (Liang-Barsky); None when none of it is. Unlike :func:`clip_polyline` (which
+    follows the evaluator), a segment crossing the image between two outside ends is clipped too."""
+    d = np.asarray(q, float) - np.asarray(p, float)
+    s0, s1 = 0.0, 1.0
+    # p + s d inside the image, as inequalities P s <= Q
+    for P, Q in ((-d[0], p[0]), (d[0], width - 1 - p[0]), (-d[1], p[1]), (d[1], height - 1 - p[1])):
+        if abs(P) < 1e-12:
+            if Q < 0:
+                return None
+        elif P < 0:
+            s0 = max(s0, Q / P)
+        else:
+            s1 = min(s1, Q / P)
+    return (s0, s1) if s0 <= s1 else None
+
+
 def _border_crossing(cur: np.ndarray, prev: np.ndarray, width: float, height: float) -> np.ndarray | None:
     """Crossing of the line through two homogeneous points with the border lines, as the evaluator
     computes it (the candidate inside the image closest to ``cur``), or None."""

@@ -29,6 +29,7 @@ import numpy as np
 
 from pnlviz.field.model import FieldModel
 from pnlviz.field.names import CLASS_TO_LINE_ID, STRAIGHT_CLASSES
+from pnlviz.geometry.polylines import segment_in_image
 
 from .catalogue import NETWORK_KEYPOINT_IDS, get_catalogue
 from .heatmaps import N_KEYPOINT_CHANNELS, N_LINE_CHANNELS, heatmap_targets
@@ -100,19 +101,10 @@ def _clip_segment(H: np.ndarray, a: np.ndarray, b: np.ndarray, sign: float, widt
     pa, pb = ha + t0 * (hb - ha), ha + t1 * (hb - ha)
     p, q = pa[:2] / pa[2], pb[:2] / pb[2]
     d = q - p
-    s0, s1 = 0.0, 1.0
-    # p + s d inside [0, W-1] x [0, H-1], as inequalities P s <= Q
-    for P, Q in ((-d[0], p[0]), (d[0], width - 1 - p[0]), (-d[1], p[1]), (d[1], height - 1 - p[1])):
-        if abs(P) < 1e-12:
-            if Q < 0:
-                return None
-        elif P < 0:
-            s0 = max(s0, Q / P)
-        else:
-            s1 = min(s1, Q / P)
-    if s0 > s1 or np.hypot(*(d * (s1 - s0))) < 1e-9:
+    inside = segment_in_image(p, q, width, height)
+    if inside is None or np.hypot(*(d * (inside[1] - inside[0]))) < 1e-9:
         return None
-    return p + s0 * d, p + s1 * d
+    return p + inside[0] * d, p + inside[1] * d
 
 
 def _ordered(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -14,16 +14,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from pnlviz.conventions import EVAL_SIZE
+from pnlviz.field.model import pitch_grid
 from pnlviz.geometry.camera import Camera
 
-__all__ = ["jitter", "pitch_grid"]
-
-
-def pitch_grid(spacing: float = 5.0, length: float = 105.0, width: float = 68.0) -> np.ndarray:
-    """(N, 3) ground points every ``spacing`` metres over the pitch, centred on the centre spot."""
-    xs = np.arange(-length / 2, length / 2 + 1e-9, spacing)
-    ys = np.arange(-width / 2, width / 2 + 1e-9, spacing)
-    return np.array([[x, y, 0.0] for x in xs for y in ys])
+__all__ = ["jitter"]
 
 
 def jitter(cameras: Sequence[Camera | None], size: tuple[int, int] = EVAL_SIZE, spacing: float = 5.0
