@@ -17,6 +17,9 @@ def test_clips_are_named_runs_of_frames_and_plain_numbers_are_not():
     assert list(clips) == ["a", "b"]
     assert [stems[i] for i in clips["a"]] == ["a-IMG_9", "a-IMG_10", "a-IMG_11"]
     assert clip_index(["x-IMG_1", "x-IMG_2"]) == {}  # too short to be a clip
+    # named picks of separate pictures (the bundled sample's wc14_3, wc14_8, ...) are no clip
+    assert clip_index(["wc14_3", "wc14_8", "wc14_11", "wc14_17", "sn22_00004", "sn22_00097", "sn22_00187"]) == {}
+    assert list(clip_index(["v-IMG_1", "v-IMG_2", "v-IMG_4", "v-IMG_5"])) == ["v"]  # a dropped frame is fine
 
 
 def test_the_strip_colours_each_frame_by_its_error_and_frames_the_current_one():
