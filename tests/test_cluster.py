@@ -1,6 +1,7 @@
 """Batches on a dask cluster (issue #15): the same bytes as a local run, a lost worker costs
 nothing but time."""
 
+import json
 import os
 import signal
 import threading
@@ -93,3 +94,54 @@ def test_labels_on_the_cluster_write_the_local_files_and_resume(tmp_path, shared
     assert main(["labels", "--data", str(gt), "--out", str(remote), "--resume"]) == 0
     assert "resuming: 43 frames already labelled" in capsys.readouterr().out
     assert all((local / n).read_bytes() == (remote / n).read_bytes() for n in names)
+
+
+def _export_members(path):
+    """The members of an export zip, the manifest without its date (the one thing two runs differ in)."""
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    manifest = json.loads(members.pop("manifest.json"))
+    manifest.pop("exported")
+    return members, manifest
+
+
+def test_export_on_the_cluster_writes_the_local_files(tmp_path, shared_dir, cluster):
+    """`pnlviz export` on the cluster: the workers open the data and the edits read-only where they
+    are; every label file is the local run's, byte for byte. A second run on the same cluster sees
+    an edit made in between (the workers do not keep the edits they read before)."""
+    from pnlviz.app.state import AppState
+
+    data = tmp_path / "set"
+    data.mkdir()
+    with zipfile.ZipFile(shared_dir / "data" / "sn22_test_subset" / "annotations.zip") as z:
+        for name in sorted(n for n in z.namelist() if n.endswith(".json"))[:24]:
+            (data / os.path.basename(name)).write_bytes(z.read(name))
+    edits = tmp_path / "edits"
+    with AppState(data, edits=edits) as st:
+        stems = st.stems
+        for stem in stems[:20]:
+            st.set_review(stem, "accepted")
+        kid = int(st.view(stems[3]).observations.kp_ids[0])
+        st.move_keypoint(stems[3], kid, 321.0, 123.0)
+    common = ["export", "--data", str(data), "--edits", str(edits), "--no-progress"]
+    local, remote = tmp_path / "local.zip", tmp_path / "remote.zip"
+    assert main(common + ["--out", str(local)]) == 0
+    assert main(common + ["--out", str(remote), "--scheduler", cluster[0].scheduler_address, "--chunk", "3"]) == 0
+    members, manifest = _export_members(local)
+    assert len(manifest["frames"]) == 20 and manifest["frames"][stems[3]]["keypoints_edited"] == [kid]
+    assert sum(n.startswith("cameras/") for n in members) >= 18
+    assert _export_members(remote) == (members, manifest)
+    # a folder output holds the same files
+    folder = tmp_path / "folder"
+    assert main(common + ["--out", str(folder), "--dask", "1"]) == 0
+    assert {n: (folder / n).read_bytes() for n in members} == members
+    # an edit between two runs on the same cluster is in the second
+    with AppState(data, edits=edits) as st:
+        st.set_review(stems[22], "corrected")
+        st.move_keypoint(stems[3], kid, 300.0, 100.0)
+    again = tmp_path / "again.zip"
+    assert main(common + ["--out", str(again), "--scheduler", cluster[0].scheduler_address, "--chunk", "3"]) == 0
+    members2, manifest2 = _export_members(again)
+    assert stems[22] in manifest2["frames"] and len(manifest2["frames"]) == 21
+    kps = json.loads(members2[f"keypoints/{stems[3]}.json"])["keypoints"][str(kid)]
+    assert (kps["x"], kps["y"]) == (300.0, 100.0)

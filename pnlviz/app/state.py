@@ -272,8 +272,9 @@ class AppState:
         edit = {k: rec[k] for k in ("annotation", "keypoints") if rec.get(k) is not None}
         return stem, settings, json.dumps(edit, sort_keys=True) if edit else None
 
-    def view(self, stem: str, settings: Settings | None = None) -> FrameView:
-        """The frame's view under ``settings`` (default: :attr:`default_settings`), cached. Never
+    def view(self, stem: str, settings: Settings | None = None, *, keep: bool = True) -> FrameView:
+        """The frame's view under ``settings`` (default: :attr:`default_settings`), cached (not
+        kept when computed with ``keep=False``: for one pass over many frames, an export). Never
         raises on bad data."""
         settings = settings or self.default_settings
         key = self._key(stem, settings)
@@ -286,8 +287,9 @@ class AppState:
                 self._cache[key] = preview[1]
                 return preview[1]
         view = self._compute(stem, settings)
-        with self._lock:
-            self._cache[key] = view
+        if keep:
+            with self._lock:
+                self._cache[key] = view
         return view
 
     def cached_view(self, stem: str, settings: Settings | None = None) -> FrameView | None:

@@ -13,7 +13,8 @@ from pnlviz.commands.detect import add_detect_parser
 from pnlviz.commands.evaluate import add_eval_parser
 from pnlviz.commands.labels import add_labels_parser
 from pnlviz.commands.render import add_render_parser
-from pnlviz.commands.serve import add_export_parser, add_serve_parser
+from pnlviz.commands.export import add_export_parser
+from pnlviz.commands.serve import add_serve_parser
 from pnlviz.commands.sheet import add_sheet_parser
 from pnlviz.commands.synth import add_synth_parser
 from pnlviz.commands.train import add_train_parser
