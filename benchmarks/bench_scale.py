@@ -1,7 +1,8 @@
 """Scale: a 23,000-frame SN23-sized dataset calibrated on 1 and 2 workers, and the light detector
-on 1,000 frames on 1 and 2 workers.
+on 1,000 frames on 1 and 2 workers, and an export of 4,000 frames on 1 and 2 workers.
 
-    python benchmarks/bench_scale.py [--frames 23000] [--detect 1000] [--skip-detect]
+    python benchmarks/bench_scale.py [--frames 23000] [--detect 1000] [--export 4000]
+                                     [--skip-calibrate] [--skip-detect]
 
 * Calibration from labels: a zip of ``--frames`` SoccerNet annotations (the 400 real SN22 test
   annotations of ``../shared/data/sn22_test_subset`` repeated under new stems; no images needed),
@@ -11,6 +12,9 @@ on 1,000 frames on 1 and 2 workers.
   for byte.
 * Detection: ``--detect`` frames (the bundled sample's images, linked under new stems),
   ``pnlviz detect --threads 1`` locally and on the 2-worker cluster (1 torch thread per worker).
+* Export: ``pnlviz export --all`` of ``--export`` of those annotations (every frame calibrated,
+  its label files written), locally and on the cluster; the outputs are compared member by member
+  (the manifest's export date left out).
 
 All on this machine: the 2 workers share its 2 cores with the command itself.
 """
@@ -55,6 +59,19 @@ def _local_then_cluster(cmd: list[str], outputs: Path, name: str, scheduler: str
     return t1, peak, t2, a.read_bytes() == b.read_bytes()
 
 
+def _same_export(a: Path, b: Path) -> bool:
+    import json
+
+    def members(path):
+        with zipfile.ZipFile(path) as z:
+            out = {n: z.read(n) for n in z.namelist()}
+        manifest = json.loads(out.pop("manifest.json"))
+        manifest.pop("exported")
+        return out, manifest
+
+    return members(a) == members(b)
+
+
 def _worker_peaks(client) -> list[float]:
     return sorted(round(v / 1024) for v in client.run(
         lambda: __import__("resource").getrusage(__import__("resource").RUSAGE_SELF).ru_maxrss).values())
@@ -82,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
     ap.add_argument("--frames", type=int, default=23000)
     ap.add_argument("--detect", type=int, default=1000)
+    ap.add_argument("--export", type=int, default=4000, help="frames to export (0: no export run)")
+    ap.add_argument("--skip-calibrate", action="store_true")
     ap.add_argument("--skip-detect", action="store_true")
     args = ap.parse_args(argv)
     try:
@@ -98,15 +117,31 @@ def main(argv: list[str] | None = None) -> int:
         print(f"dataset: {args.frames} annotations ({data.stat().st_size / 2**20:.0f} MiB zip), no images")
         with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                                       silence_logs=50) as c, distributed.Client(c) as client:
-            t1, local_peak, t2, same = _local_then_cluster(pnlviz + ["calibrate", "--data", str(data)], tmp,
-                                                           "calibrate", c.scheduler_address, 64)
-            workers = _worker_peaks(client)
-            print("| calibrate (from labels) | wall (s) | frames/s | speed-up | peak memory |")
-            print("|---|---|---|---|---|")
-            print(f"| 1 process | {t1:.0f} | {args.frames / t1:.0f} | 1.00 | {local_peak:.0f} MB |")
-            print(f"| 2 dask workers | {t2:.0f} | {args.frames / t2:.0f} | {t1 / t2:.2f} | "
-                  f"{' and '.join(f'{w} MB' for w in workers)} per worker |")
-            print(f"outputs identical byte for byte: {same}")
+            if not args.skip_calibrate:
+                t1, local_peak, t2, same = _local_then_cluster(pnlviz + ["calibrate", "--data", str(data)], tmp,
+                                                               "calibrate", c.scheduler_address, 64)
+                workers = _worker_peaks(client)
+                print("| calibrate (from labels) | wall (s) | frames/s | speed-up | peak memory |")
+                print("|---|---|---|---|---|")
+                print(f"| 1 process | {t1:.0f} | {args.frames / t1:.0f} | 1.00 | {local_peak:.0f} MB |")
+                print(f"| 2 dask workers | {t2:.0f} | {args.frames / t2:.0f} | {t1 / t2:.2f} | "
+                      f"{' and '.join(f'{w} MB' for w in workers)} per worker |")
+                print(f"outputs identical byte for byte: {same}")
+            if args.export:
+                exports = tmp / "export_set.zip"
+                build_annotations(src, args.export, exports)
+                a, b = tmp / "export_local.zip", tmp / "export_cluster.zip"
+                cmd = pnlviz + ["export", "--data", str(exports), "--all", "--no-progress", "--edits", str(tmp / "edits")]
+                e1, _ = _run(cmd + ["--out", str(a)])
+                e1_peak = _peak_mb_children()
+                e2, _ = _run(cmd + ["--out", str(b), "--scheduler", c.scheduler_address, "--chunk", "64"])
+                workers = _worker_peaks(client)
+                print(f"| export --all ({args.export} frames) | wall (s) | frames/s | speed-up |")
+                print("|---|---|---|---|")
+                print(f"| 1 process | {e1:.0f} | {args.export / e1:.0f} | 1.00 |")
+                print(f"| 2 dask workers | {e2:.0f} | {args.export / e2:.0f} | {e1 / e2:.2f} |")
+                print(f"outputs identical (manifest date aside): {_same_export(a, b)}; peak memory: "
+                      f"{e1_peak:.0f} MB of the processes so far, worker peaks {workers} MB")
             if not args.skip_detect:
                 frames = tmp / "frames"
                 build_images(args.detect, frames)

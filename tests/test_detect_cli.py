@@ -162,3 +162,55 @@ def test_device_is_chosen_or_clearly_refused(frames, tmp_path, capsys):
     assert main(["detect", "--data", str(frames), "--out", str(tmp_path / "p3.zip"), "--device", "tpu",
                  "--no-progress"]) == 2
     assert "expected cpu, cuda" in capsys.readouterr().err
+
+
+def _points(pred, W=960, H=540) -> dict:
+    pts = {("kp", k): (x * W, y * H) for k, (x, y, _) in pred.keypoints.items()}
+    for k, (x1, y1, _, x2, y2, _) in pred.lines.items():
+        pts[("line", k, 1)], pts[("line", k, 2)] = (x1 * W, y1 * H), (x2 * W, y2 * H)
+    return pts
+
+
+def test_batches_and_half_precision_keep_the_detections(tmp_path):
+    """--batch 3 finds what one frame at a time finds (to 1e-3 px); --half (float16, run on the CPU
+    here) moves the points of real frames by less than 1 px, and says so in the sidecar."""
+    import numpy as np
+
+    frames = copy_sample_frames(tmp_path / "frames", 5)
+    outs = {}
+    for name, extra in (("one", []), ("batch", ["--batch", "3"]), ("half", ["--half", "--batch", "2"])):
+        outs[name] = tmp_path / f"{name}.zip"
+        assert main(["detect", "--data", str(frames), "--out", str(outs[name]), "--threads", "1", "--no-progress"]
+                    + extra) == 0
+    ref, batch, half = (read_predictions(outs[n]) for n in ("one", "batch", "half"))
+    assert set(ref) == set(batch) == set(half) and len(ref) == 5
+    moved, unshared, total = [], 0, 0
+    for stem in ref:
+        a, b, h = _points(ref[stem]), _points(batch[stem]), _points(half[stem])
+        assert a.keys() == b.keys() and len(a) > 10
+        assert max(np.hypot(a[k][0] - b[k][0], a[k][1] - b[k][1]) for k in a) < 1e-3
+        total += len(a)
+        unshared += len(a.keys() ^ h.keys())
+        moved += [np.hypot(a[k][0] - h[k][0], a[k][1] - h[k][1]) for k in a.keys() & h.keys()]
+    moved = np.asarray(moved)
+    assert unshared <= 0.02 * total and np.mean(moved < 1.0) >= 0.98 and np.median(moved) < 0.1
+    assert moved.max() > 0  # float16 did run: float32 again would give the same points exactly
+    assert read_predictions_info(outs["half"])["precision"] == "float16"
+    assert read_predictions_info(outs["one"])["precision"] == "float32"
+
+
+def test_a_cluster_worker_reloads_a_retrained_model(tmp_path):
+    """The worker's cached detector is keyed on its weight files as they are: a model retrained
+    under the same name is not served from the old one."""
+    import os
+
+    from pnlviz.commands.detect import _detector_key
+
+    w = tmp_path / "light.pt"
+    w.write_bytes(b"one")
+    kw = {"weights_kp": None, "weights_lines": None, "light": w, "device": "cpu"}
+    before = _detector_key(kw)
+    assert _detector_key(dict(kw)) == before
+    w.write_bytes(b"second")
+    os.utime(w, ns=(1, 2))
+    assert _detector_key(kw) != before

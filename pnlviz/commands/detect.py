@@ -36,9 +36,14 @@ def add_detect_parser(sub) -> None:
                    help="keypoint heatmap threshold (default 0.1; the light default model: its sidecar's)")
     p.add_argument("--line-threshold", type=float, default=None,
                    help="line heatmap threshold (default 0.1; the light default model: its sidecar's)")
-    p.add_argument("--batch", type=int, default=1, help="frames per forward pass")
+    p.add_argument("--batch", type=int, default=1,
+                   help="frames per forward pass (default 1, the fastest on a CPU: batches of 8 are 1.1x slower "
+                        "there; on a GPU larger batches pay). Detections do not depend on it")
     p.add_argument("--device", default="cpu", help="where the networks run: cpu (default), cuda, cuda:N, or auto "
                                                    "(a GPU if torch sees one)")
+    p.add_argument("--half", action="store_true",
+                   help="run the networks in float16 (for GPUs: half the memory; 1.5x slower on a CPU). With the light "
+                        "model on real frames, points move 0.11 px at p99 (benchmarks/bench_precision.py)")
     p.add_argument("--threads", type=int, default=0,
                    help="torch CPU threads (default: the idle cores less one, at least 1; more threads than "
                         "free cores makes torch wait for itself: 5-9x slower)")
@@ -75,7 +80,7 @@ def _detector_kwargs(args) -> dict:
     """What :meth:`pnlviz.detect.run.Detector.from_weights` is called with (here and on cluster
     workers); ``device`` as asked: each process resolves it where the networks run."""
     kw = {"weights_kp": args.weights_kp, "weights_lines": args.weights_lines, "light": args.weights,
-          "input_size": args.input_size, "device": args.device}
+          "input_size": args.input_size, "device": args.device, "half": args.half}
     kw.update({k: v for k, v in (("kp_threshold", args.kp_threshold), ("line_threshold", args.line_threshold))
                if v is not None})
     return kw
@@ -126,6 +131,26 @@ class _DetectJob:
 _WORKER_DETECTORS: dict = {}  # on a cluster worker: the detector, built once per process
 
 
+def _detector_key(kw: dict) -> str:
+    """What a worker's detector is built from: its settings and its weight files as they are now
+    (a model retrained under the same name is loaded again on a long-lived cluster)."""
+    import os
+
+    from pnlviz.detect.default import DEFAULT_MODEL
+
+    files = [kw.get(k) for k in ("weights_kp", "weights_lines", "light")]
+    if not any(files):
+        files = [DEFAULT_MODEL]
+    stats = []
+    for f in files:
+        try:
+            st = os.stat(f) if f is not None else None
+        except OSError:  # loading it says what is wrong with it
+            st = None
+        stats.append(None if st is None else (st.st_size, st.st_mtime_ns))
+    return repr((sorted((k, str(v)) for k, v in kw.items()), stats))
+
+
 def _detect_chunk(job: _DetectJob, stems: list[str]) -> list:
     """One cluster task: the frames ``stems`` read where they are and detected on this worker."""
     import torch
@@ -133,7 +158,7 @@ def _detect_chunk(job: _DetectJob, stems: list[str]) -> list:
     from pnlviz.data import open_dataset
     from pnlviz.detect.run import Detector, resolve_device
 
-    key = repr(sorted(job.detector.items()))
+    key = _detector_key(job.detector)
     if key not in _WORKER_DETECTORS:
         torch.set_num_threads(1)  # one thread per worker process: the cluster's processes are its parallelism
         kw = dict(job.detector)
@@ -166,6 +191,7 @@ def _sidecar(args, det, frames: int) -> dict:
         "detector": kind,
         "weights": named,
         "input_size": list(det.input_size), "device": args.device if _on_cluster(args) else det.device,
+        "precision": "float16" if args.half else "float32",
         "kp_threshold": det.kp_threshold,
         "line_threshold": det.line_threshold, "peak_refine": det.refine,
         "calibration": det.calibration, "frames": frames,
