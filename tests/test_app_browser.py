@@ -239,6 +239,65 @@ def test_zoom_4x_then_a_drag_of_n_screen_pixels_moves_the_point_n_over_4(data, b
         stop(app)
 
 
+def test_the_point_follows_the_hand_on_every_frame_and_after_a_zoom(data, browser):
+    """While the button is still down, the dragged point moves (viser sends drag updates and the
+    frame is recalibrated live): on the first frame, on the next one, on another point after a
+    drag, and after a zoom. (The browser picks a batched mesh where its instances were when it
+    was made: with the grab mesh moved in place, a press on any frame but the first reported no
+    instance, and no update came until the release.)"""
+    import numpy as np
+
+    app = start(data)
+    try:
+        page = open_page(browser, app, "focal")
+        session = tab(app)
+        nodes = session.workspace.points["keypoints"]
+
+        def fresh_point() -> tuple[int, np.ndarray]:
+            """A keypoint on screen, not dragged on this frame yet, nearest the canvas centre."""
+            obs = session.view().observations
+            screen = np.array([session.view2d.to_screen(uv, session.canvas) for uv in obs.kp_xy])
+            on = np.all((screen > 40) & (screen < np.array(session.canvas) - 40), axis=1)
+            done = app.state.edits.get(session.stem).get("keypoints") or {}
+            ok = [i for i in np.flatnonzero(on) if str(int(obs.kp_ids[i])) not in done]
+            i = min(ok, key=lambda i: np.hypot(*(screen[i] - np.array(session.canvas) / 2)))
+            return int(obs.kp_ids[i]), obs.kp_xy[i].copy()
+
+        def drag_and_watch() -> None:
+            stem = session.stem
+            kid, uv = fresh_point()
+            before = app.state.edits.get(stem).get("keypoints") or {}
+            x, y = on_screen(page, session, uv)
+            page.mouse.move(x, y)
+            page.mouse.down()
+            for k in range(1, 7):
+                page.mouse.move(x + 5 * k, y + 3 * k)
+                time.sleep(0.05)
+            # still pressed: the point has followed the pointer
+            wait_until(lambda: kid in nodes.keys and np.hypot(*(nodes.uv[nodes.keys.index(kid)] - uv)) > 5.0,
+                       timeout=8.0)
+            page.mouse.up()
+            wait_until(lambda: (app.state.edits.get(stem).get("keypoints") or {}).get(str(kid)) != before.get(str(kid)))
+            settle(session)
+
+        drag_and_watch()  # the first frame
+        first = session.stem
+        page.keyboard.press("n")
+        wait_until(lambda: session.stem != first)
+        settle(session)
+        drag_and_watch()  # the next frame
+        drag_and_watch()  # another point, once a drag has changed the frame
+        zoom = session.view2d.zoom
+        page.mouse.move(*on_screen(page, session, fresh_point()[1]))
+        page.keyboard.press("+")
+        wait_until(lambda: session.view2d.zoom > 1.3 * zoom)
+        settle(session)
+        drag_and_watch()  # after a zoom (the grab areas were resized)
+        page.close()
+    finally:
+        stop(app)
+
+
 def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(tmp_path, browser):
     """An image and nothing else: shift+click places the chosen ids, the fourth calibrates it
     (close to the truth the synthetic frame was made with), and a placed point can be dragged."""

@@ -71,9 +71,16 @@ def update_changed(handle, **props) -> None:
 class _PointNodes:
     """The points of one kind, drawn as flat discs with a black rim (two point clouds: unlit, so
     the colours are the legend's) over an invisible batched mesh that takes the pointer, so every
-    point of a frame is grabbed directly; ``keys[i]`` says what instance ``i`` is. The grab
-    mesh holds a few spare instances (parked out of sight): a point more or less does not
-    re-create it under a hand that is dragging one."""
+    point of a frame is grabbed directly; ``keys[i]`` says what instance ``i`` is.
+
+    The browser finds what the pointer hits on a batched mesh where its instances were when it
+    was made: once they are moved or resized in place, a press on a point reports no instance
+    and no position, and viser then sends no drag update until the release (the point would not
+    follow the hand on any frame but the first). So the grab mesh is made anew, under a new name,
+    whenever its instances change, except while one of its points is dragged: then it is
+    changed in place (the drag follows the pointer on a plane, not by hitting the mesh), and it
+    holds a few spare instances (parked out of sight) so that a point more or less does not
+    re-create it under the hand."""
 
     def __init__(self, scene, path: str, kind: str, layer: str, opacity: float = 1.0):
         self.scene, self.path, self.kind, self.layer, self.opacity = scene, path, kind, layer, opacity
@@ -83,25 +90,43 @@ class _PointNodes:
         self.plane: ImagePlane | None = None
         self.world_per_px = 0.01
         self.disc = self.rim = self.grab = None
+        self.events: WorkspaceEvents | None = None
+        self.dragging = False  # one of these points is being dragged: the grab mesh stays
+        self._grab_made: tuple[np.ndarray, np.ndarray] | None = None  # its instances as made
+        self._grabs_made = 0
 
     def show(self, markers: Markers, plane: ImagePlane, world_per_px: float, events: WorkspaceEvents) -> None:
         self.keys, self.plane, self.world_per_px = list(markers.keys), plane, world_per_px
         self.uv = np.asarray(markers.uv, float).reshape(-1, 2).copy()
         self.colors = np.asarray(markers.colors, np.uint8).reshape(-1, 3)
+        self.events = events
         if not self.keys and self.grab is None:
             return
         self._draw()
         capacity = max(8, 1 << max(0, len(self.keys) - 1).bit_length())
-        pos, scales = self._grab_layout(capacity)
-        if self.grab is None or len(self.grab.batched_positions) != capacity:
-            vertices, faces = _disc()
-            self.grab = self.scene.add_batched_meshes_simple(
-                f"{self.path}/grab", vertices, faces, np.tile([1.0, 0.0, 0.0, 0.0], (capacity, 1)), pos,
-                batched_scales=scales, batched_colors=(255, 255, 255), opacity=0.0, side="double",
-                cast_shadow=False, receive_shadow=False, lod="off")
-            self._bind(self.grab, events)
-        else:
+        self._set_grab(*self._grab_layout(capacity))
+
+    def _set_grab(self, pos: np.ndarray, scales: np.ndarray) -> None:
+        """The grab mesh's instances: made anew when they changed (see the class docstring), in
+        place while a point is dragged and the capacity holds."""
+        made = self._grab_made  # None once changed in place: the browser's picking is stale
+        if made is not None and made[0].shape == pos.shape and np.array_equal(made[0], pos) \
+                and np.array_equal(made[1], scales):
+            return
+        if self.grab is not None and self.dragging and len(self.grab.batched_positions) == len(pos):
             update_changed(self.grab, batched_positions=pos, batched_scales=scales)
+            self._grab_made = None
+            return
+        if self.grab is not None:
+            self.grab.remove()
+        self._grabs_made += 1
+        vertices, faces = _disc()
+        self.grab = self.scene.add_batched_meshes_simple(
+            f"{self.path}/grab{self._grabs_made}", vertices, faces, np.tile([1.0, 0.0, 0.0, 0.0], (len(pos), 1)),
+            pos, batched_scales=scales, batched_colors=(255, 255, 255), opacity=0.0, side="double",
+            cast_shadow=False, receive_shadow=False, lod="off")
+        self._grab_made = (pos.copy(), scales.copy())
+        self._bind(self.grab, self.events)
 
     def _draw(self) -> None:
         """The visible discs and rims, where ``uv`` says (none: hidden)."""
@@ -144,7 +169,7 @@ class _PointNodes:
         if self.disc is not None:
             self.disc.point_size, self.rim.point_size = DISC_PX * world_per_px, RIM_PX * world_per_px
         if self.grab is not None and self.keys:
-            self.grab.batched_scales = self._grab_layout(len(self.grab.batched_positions))[1]
+            self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
 
     def move(self, index: int, uv) -> None:
         """Put point ``index`` at pixel ``uv`` (while it is dragged)."""
@@ -153,7 +178,7 @@ class _PointNodes:
         self.uv[index] = uv
         self._draw()
         if self.grab is not None:
-            self.grab.batched_positions = self._grab_layout(len(self.grab.batched_positions))[0]
+            self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
 
     def _instance(self, index: int | None, at_uv) -> int | None:
         """The point an event is about: the instance viser reports if that point is where the
@@ -193,6 +218,7 @@ class _PointNodes:
                 if i is None:
                     return
                 grabbed.update(key=self.keys[i], index=i, at=at, uv=self.uv[i].copy(), exact=exact)
+                self.dragging = True
             if "key" not in grabbed:
                 return
             # the point follows the pointer by as many image pixels as the pointer moved
@@ -201,9 +227,11 @@ class _PointNodes:
             now = grabbed["uv"] + pointer - grabbed["at"]
             if event.phase != "start" and self.keys[grabbed["index"]:grabbed["index"] + 1] == [grabbed["key"]]:
                 self.move(grabbed["index"], now)
-            events.drag(self.kind, grabbed["key"], event.phase, now)
-            if event.phase == "end":
+            key = grabbed["key"]
+            if event.phase == "end":  # before the release is handled: it makes the grab mesh anew
                 grabbed.clear()
+                self.dragging = False
+            events.drag(self.kind, key, event.phase, now)
 
 
 class Workspace:
