@@ -64,10 +64,13 @@ def _export_chunk(job: _ExportJob, stems: list[str]) -> list:
     return [export_frame(state, stem) for stem in stems]
 
 
-def _failed_on_cluster(stem: str, message: str):
+def _failed_on_cluster(state, stem: str, message: str):
+    """The manifest entry of a frame whose cluster task failed: what the edits say of it, no labels."""
     from pnlviz.app.export import FrameExport
 
-    return FrameExport(stem, {"review": None, "annotation_edited": False, "keypoints_edited": [],
+    rec = state.edits.get(stem)
+    return FrameExport(stem, {"review": rec.get("review"), "annotation_edited": rec.get("annotation") is not None,
+                              "keypoints_edited": sorted(int(k) for k in (rec.get("keypoints") or {})),
                               "calibrated": False, "error": f"{stem}: {message}", "exported": False})
 
 
@@ -96,7 +99,8 @@ def run_export(args) -> int:
         if client is not None:
             job = _ExportJob(str(Path(data).resolve()), None if args.detections is None else str(args.detections.resolve()),
                              str(state.edits.root.resolve()), tuple(args.size), uuid.uuid4().hex)
-            parts = map_on_cluster(client, _export_chunk, job, stems, args.chunk, _failed_on_cluster)
+            parts = map_on_cluster(client, _export_chunk, job, stems, args.chunk,
+                                   lambda stem, message: _failed_on_cluster(state, stem, message))
         else:
             parts = (export_frame(state, stem) for stem in stems)
         bar = tqdm(parts, total=len(stems), desc="export", unit="frame", disable=args.no_progress or None)
