@@ -53,19 +53,11 @@ def run(det: Detector, frames: list[np.ndarray], batch: int) -> tuple[list, floa
     return out, 1e3 * (time.perf_counter() - t0) / len(frames)
 
 
-def points(pred, W: int, H: int) -> dict:
-    """Every detected point in pixels: keypoints by id, line ends by (id, end)."""
-    pts = {("kp", k): (x * W, y * H) for k, (x, y, _) in pred.keypoints.items()}
-    for k, (x1, y1, _, x2, y2, _) in pred.lines.items():
-        pts[("line", k, 1)], pts[("line", k, 2)] = (x1 * W, y1 * H), (x2 * W, y2 * H)
-    return pts
-
-
 def compare(ref: list, other: list) -> tuple[np.ndarray, int, int]:
     """(distances of shared points, points in only one run, points in the reference)."""
     d, unshared, total = [], 0, 0
     for a, b in zip(ref, other):
-        pa, pb = points(a, *SIZE), points(b, *SIZE)
+        pa, pb = a.points_px(*SIZE), b.points_px(*SIZE)
         total += len(pa)
         unshared += len(pa.keys() ^ pb.keys())
         d += [np.hypot(pa[k][0] - pb[k][0], pa[k][1] - pb[k][1]) for k in pa.keys() & pb.keys()]
@@ -91,8 +83,7 @@ def camera_gaps(ref: list, other: list) -> tuple[np.ndarray, int]:
         if a is None or b is None:
             continue
         pa, pb = a.project(grid)[0], b.project(grid)[0]
-        with np.errstate(invalid="ignore"):
-            inside = np.all((pa >= 0) & (pa < SIZE), axis=1) & np.isfinite(pb).all(axis=1)
+        inside = a.in_image(pa) & np.isfinite(pb).all(axis=1)
         if inside.any():
             gaps.append(float(np.linalg.norm(pa - pb, axis=1)[inside].max()))
     return np.asarray(gaps), one

@@ -47,29 +47,26 @@ def _run(cmd: list[str]) -> tuple[float, str]:
     return time.perf_counter() - t0, r.stdout
 
 
+def _same_bytes(a: Path, b: Path) -> bool:
+    return a.read_bytes() == b.read_bytes()
+
+
+def _same_export(a: Path, b: Path) -> bool:
+    from pnlviz.app.export import read_export_zip
+
+    return read_export_zip(a) == read_export_zip(b)
+
+
 def _local_then_cluster(cmd: list[str], outputs: Path, name: str, scheduler: str, chunk: int,
-                        local: tuple[str, ...] = ()) -> tuple[float, float, float, bool]:
+                        local: tuple[str, ...] = (), same=_same_bytes) -> tuple[float, float, float, bool]:
     """``cmd`` once in one process (with ``local`` options) and once on the cluster at
-    ``scheduler``: (local s, its peak memory MB, cluster s, whether the two outputs are the same
-    bytes)."""
+    ``scheduler``: (local s, the peak memory MB of the processes so far, cluster s, whether
+    ``same(local output, cluster output)``)."""
     a, b = outputs / f"{name}_local.zip", outputs / f"{name}_cluster.zip"
     t1, _ = _run(cmd + ["--out", str(a), "--no-progress", *local])
     peak = _peak_mb_children()
     t2, _ = _run(cmd + ["--out", str(b), "--no-progress", "--scheduler", scheduler, "--chunk", str(chunk)])
-    return t1, peak, t2, a.read_bytes() == b.read_bytes()
-
-
-def _same_export(a: Path, b: Path) -> bool:
-    import json
-
-    def members(path):
-        with zipfile.ZipFile(path) as z:
-            out = {n: z.read(n) for n in z.namelist()}
-        manifest = json.loads(out.pop("manifest.json"))
-        manifest.pop("exported")
-        return out, manifest
-
-    return members(a) == members(b)
+    return t1, peak, t2, same(a, b)
 
 
 def _worker_peaks(client) -> list[float]:
@@ -130,17 +127,15 @@ def main(argv: list[str] | None = None) -> int:
             if args.export:
                 exports = tmp / "export_set.zip"
                 build_annotations(src, args.export, exports)
-                a, b = tmp / "export_local.zip", tmp / "export_cluster.zip"
-                cmd = pnlviz + ["export", "--data", str(exports), "--all", "--no-progress", "--edits", str(tmp / "edits")]
-                e1, _ = _run(cmd + ["--out", str(a)])
-                e1_peak = _peak_mb_children()
-                e2, _ = _run(cmd + ["--out", str(b), "--scheduler", c.scheduler_address, "--chunk", "64"])
+                cmd = pnlviz + ["export", "--data", str(exports), "--all", "--edits", str(tmp / "edits")]
+                e1, e1_peak, e2, same = _local_then_cluster(cmd, tmp, "export", c.scheduler_address, 64,
+                                                            same=_same_export)
                 workers = _worker_peaks(client)
                 print(f"| export --all ({args.export} frames) | wall (s) | frames/s | speed-up |")
                 print("|---|---|---|---|")
                 print(f"| 1 process | {e1:.0f} | {args.export / e1:.0f} | 1.00 |")
                 print(f"| 2 dask workers | {e2:.0f} | {args.export / e2:.0f} | {e1 / e2:.2f} |")
-                print(f"outputs identical (manifest date aside): {_same_export(a, b)}; peak memory: "
+                print(f"outputs identical (manifest date aside): {same}; peak memory: "
                       f"{e1_peak:.0f} MB of the processes so far, worker peaks {workers} MB")
             if not args.skip_detect:
                 frames = tmp / "frames"

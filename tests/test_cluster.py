@@ -96,19 +96,11 @@ def test_labels_on_the_cluster_write_the_local_files_and_resume(tmp_path, shared
     assert all((local / n).read_bytes() == (remote / n).read_bytes() for n in names)
 
 
-def _export_members(path):
-    """The members of an export zip, the manifest without its date (the one thing two runs differ in)."""
-    with zipfile.ZipFile(path) as z:
-        members = {n: z.read(n) for n in z.namelist()}
-    manifest = json.loads(members.pop("manifest.json"))
-    manifest.pop("exported")
-    return members, manifest
-
-
 def test_export_on_the_cluster_writes_the_local_files(tmp_path, shared_dir, cluster):
     """`pnlviz export` on the cluster: the workers open the data and the edits read-only where they
     are; every label file is the local run's, byte for byte. A second run on the same cluster sees
     an edit made in between (the workers do not keep the edits they read before)."""
+    from pnlviz.app.export import read_export_zip
     from pnlviz.app.state import AppState
 
     data = tmp_path / "set"
@@ -127,10 +119,10 @@ def test_export_on_the_cluster_writes_the_local_files(tmp_path, shared_dir, clus
     local, remote = tmp_path / "local.zip", tmp_path / "remote.zip"
     assert main(common + ["--out", str(local)]) == 0
     assert main(common + ["--out", str(remote), "--scheduler", cluster[0].scheduler_address, "--chunk", "3"]) == 0
-    members, manifest = _export_members(local)
+    members, manifest = read_export_zip(local)
     assert len(manifest["frames"]) == 20 and manifest["frames"][stems[3]]["keypoints_edited"] == [kid]
     assert sum(n.startswith("cameras/") for n in members) >= 18
-    assert _export_members(remote) == (members, manifest)
+    assert read_export_zip(remote) == (members, manifest)
     # a folder output holds the same files
     folder = tmp_path / "folder"
     assert main(common + ["--out", str(folder), "--dask", "1"]) == 0
@@ -141,7 +133,7 @@ def test_export_on_the_cluster_writes_the_local_files(tmp_path, shared_dir, clus
         st.move_keypoint(stems[3], kid, 300.0, 100.0)
     again = tmp_path / "again.zip"
     assert main(common + ["--out", str(again), "--scheduler", cluster[0].scheduler_address, "--chunk", "3"]) == 0
-    members2, manifest2 = _export_members(again)
+    members2, manifest2 = read_export_zip(again)
     assert stems[22] in manifest2["frames"] and len(manifest2["frames"]) == 21
     kps = json.loads(members2[f"keypoints/{stems[3]}.json"])["keypoints"][str(kid)]
     assert (kps["x"], kps["y"]) == (300.0, 100.0)

@@ -164,13 +164,6 @@ def test_device_is_chosen_or_clearly_refused(frames, tmp_path, capsys):
     assert "expected cpu, cuda" in capsys.readouterr().err
 
 
-def _points(pred, W=960, H=540) -> dict:
-    pts = {("kp", k): (x * W, y * H) for k, (x, y, _) in pred.keypoints.items()}
-    for k, (x1, y1, _, x2, y2, _) in pred.lines.items():
-        pts[("line", k, 1)], pts[("line", k, 2)] = (x1 * W, y1 * H), (x2 * W, y2 * H)
-    return pts
-
-
 def test_batches_and_half_precision_keep_the_detections(tmp_path):
     """--batch 3 finds what one frame at a time finds (to 1e-3 px); --half (float16, run on the CPU
     here) moves the points of real frames by less than 1 px, and says so in the sidecar."""
@@ -186,7 +179,7 @@ def test_batches_and_half_precision_keep_the_detections(tmp_path):
     assert set(ref) == set(batch) == set(half) and len(ref) == 5
     moved, unshared, total = [], 0, 0
     for stem in ref:
-        a, b, h = _points(ref[stem]), _points(batch[stem]), _points(half[stem])
+        a, b, h = (p[stem].points_px(960, 540) for p in (ref, batch, half))
         assert a.keys() == b.keys() and len(a) > 10
         assert max(np.hypot(a[k][0] - b[k][0], a[k][1] - b[k][1]) for k in a) < 1e-3
         total += len(a)

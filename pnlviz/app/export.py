@@ -20,6 +20,7 @@ file would say "no keypoints", which is not what is known).
 from __future__ import annotations
 
 import io
+import json
 import time
 import zipfile
 from collections.abc import Iterable
@@ -30,7 +31,7 @@ from pnlviz.app.state import EVAL_SIZE, AppState, Settings
 from pnlviz.data import atomic_write_bytes
 from pnlviz.data.annotations import annotation_to_json
 from pnlviz.data.jsonio import dumps
-from pnlviz.data.zipwriter import MEMBER_DATE, ZipStream
+from pnlviz.data.zipwriter import ZipStream, member_info
 
 N_KEYPOINTS = 73
 
@@ -54,15 +55,20 @@ def export_stems(state: AppState, include_all: bool = False) -> list[str]:
     return [s for s in state.stems if state.edits.review(s) in ("accepted", "corrected")]
 
 
+def edits_entry(state: AppState, stem: str) -> dict:
+    """What the manifest says of a frame's edits: its review status and what was changed."""
+    rec = state.edits.get(stem)
+    return {"review": rec.get("review"), "annotation_edited": rec.get("annotation") is not None,
+            "keypoints_edited": sorted(int(k) for k in (rec.get("keypoints") or {}))}
+
+
 def export_frame(state: AppState, stem: str, settings: Settings | None = None) -> FrameExport:
     """The frame's export, calibrated with ``settings`` (default: the state's). Its view is
     computed without being kept (an export of 23,000 frames would otherwise hold them all)."""
-    rec = state.edits.get(stem)
     view = state.view(stem, settings, keep=False)
     W, H = view.size
-    entry = {"review": rec.get("review"), "annotation_edited": rec.get("annotation") is not None,
-             "keypoints_edited": sorted(int(k) for k in (rec.get("keypoints") or {})),
-             "calibrated": bool(view.result is not None and view.result.ok), "error": view.error}
+    entry = {**edits_entry(state, stem), "calibrated": bool(view.result is not None and view.result.ok),
+             "error": view.error}
     if view.annotation is None and view.observations is None and view.error:  # unreadable: no labels
         entry["exported"] = False
         return FrameExport(stem, entry)
@@ -166,10 +172,18 @@ def _zip(files: dict[str, bytes]) -> bytes:
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
         for name, data in sorted(files.items()):
-            info = zipfile.ZipInfo(name, date_time=MEMBER_DATE)  # as every zip pnlviz writes: same labels, same bytes
-            info.compress_type, info.external_attr = zipfile.ZIP_DEFLATED, 0o644 << 16
-            zf.writestr(info, data)
+            zf.writestr(member_info(name), data)  # as every zip pnlviz writes: same labels, same bytes
     return buf.getvalue()
+
+
+def read_export_zip(path: Path) -> tuple[dict[str, bytes], dict]:
+    """An export zip read back: (its members but the manifest, the manifest without its date),
+    the whole of what two exports of the same labels agree on."""
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    manifest = json.loads(members.pop("manifest.json"))
+    manifest.pop("exported")
+    return members, manifest
 
 
 def export_zip_bytes(state: AppState, include_all: bool = False, settings: Settings | None = None) -> bytes:

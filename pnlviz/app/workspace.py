@@ -84,24 +84,24 @@ class _PointNodes:
     on a mesh made anew, reports no instance in Chromium (cause not found); that drag lands by
     the pointer's screen position, as before, but without the live preview."""
 
-    def __init__(self, scene, path: str, kind: str, layer: str, opacity: float = 1.0):
+    def __init__(self, scene, path: str, kind: str, layer: str, opacity: float = 1.0,
+                 events: WorkspaceEvents | None = None):
         self.scene, self.path, self.kind, self.layer, self.opacity = scene, path, kind, layer, opacity
+        self.events = events
         self.keys: list = []
         self.uv = np.zeros((0, 2))
         self.colors = np.zeros((0, 3), np.uint8)
         self.plane: ImagePlane | None = None
         self.world_per_px = 0.01
         self.disc = self.rim = self.grab = None
-        self.events: WorkspaceEvents | None = None
         self.dragging = False  # one of these points is being dragged: the grab mesh stays
         self._grab_made: tuple[np.ndarray, np.ndarray] | None = None  # its instances as made
         self._grabs_made = 0
 
-    def show(self, markers: Markers, plane: ImagePlane, world_per_px: float, events: WorkspaceEvents) -> None:
+    def show(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
         self.keys, self.plane, self.world_per_px = list(markers.keys), plane, world_per_px
         self.uv = np.asarray(markers.uv, float).reshape(-1, 2).copy()
         self.colors = np.asarray(markers.colors, np.uint8).reshape(-1, 3)
-        self.events = events
         if not self.keys and self.grab is None:
             return
         self._draw()
@@ -249,7 +249,7 @@ class Workspace:
         self._backdrop = None
         self._ring = None
         self._lines: dict[str, object] = {}
-        self.points = {kind: _PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity)
+        self.points = {kind: _PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity, events)
                        for kind, layer, opacity in (("keypoints", "keypoints", 1.0), ("ghosts", "ghosts", 0.55),
                                                     ("line_points", "keypoints", 1.0))}
         self._labels: dict[object, object] = {}  # keypoint id -> label node
@@ -384,7 +384,7 @@ class Workspace:
                  "ghosts": overlay.ghosts if ghosts else Markers(),
                  "line_points": overlay.line_points if line_points else Markers()}
         for kind, markers in shown.items():
-            self.points[kind].show(markers, plane, self.world_per_px, self.events)
+            self.points[kind].show(markers, plane, self.world_per_px)
         labelled = [(k, uv, 0) for k, uv in zip(shown["keypoints"].keys, shown["keypoints"].uv)] if ids else []
         labelled += [(k, uv, 1) for k, uv in zip(shown["ghosts"].keys, shown["ghosts"].uv)] if ids else []
         self._show_labels(labelled)

@@ -457,8 +457,7 @@ def _view_change(a: Camera, b: Camera) -> float:
     they see none in common)."""
     pa, _ = a.project(_GRID)
     pb, _ = b.scaled(a.width, a.height).project(_GRID)
-    seen = np.all(np.isfinite(pa), 1) & np.all(np.isfinite(pb), 1)
-    seen &= (pa[:, 0] >= 0) & (pa[:, 0] <= a.width) & (pa[:, 1] >= 0) & (pa[:, 1] <= a.height)
+    seen = a.in_image(pa) & np.all(np.isfinite(pb), 1)
     return float(np.median(np.linalg.norm(pa[seen] - pb[seen], axis=1))) if seen.any() else math.inf
 
 

@@ -19,6 +19,19 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def add_app_data_args(p) -> None:
+    """The options that say what the app shows (``serve``) and exports (``export``): the dataset,
+    its detections, its edits folder, and the size of frames without an image."""
+    from pathlib import Path
+
+    from pnlviz.conventions import EVAL_SIZE
+
+    p.add_argument("--data", type=Path, help="dataset folder or zip (default: the bundled sample)")
+    p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip")
+    p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
+    p.add_argument("--size", type=parse_size, default=EVAL_SIZE, help="image size for frames without an image")
+
+
 def print_skipped(lines, prefix: str = "skipped: ") -> None:
     """Print problems to stderr, one line each (DataErrors or strings)."""
     for line in lines:

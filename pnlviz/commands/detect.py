@@ -37,12 +37,12 @@ def add_detect_parser(sub) -> None:
     p.add_argument("--line-threshold", type=float, default=None,
                    help="line heatmap threshold (default 0.1; the light default model: its sidecar's)")
     p.add_argument("--batch", type=int, default=1,
-                   help="frames per forward pass (default 1, the fastest on a CPU: batches of 8 are 1.1x slower "
+                   help="frames per forward pass (default 1, the fastest on a CPU: batches of 8 are 1.05-1.13x slower "
                         "there; on a GPU larger batches pay). Detections do not depend on it")
     p.add_argument("--device", default="cpu", help="where the networks run: cpu (default), cuda, cuda:N, or auto "
                                                    "(a GPU if torch sees one)")
     p.add_argument("--half", action="store_true",
-                   help="run the networks in float16 (for GPUs: half the memory; 1.5x slower on a CPU). With the light "
+                   help="run the networks in float16 (for GPUs: half the memory; 1.4-1.5x slower on a CPU). With the light "
                         "model on real frames, points move 0.11 px at p99 (benchmarks/bench_precision.py)")
     p.add_argument("--threads", type=int, default=0,
                    help="torch CPU threads (default: the idle cores less one, at least 1; more threads than "

@@ -11,23 +11,18 @@ import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
-from pnlviz.conventions import EVAL_SIZE
-
 
 def add_export_parser(sub) -> None:
     from pnlviz.commands.cluster import add_cluster_args
-    from pnlviz.commands.common import parse_size
+    from pnlviz.commands.common import add_app_data_args
 
     p = sub.add_parser("export", help="export corrected training labels (as the app's export button)",
                        description="Write the corrected labels of a dataset and its edits: SoccerNet annotations, "
                                    "keypoint labels, cameras, COCO keypoints and a manifest of what changed. "
                                    "Only accepted and corrected frames unless --all.")
-    p.add_argument("--data", type=Path, help="dataset folder or zip (default: the bundled sample)")
-    p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
-    p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip, as given to pnlviz serve")
+    add_app_data_args(p)  # as pnlviz serve takes them
     p.add_argument("--out", required=True, type=Path, help="output folder, or a .zip")
     p.add_argument("--all", action="store_true", help="export every frame, reviewed or not")
-    p.add_argument("--size", type=parse_size, default=EVAL_SIZE, help="image size for frames without an image")
     p.add_argument("--no-progress", action="store_true")
     add_cluster_args(p)
     p.set_defaults(func=run_export)
@@ -66,12 +61,10 @@ def _export_chunk(job: _ExportJob, stems: list[str]) -> list:
 
 def _failed_on_cluster(state, stem: str, message: str):
     """The manifest entry of a frame whose cluster task failed: what the edits say of it, no labels."""
-    from pnlviz.app.export import FrameExport
+    from pnlviz.app.export import FrameExport, edits_entry
 
-    rec = state.edits.get(stem)
-    return FrameExport(stem, {"review": rec.get("review"), "annotation_edited": rec.get("annotation") is not None,
-                              "keypoints_edited": sorted(int(k) for k in (rec.get("keypoints") or {})),
-                              "calibrated": False, "error": f"{stem}: {message}", "exported": False})
+    return FrameExport(stem, {**edits_entry(state, stem), "calibrated": False, "error": f"{stem}: {message}",
+                              "exported": False})
 
 
 def run_export(args) -> int:

@@ -7,19 +7,15 @@ import sys
 import time
 from pathlib import Path
 
-from pnlviz.conventions import EVAL_SIZE
-
 
 def add_serve_parser(sub) -> None:
-    from pnlviz.commands.common import parse_size
+    from pnlviz.commands.common import add_app_data_args
 
     p = sub.add_parser("serve", help="the web app: inspect calibrations, review frames",
                        description="Serve the pnlviz app (viser) on a dataset; without --data, the bundled "
                                    "sample in examples/sample. Edits and review statuses are saved at once "
                                    "in an edits folder beside the data (never over it).")
-    p.add_argument("--data", type=Path, help="dataset folder or zip (default: the bundled sample)")
-    p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip")
-    p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
+    add_app_data_args(p)
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint: detect in the app (background)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint: detect in the app (background)")
     p.add_argument("--weights", type=Path, default=None,
@@ -33,7 +29,6 @@ def add_serve_parser(sub) -> None:
                                    "the URL)")
     p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
                    help="another host name the browser may use for this server (e.g. behind a proxy); repeatable")
-    p.add_argument("--size", type=parse_size, default=EVAL_SIZE, help="image size for frames without an image")
     p.add_argument("--detector-threads", type=int, default=1,
                    help="torch threads of the background detector process (default 1: the app keeps a core)")
     p.set_defaults(func=run_serve)

@@ -80,6 +80,14 @@ class Predictions:
             for k, (x1, y1, p1, x2, y2, p2) in self.lines.items()
         }
 
+    def points_px(self, width: float, height: float) -> dict[tuple, tuple[float, float]]:
+        """Every detected point in pixels, keyed ``("kp", id)`` for keypoints and ``("line", id,
+        1 | 2)`` for line ends: two detections of a frame compare point by point."""
+        pts = {("kp", k): (x, y) for k, (x, y, _) in self.keypoints_px(width, height).items()}
+        for k, (x1, y1, _, x2, y2, _) in self.lines_px(width, height).items():
+            pts[("line", k, 1)], pts[("line", k, 2)] = (x1, y1), (x2, y2)
+        return pts
+
     def keypoint_arrays(self, width: float, height: float, min_p: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(ids (N,) int, xy_px (N, 2), p (N,))`` of the keypoints with ``p >= min_p``, by id."""
         items = sorted((k, v) for k, v in self.keypoints.items() if v[2] >= min_p)

@@ -30,10 +30,17 @@ from typing import IO, Any
 from .errors import DataError, member_source
 from .reading import is_utf8
 
-__all__ = ["MEMBER_DATE", "ZipStream", "LineStream", "journal_path", "resume_members"]
+__all__ = ["MEMBER_DATE", "ZipStream", "LineStream", "journal_path", "member_info", "resume_members"]
 
 #: every member's timestamp: the same results give the same bytes, whatever ran them and when
 MEMBER_DATE = (1980, 1, 1, 0, 0, 0)
+
+
+def member_info(name: str) -> zipfile.ZipInfo:
+    """The header of a member pnlviz writes: deflated, mode 0644, dated :data:`MEMBER_DATE`."""
+    info = zipfile.ZipInfo(name, date_time=MEMBER_DATE)
+    info.compress_type, info.external_attr = zipfile.ZIP_DEFLATED, 0o644 << 16
+    return info
 
 
 def journal_path(path: str | os.PathLike) -> Path:
@@ -157,9 +164,7 @@ class ZipStream(_TempOutput):
             raise DataError(source, "member name is not valid UTF-8: not written")
         if name in self._seen:
             raise DataError(source, "written twice: the second copy is dropped")
-        info = zipfile.ZipInfo(name, date_time=MEMBER_DATE)
-        info.compress_type, info.external_attr = zipfile.ZIP_DEFLATED, 0o644 << 16
-        self._zip.writestr(info, data)
+        self._zip.writestr(member_info(name), data)
         self.names.append(name)
         self._seen.add(name)
         if self._journal is not None:

@@ -31,9 +31,9 @@ def jitter(cameras: Sequence[Camera | None], size: tuple[int, int] = EVAL_SIZE, 
         if cam is None:
             proj.append(None)
             continue
-        uv, _ = cam.scaled(W, H).project(grid)
-        inside = np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) & (uv[:, 0] <= W) & (uv[:, 1] >= 0) & (uv[:, 1] <= H)
-        proj.append((uv, inside))
+        cam = cam.scaled(W, H)
+        uv, _ = cam.project(grid)
+        proj.append((uv, cam.in_image(uv)))  # NaN (behind the camera) is never inside
     out = np.full(len(cameras), np.nan)
     for t in range(1, len(cameras) - 1):
         a, b, c = proj[t - 1], proj[t], proj[t + 1]
