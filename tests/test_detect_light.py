@@ -12,8 +12,9 @@ torch = pytest.importorskip("torch")
 from pnlviz.detect.light import LightNet, load_light, read_sidecar  # noqa: E402
 from pnlviz.detect.run import light_detector  # noqa: E402
 from pnlviz.detect.train_data import View  # noqa: E402
-from pnlviz.detect.train import (FrameCache, TrainConfig, focal_heatmap_loss, load_config, loss_fn,  # noqa: E402
-                                 masked_mse, peak_pixels, train)
+from pnlviz.detect.train import FrameCache, train  # noqa: E402
+from pnlviz.detect.train_config import TrainConfig, load_config  # noqa: E402
+from pnlviz.detect.train_loss import focal_heatmap_loss, loss_fn, masked_mse, peak_pixels  # noqa: E402
 
 SMOKE_SIZE = (160, 96)
 
@@ -151,7 +152,7 @@ def test_train_cli_smoke(tmp_path, capsys):
 
     from pnlviz.commands.train import add_train_parser
 
-    from pnlviz.detect.train import DEFAULT_CONFIG_PATH
+    from pnlviz.detect.train_config import DEFAULT_CONFIG_PATH
 
     cfg = load_config(DEFAULT_CONFIG_PATH.with_name("light_synth_config.json")).to_dict()  # stage 1: synthetic only
     cfg["data"]["size"] = list(SMOKE_SIZE)

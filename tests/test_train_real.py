@@ -10,8 +10,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from pnlviz.detect.train import (FrameCache, Source, TrainConfig, build_sources, epoch_plan,  # noqa: E402
-                                 train)
+from pnlviz.detect.train import FrameCache, Source, build_sources, epoch_plan, train  # noqa: E402
+from pnlviz.detect.train_config import TrainConfig  # noqa: E402
 from pnlviz.detect.train_data import (AnnotatedFrames, ExportedFrames, HomographyFrames, View,  # noqa: E402
                                       clip_annotation, draw_view)
 from pnlviz.labels import LabelParams, keypoints_from_annotation, training_targets  # noqa: E402
@@ -296,14 +296,14 @@ def test_the_shipped_recipe_names_what_it_was_trained_from(shared_dir):
 
     from pnlviz.detect.default import DEFAULT_MODEL
     from pnlviz.detect.light import read_sidecar
-    from pnlviz.detect.train import DEFAULT_CONFIG_PATH, _resolve, load_config
+    from pnlviz.detect.train_config import DEFAULT_CONFIG_PATH, load_config, resolve_path
 
     cfg = load_config(DEFAULT_CONFIG_PATH)
-    init = _resolve(cfg.init, cfg.base_dir)
+    init = resolve_path(cfg.init, cfg.base_dir)
     side = read_sidecar(DEFAULT_MODEL)
     assert init.is_file() and side["init"]["sha256"] == hashlib.sha256(init.read_bytes()).hexdigest()
     real = cfg.real[0]
-    folder = _resolve(real["path"], cfg.base_dir)
+    folder = resolve_path(real["path"], cfg.base_dir)
     assert folder.resolve() == (shared_dir / "data" / "wc14_real" / "trainval_300").resolve()
     held_out = set(real["exclude"])
     assert len(held_out) == 30

@@ -56,7 +56,8 @@ def add_train_parser(subparsers) -> None:
 
 
 def run_train(args) -> int:
-    from pnlviz.detect.train import DEFAULT_CONFIG_PATH, load_config, train
+    from pnlviz.detect.train import train
+    from pnlviz.detect.train_config import DEFAULT_CONFIG_PATH, load_config
 
     config_path = args.config if args.config is not None else DEFAULT_CONFIG_PATH
     try:

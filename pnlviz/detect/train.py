@@ -9,7 +9,7 @@ run skips the rendering. Heatmap targets and their loss masks come from
 ``pnlviz.labels.training_targets`` (left-right disambiguation on), computed on the fly at the
 network's input size.
 
-Loss: CenterNet's penalty-reduced focal loss on the probability maps (the 57 keypoint channels of
+Loss (:mod:`pnlviz.detect.train_loss`): CenterNet's penalty-reduced focal loss on the probability maps (the 57 keypoint channels of
 the softmax; the 23 line-extremity channels and the line-body channel of the sigmoid), positives at
 the pixel nearest each target Gaussian's centre, channels kept by the masks (keypoint mask per
 frame; the line mask keeps all), keypoint loss + line loss. The paper's loss (Sec. III-B, mean
@@ -23,7 +23,7 @@ horizontal flip (``augment.flip``: its probability), whose targets come from the
 annotation (:func:`pnlviz.labels.flip_annotation`: x -> 1 - x and left/right class names swapped,
 so the keypoint and line ids follow).
 
-Everything is seeded (``seed`` for the weights, the shuffling and the augmentations;
+The configuration: :mod:`pnlviz.detect.train_config`. Everything is seeded (``seed`` for the weights, the shuffling and the augmentations;
 ``data.seed`` for the frames). The checkpoint is a plain state dict written with
 ``save_checkpoint``; a JSON sidecar (``light.pt`` -> ``light.json``) records the provenance.
 """
@@ -35,7 +35,7 @@ import math
 import platform
 import random
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable
@@ -49,88 +49,10 @@ from pnlviz.detect.light import LightNet, sidecar_path
 from pnlviz.detect.train_data import (AnnotatedFrames, ExportedFrames, HomographyFrames, View, annotation_example,
                                      draw_view)
 
-__all__ = ["TrainConfig", "TrainResult", "FrameCache", "load_config", "masked_mse", "train",
-           "DEFAULT_CONFIG_PATH"]
+from pnlviz.detect.train_config import TrainConfig, resolve_path
+from pnlviz.detect.train_loss import augment, loss_fn
 
-DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / "assets" / "models" / "light_config.json"
-
-
-@dataclass
-class TrainConfig:
-    data_seed: int = 5
-    frames: int = 1400  # synthetic frames (0: none)
-    data_weight: float = 1.0  # share of the synthetic frames in a mixed epoch
-    size: tuple[int, int] = (480, 272)  # rendering size (W, H)
-    input_size: tuple[int, int] = (480, 272)  # network input size in training, and at inference
-    epochs: int = 20
-    lr: float = 1e-3
-    lr_final: float = 5e-5
-    weight_decay: float = 0.0
-    batch_size: int = 8
-    sigma: float = 2.0
-    loss: str = "focal"  # or "mse" (the paper's loss; collapses to empty maps for this network)
-    kp_threshold: float = 0.1  # peak thresholds the detector uses with this model (kept in the sidecar)
-    line_threshold: float = 0.1
-    peak_refine: str = "log"  # sub-pixel peak refinement the detector uses with this model (sidecar)
-    calibration: dict = field(default_factory=dict)  # CalibParams overrides for its detections (sidecar)
-    seed: int = 0
-    threads: int = 2
-    augment: dict = field(default_factory=lambda: {"brightness": 0.3, "contrast": 0.3, "saturation": 0.3,
-                                                   "gain": 0.08, "noise": 0.03})
-    #: real sources: ``{"kind": "homography" | "soccernet", "path": ..., "weight": w, ...}`` (see
-    #: :func:`build_sources`); relative paths are taken from ``base_dir`` (the config's folder)
-    real: list = field(default_factory=list)
-    #: weights to start from (a LightNet checkpoint), instead of a random initialisation
-    init: str | None = None
-    #: samples per epoch (default: the frames of every source, once)
-    epoch_frames: int | None = None
-    base_dir: str | None = field(default=None, compare=False)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "TrainConfig":
-        d = dict(d)
-        data = d.pop("data", {}) or {}
-        kw: dict = {}
-        if "seed" in data:
-            kw["data_seed"] = int(data["seed"])
-        if "frames" in data:
-            kw["frames"] = int(data["frames"])
-        if "size" in data:
-            kw["size"] = tuple(int(v) for v in data["size"])
-        if "weight" in data:
-            kw["data_weight"] = float(data["weight"])
-        known = {f for f in cls.__dataclass_fields__}
-        for k, v in d.items():
-            if k.startswith("_") or k in ("comment", "estimate", "base_dir"):
-                continue
-            if k not in known:
-                raise ValueError(f"unknown training config key {k!r}")
-            kw[k] = tuple(int(x) for x in v) if k in ("size", "input_size") else v
-        cfg = cls(**kw)
-        if "input_size" not in d and "size" in data:
-            cfg.input_size = cfg.size
-        return cfg
-
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d.pop("base_dir")
-        out = {"data": {"seed": d.pop("data_seed"), "frames": d.pop("frames"), "size": list(d.pop("size")),
-                        "weight": d.pop("data_weight")}}
-        d["input_size"] = list(d["input_size"])
-        out.update(d)
-        return out
-
-
-def load_config(path: str | Path | None = None) -> TrainConfig:
-    path = Path(path) if path is not None else DEFAULT_CONFIG_PATH
-    cfg = TrainConfig.from_dict(json.loads(Path(path).read_text()))
-    cfg.base_dir = str(Path(path).resolve().parent)
-    return cfg
-
-
-def _resolve(path: str, base_dir: str | None) -> Path:
-    p = Path(path).expanduser()
-    return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
+__all__ = ["FrameCache", "Source", "TrainResult", "build_sources", "epoch_plan", "train", "write_sidecar"]
 
 
 @dataclass
@@ -164,18 +86,18 @@ def build_sources(config: TrainConfig, *, cache: "FrameCache | None" = None, cac
         kind = entry.get("kind")
         if "path" not in entry:
             raise ValueError(f"real source {k}: no 'path'")
-        path = _resolve(entry["path"], config.base_dir)
+        path = resolve_path(entry["path"], config.base_dir)
         exclude = [str(s) for s in entry.get("exclude", [])]
         if kind == "homography":
             hom = entry.get("homographies")
-            frames = HomographyFrames(path, _resolve(hom, config.base_dir) if hom else None,
+            frames = HomographyFrames(path, resolve_path(hom, config.base_dir) if hom else None,
                                       source_size=tuple(entry.get("source_size", (1280, 720))), exclude=exclude)
         elif kind == "soccernet":
             frames = AnnotatedFrames(path, exclude=exclude)
         elif kind == "labels":
             if "images" not in entry:
                 raise ValueError(f"real source {k}: exported labels need 'images' (the dataset they were made on)")
-            frames = ExportedFrames(path, _resolve(entry["images"], config.base_dir), exclude=exclude)
+            frames = ExportedFrames(path, resolve_path(entry["images"], config.base_dir), exclude=exclude)
         else:
             raise ValueError(f"real source {k}: unknown kind {kind!r} (homography, soccernet or labels)")
         real.append(Source(f"{kind} {entry['path']}", frames, float(entry.get("weight", 1.0)),
@@ -278,85 +200,6 @@ def _batch(items: list, input_size, sigma):
     return [torch.from_numpy(np.stack(col)) for col in zip(*rows)]
 
 
-def augment(x: torch.Tensor, params: dict, gen: torch.Generator) -> torch.Tensor:
-    """Colour jitter + Gaussian noise on an RGB batch in [0, 1] (B, 3, H, W)."""
-    B = x.shape[0]
-
-    def factor(name):
-        a = float(params.get(name, 0.0))
-        return 1.0 + (torch.rand(B, 1, 1, 1, generator=gen) * 2 - 1) * a
-
-    if params.get("brightness"):
-        x = x * factor("brightness")
-    if params.get("contrast"):
-        mean = x.mean(dim=(1, 2, 3), keepdim=True)
-        x = (x - mean) * factor("contrast") + mean
-    if params.get("saturation"):
-        gray = (0.299 * x[:, 0:1] + 0.587 * x[:, 1:2] + 0.114 * x[:, 2:3])
-        x = (x - gray) * factor("saturation") + gray
-    if params.get("gain"):
-        g = float(params["gain"])
-        x = x * (1.0 + (torch.rand(B, 3, 1, 1, generator=gen) * 2 - 1) * g)
-    if params.get("noise"):
-        std = torch.rand(B, 1, 1, 1, generator=gen) * float(params["noise"])
-        x = x + torch.randn(x.shape, generator=gen) * std
-    return x.clamp_(0.0, 1.0)
-
-
-# -- loss ----------------------------------------------------------------------------------------
-def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """Mean over the kept (B, C) channels of the per-channel mean squared error."""
-    per_channel = (pred - target).square().mean(dim=(2, 3))
-    return (per_channel * mask).sum() / mask.sum().clamp_min(1.0)
-
-
-def peak_pixels(target: torch.Tensor, floor: float = 0.5) -> torch.Tensor:
-    """The positives of the focal loss: pixels that are the 3x3 maximum of a target Gaussian
-    reaching ``floor`` (one pixel per Gaussian, the one nearest its sub-pixel centre)."""
-    return (target >= torch.nn.functional.max_pool2d(target, 3, 1, 1)) & (target >= floor)
-
-
-def focal_heatmap_loss(p: torch.Tensor, log_p: torch.Tensor, log_1mp: torch.Tensor, target: torch.Tensor,
-                       mask: torch.Tensor, pos: torch.Tensor, alpha: float = 2.0, beta: float = 4.0
-                       ) -> torch.Tensor:
-    """CenterNet's penalty-reduced pixel-wise focal loss (Law & Deng 2018, Zhou et al. 2019) on
-    probability maps ``p`` (B, C, h, w), with their logs given for numerical stability: positives
-    ``pos`` pull p to 1, every other pixel pushes p to 0 with weight (1 - target)^beta (so the
-    Gaussian's shoulders are barely penalised); summed over kept channels, divided by the number of
-    positives. Unlike a plain MSE it cannot be minimised by an empty map (issue #5: the MSE run
-    collapsed to the background)."""
-    m = mask[:, :, None, None]
-    pos_f = pos.to(p.dtype) * m
-    pos_loss = -((1 - p) ** alpha * log_p * pos_f).sum()
-    neg_w = (1 - target).clamp_min(0) ** beta * (1 - pos.to(p.dtype)) * m
-    neg_loss = -((p ** alpha) * log_1mp * neg_w).sum()
-    return (pos_loss + neg_loss) / pos_f.sum().clamp_min(1.0)
-
-
-def loss_fn(net: LightNet, x, kp_t, kp_m, ln_t, ln_m, kind: str = "focal") -> torch.Tensor:
-    kp_logits, ln_logits = net.logits(x)
-    if kind == "mse":
-        return (masked_mse(torch.softmax(kp_logits, dim=1), kp_t, kp_m)
-                + masked_mse(torch.sigmoid(ln_logits), ln_t, ln_m))
-    if kind != "focal":
-        raise ValueError(f"unknown loss {kind!r} (focal or mse)")
-    # keypoints: the 57 keypoint channels of the softmax (the background is their complement)
-    log_sm = torch.log_softmax(kp_logits, dim=1)[:, :-1]
-    p = log_sm.exp()
-    log_1mp = torch.log1p(-p.clamp(max=1 - 1e-6))
-    kp_t, kp_m = kp_t[:, :-1], kp_m[:, :-1]
-    kp_loss = focal_heatmap_loss(p, log_sm, log_1mp, kp_t, kp_m, peak_pixels(kp_t))
-    # lines: the 23 extremity channels (two peaks each), and the line-body ridge channel as its own
-    # term. Normalised together, the body's hundreds of ridge pixels per frame outnumbered the ~2
-    # positives per extremity channel and starved those channels (issue #5: line-end peaks reached
-    # 0.29 on average, 4 % above the 0.6 threshold).
-    sig = torch.nn.functional.logsigmoid
-    z, t, m = ln_logits[:, :-1], ln_t[:, :-1], ln_m[:, :-1]
-    ln_loss = focal_heatmap_loss(torch.sigmoid(z), sig(z), sig(-z), t, m, peak_pixels(t))
-    z, t, m = ln_logits[:, -1:], ln_t[:, -1:], ln_m[:, -1:]
-    ln_loss = ln_loss + focal_heatmap_loss(torch.sigmoid(z), sig(z), sig(-z), t, m, t >= 0.8)
-    return kp_loss + ln_loss
-
 
 # -- loop ----------------------------------------------------------------------------------------
 def _seed_everything(seed: int) -> None:
@@ -398,7 +241,7 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
         log(f"source {src.name}: {len(src)} frames, weight {src.weight:g}")
     # recorded as given: on the command line, or as the config names it (relative to the config)
     init_label = str(init) if init is not None else config.init
-    init = init if init is not None else (str(_resolve(config.init, config.base_dir)) if config.init else None)
+    init = init if init is not None else (str(resolve_path(config.init, config.base_dir)) if config.init else None)
     net = LightNet()
     if init is not None:
         from pnlviz.detect.checkpoint import load_checkpoint

@@ -30,7 +30,7 @@ A :class:`View` says how one example is drawn, and every part of it keeps the la
 * ``graphics``: a broadcast score bug (a box with team names, score and clock) drawn near a top
   corner, as live broadcasts show (labels unchanged: the pitch is still where it was).
 
-Photometric jitter and noise are applied to the batch afterwards (:func:`pnlviz.detect.train.augment`).
+Photometric jitter and noise are applied to the batch afterwards (:func:`pnlviz.detect.train_loss.augment`).
 """
 
 from __future__ import annotations

@@ -1,0 +1,94 @@
+"""The training configuration of the light model (:mod:`pnlviz.detect.train`): its fields, its
+JSON form (``assets/models/light_config.json`` is the shipped one) and how relative paths in it
+are read (from the config's own folder)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+__all__ = ["DEFAULT_CONFIG_PATH", "TrainConfig", "load_config", "resolve_path"]
+
+DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / "assets" / "models" / "light_config.json"
+
+
+@dataclass
+class TrainConfig:
+    data_seed: int = 5
+    frames: int = 1400  # synthetic frames (0: none)
+    data_weight: float = 1.0  # share of the synthetic frames in a mixed epoch
+    size: tuple[int, int] = (480, 272)  # rendering size (W, H)
+    input_size: tuple[int, int] = (480, 272)  # network input size in training, and at inference
+    epochs: int = 20
+    lr: float = 1e-3
+    lr_final: float = 5e-5
+    weight_decay: float = 0.0
+    batch_size: int = 8
+    sigma: float = 2.0
+    loss: str = "focal"  # or "mse" (the paper's loss; collapses to empty maps for this network)
+    kp_threshold: float = 0.1  # peak thresholds the detector uses with this model (kept in the sidecar)
+    line_threshold: float = 0.1
+    peak_refine: str = "log"  # sub-pixel peak refinement the detector uses with this model (sidecar)
+    calibration: dict = field(default_factory=dict)  # CalibParams overrides for its detections (sidecar)
+    seed: int = 0
+    threads: int = 2
+    augment: dict = field(default_factory=lambda: {"brightness": 0.3, "contrast": 0.3, "saturation": 0.3,
+                                                   "gain": 0.08, "noise": 0.03})
+    #: real sources: ``{"kind": "homography" | "soccernet", "path": ..., "weight": w, ...}`` (see
+    #: :func:`build_sources`); relative paths are taken from ``base_dir`` (the config's folder)
+    real: list = field(default_factory=list)
+    #: weights to start from (a LightNet checkpoint), instead of a random initialisation
+    init: str | None = None
+    #: samples per epoch (default: the frames of every source, once)
+    epoch_frames: int | None = None
+    base_dir: str | None = field(default=None, compare=False)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainConfig":
+        d = dict(d)
+        data = d.pop("data", {}) or {}
+        kw: dict = {}
+        if "seed" in data:
+            kw["data_seed"] = int(data["seed"])
+        if "frames" in data:
+            kw["frames"] = int(data["frames"])
+        if "size" in data:
+            kw["size"] = tuple(int(v) for v in data["size"])
+        if "weight" in data:
+            kw["data_weight"] = float(data["weight"])
+        known = {f for f in cls.__dataclass_fields__}
+        for k, v in d.items():
+            if k.startswith("_") or k in ("comment", "estimate", "base_dir"):
+                continue
+            if k not in known:
+                raise ValueError(f"unknown training config key {k!r}")
+            kw[k] = tuple(int(x) for x in v) if k in ("size", "input_size") else v
+        cfg = cls(**kw)
+        if "input_size" not in d and "size" in data:
+            cfg.input_size = cfg.size
+        return cfg
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d.pop("base_dir")
+        out = {"data": {"seed": d.pop("data_seed"), "frames": d.pop("frames"), "size": list(d.pop("size")),
+                        "weight": d.pop("data_weight")}}
+        d["input_size"] = list(d["input_size"])
+        out.update(d)
+        return out
+
+
+def load_config(path: str | Path | None = None) -> TrainConfig:
+    path = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+    cfg = TrainConfig.from_dict(json.loads(Path(path).read_text()))
+    cfg.base_dir = str(Path(path).resolve().parent)
+    return cfg
+
+
+def resolve_path(path: str, base_dir: str | None) -> Path:
+    """``path`` as a config names it: relative paths are taken from ``base_dir`` (the config's folder)."""
+    p = Path(path).expanduser()
+    return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
+
+
