@@ -14,7 +14,6 @@ from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.polylines import project_polylines
 
 PITCH_BGR = (60, 220, 255)  # amber: the model reprojected through a camera
-ANNOTATION_BGR = (255, 80, 255)  # magenta: what the labels say
 
 # A stable colour per class (BGR), for annotation overlays.
 _CLASS_COLOURS: dict[str, tuple[int, int, int]] = {}

@@ -43,15 +43,12 @@ from .cameras import camera_member_name, camera_stem, parse_camera_bytes
 from .errors import DataError, member_source
 from .imagesize import header_size
 from .jsonio import describe, parse_json_bytes
-from .layout import find_root, is_junk, sort_stems, split_member
+from .index import CAMERAS_DIR, IMAGE_EXTENSIONS, MATCH_INFO, index_folder, index_zip
+from .layout import sort_stems
 from .reading import bad_name_error, is_utf8, limit_for, open_file, open_zip, read_file, read_zip_member, zip_member
 
 __all__ = ["Frame", "Dataset", "open_dataset", "IMAGE_EXTENSIONS"]
 
-#: Image file extensions recognised as frames, in order of preference for a stem with several.
-IMAGE_EXTENSIONS: tuple[str, ...] = (".jpg", ".jpeg", ".png")
-MATCH_INFO = "match_info.json"
-CAMERAS_DIR = "cameras"
 #: The message of a dataset without a single frame.
 NO_FRAMES = "no frames (expected <stem>.jpg/.png/.json at the top level or inside one folder)"
 
@@ -82,30 +79,6 @@ class Frame:
         return member_source(self.archive, name) if self.archive else name
 
 
-def _classify(base: str) -> tuple[str, str] | None:
-    """``("image"|"annotation", stem)`` for a frame file name, else None."""
-    lower = base.lower()
-    if lower == MATCH_INFO or base.startswith("."):
-        return None
-    stem, dot, ext = base.rpartition(".")
-    if not dot or not stem:
-        return None
-    ext = "." + ext.lower()
-    if ext == ".json":
-        return ("annotation", stem)
-    if ext in IMAGE_EXTENSIONS:
-        return ("image", stem)
-    return None
-
-
-def _preference(what: str, base: str) -> tuple:
-    """Sort key of the files of one frame: the first one is used (rule in the module docstring)."""
-    ext = "." + base.rpartition(".")[2]
-    if what == "annotation":
-        return (ext != ".json", base)
-    return (IMAGE_EXTENSIONS.index(ext.lower()), ext != ext.lower(), base)
-
-
 class Dataset:
     """Lazily indexed frames of a folder or zip; see the module docstring.
 
@@ -123,7 +96,7 @@ class Dataset:
         #: ``(stem, DataError)`` of the frames the last :meth:`iter_annotations` skipped.
         self.skipped: list[tuple[str, DataError]] = []
         #: Files that are not used (bad names, duplicates; see the module docstring), one line each.
-        self.rejected: list[DataError] = []
+        self.rejected: list[DataError]
         self._lock = threading.RLock()
         self._zf: zipfile.ZipFile | None = None
         self._cache: OrderedDict[tuple[str, bool], Annotation] = OrderedDict()
@@ -133,82 +106,14 @@ class Dataset:
         if not self.path.exists():
             raise DataError(os.fspath(self.path), "no such file or folder")
         self.is_zip = not self.path.is_dir()
-        self._images: dict[str, str] = {}
-        self._annotations: dict[str, str] = {}
-        self._files: dict[tuple[str, str], list[tuple[str, str]]] = {}
         if self.is_zip:
-            self._index_zip()
+            self._zf = open_zip(self.path, not_zip="not a folder or a valid .zip archive")
+            self._index = index_zip(self.path, self._zf)
         else:
-            self._index_folder()
-        self._resolve()
-        self.rejected.sort(key=str)
+            self._index = index_folder(self.path)
+        self.rejected = self._index.rejected
+        self._images, self._annotations = self._index.images, self._index.annotations
         self._stems = tuple(sort_stems(set(self._images) | set(self._annotations)))
-
-    # ----------------------------------------------------------------- indexing
-    def _add(self, base: str, name: str) -> None:
-        kind = _classify(base)
-        if kind is None:
-            return
-        if not is_utf8(kind[1]):
-            self.rejected.append(bad_name_error(self._source(name)))
-            return
-        self._files.setdefault(kind, []).append((base, name))
-
-    def _resolve(self) -> None:
-        """One file per frame and kind: the preferred one; the others go to :attr:`rejected`."""
-        for (what, stem), files in self._files.items():
-            files.sort(key=lambda f: _preference(what, f[0]))
-            (self._annotations if what == "annotation" else self._images)[stem] = files[0][1]
-            for _, name in files[1:]:
-                self.rejected.append(DataError(self._source(name), f"another {what} of frame {stem!r} is used "
-                                                                   f"({files[0][0]}): this file is ignored"))
-        del self._files
-
-    def _index_folder(self) -> None:
-        root = self.path
-        for _ in range(2):  # the folder itself, or the single folder inside it
-            subdirs, files = [], []
-            with os.scandir(root) as it:
-                for entry in it:
-                    if entry.name.startswith("."):
-                        continue
-                    if entry.is_dir():
-                        if entry.name != CAMERAS_DIR:
-                            subdirs.append(entry.path)
-                    elif _classify(entry.name) is not None:
-                        files.append((entry.name, entry.path))
-            if files or len(subdirs) != 1:
-                break
-            root = Path(subdirs[0])
-        for base, name in files:
-            self._add(base, name)
-        self._root_dir = Path(root)
-        self._camera_names: set[str] | None = None  # checked on demand in a folder
-
-    def _index_zip(self) -> None:
-        zf = open_zip(self.path, not_zip="not a folder or a valid .zip archive")
-        self._zf = zf
-        names, seen = [], set()
-        for n in zf.namelist():
-            if is_junk(n):
-                continue
-            if n in seen:
-                self.rejected.append(DataError(self._source(n), "appears twice in the archive: the last copy is used"))
-                continue
-            seen.add(n)
-            names.append(n)
-        candidates = [n for n in names if n.split("/", 1)[0] != CAMERAS_DIR]
-        root = find_root(candidates, lambda b: _classify(b) is not None)
-        self._root = root
-        self._camera_names = set()
-        self._names = set(names)
-        cam_prefix = root + CAMERAS_DIR + "/"
-        for n in names:
-            prefix, base = split_member(n)
-            if prefix == root:
-                self._add(base, n)
-            elif prefix == cam_prefix:
-                self._camera_names.add(base)
 
     # ------------------------------------------------------------- pickling
     def __getstate__(self) -> dict:
@@ -265,7 +170,7 @@ class Dataset:
         )
 
     def _source(self, name: str) -> str:
-        return member_source(self.path, name) if self.is_zip else name
+        return self._index.source(name)
 
     def require_frames(self) -> None:
         """DataError when the dataset has no frame at all (batch commands have nothing to do)."""
@@ -337,11 +242,6 @@ class Dataset:
             yield stem, ann
 
     # ------------------------------------------------------------------ images
-    def image_bytes(self, stem: str) -> bytes | None:
-        """The encoded image file of ``stem``, None if it has none."""
-        name = self.frame(stem).image_path
-        return None if name is None else self._read(name)
-
     def image(self, stem: str) -> np.ndarray | None:
         """The image of ``stem`` as BGR uint8 ``(H, W, 3)``, pixels as stored (EXIF orientation
         ignored); None if the frame has no image. Corrupt data, or an image over the size caps,
@@ -382,10 +282,10 @@ class Dataset:
         not the dataset has that frame. A name that is not valid UTF-8 goes to :attr:`rejected`."""
         if self._camera_stems is None:
             if self.is_zip:
-                names = self._camera_names
+                names = self._index.camera_members
             else:
-                folder = self._root_dir / CAMERAS_DIR
-                names = set(os.listdir(folder)) if folder.is_dir() else set()
+                folder = self._index.path(CAMERAS_DIR)
+                names = set(os.listdir(folder)) if os.path.isdir(folder) else set()
             stems = set()
             for base in names:
                 stem = camera_stem(base)
@@ -399,9 +299,7 @@ class Dataset:
         return self._camera_stems
 
     def _camera_path(self, base: str) -> str:
-        if self.is_zip:
-            return self._root + CAMERAS_DIR + "/" + base
-        return os.fspath(self._root_dir / CAMERAS_DIR / base)
+        return self._index.path(CAMERAS_DIR, base)
 
     def camera_source(self, stem: str) -> str:
         """The ``<file>`` part of a message about the camera of ``stem``."""
@@ -411,7 +309,7 @@ class Dataset:
         """The ground-truth camera ``cameras/camera_<stem>.json`` (raw dict, validated), or None."""
         base = camera_member_name(stem)
         name = self._camera_path(base)
-        present = base in self._camera_names if self.is_zip else os.path.isfile(name)
+        present = base in self._index.camera_members if self.is_zip else os.path.isfile(name)
         if not present:
             return None
         return parse_camera_bytes(self._read(name), self._source(name))
@@ -420,12 +318,8 @@ class Dataset:
     def match_info(self) -> dict | None:
         """The content of ``match_info.json`` (a dict), or None when the dataset has none."""
         if self._match_info is ...:
-            if self.is_zip:
-                name = self._root + MATCH_INFO
-                present = name in self._names
-            else:
-                name = os.fspath(self._root_dir / MATCH_INFO)
-                present = os.path.isfile(name)
+            name = self._index.path(MATCH_INFO)
+            present = name in self._index.members if self.is_zip else os.path.isfile(name)
             info = None
             if present:
                 source = self._source(name)

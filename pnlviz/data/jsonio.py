@@ -9,12 +9,11 @@ from typing import Any
 
 import numpy as np
 
-from .atomic import atomic_write_text
 from .errors import DataError
 from .limits import MAX_JSON_BYTES
 from .reading import read_file
 
-__all__ = ["parse_json_bytes", "read_json_file", "write_json_file", "to_jsonable", "as_number", "describe"]
+__all__ = ["parse_json_bytes", "to_jsonable", "as_number", "describe"]
 
 
 def parse_json_bytes(data: bytes | str, source: str) -> Any:
@@ -37,11 +36,6 @@ def read_file_bytes(path: str | os.PathLike) -> bytes:
     return read_file(path, MAX_JSON_BYTES)
 
 
-def read_json_file(path: str | os.PathLike) -> Any:
-    """Read and parse a JSON file (DataError when unreadable or corrupt)."""
-    return parse_json_bytes(read_file_bytes(path), os.fspath(path))
-
-
 def to_jsonable(obj: Any) -> Any:
     """Convert numpy scalars/arrays and tuples inside ``obj`` to plain JSON types."""
     if isinstance(obj, dict):
@@ -62,11 +56,6 @@ def to_jsonable(obj: Any) -> Any:
 def dumps(obj: Any, indent: int | None = None) -> str:
     """``json.dumps`` of ``to_jsonable(obj)`` (NaN/inf refused: they are not JSON)."""
     return json.dumps(to_jsonable(obj), indent=indent, allow_nan=False)
-
-
-def write_json_file(path: str | os.PathLike, obj: Any, indent: int | None = None) -> None:
-    """Write ``obj`` as JSON to ``path`` atomically."""
-    atomic_write_text(path, dumps(obj, indent=indent))
 
 
 def as_number(value: Any) -> float | None:

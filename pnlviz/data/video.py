@@ -16,15 +16,7 @@ import numpy as np
 from .dataset import Frame
 from .errors import DataError
 
-__all__ = ["VideoDataset", "is_video"]
-
-VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".ts")
-
-
-def is_video(path: str | os.PathLike) -> bool:
-    p = Path(path)
-    return p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES
-
+__all__ = ["VideoDataset"]
 
 class VideoDataset:
     """The frames of one video file, with the part of :class:`pnlviz.data.Dataset`'s interface the

@@ -1,0 +1,141 @@
+"""Which files of a dataset folder or zip are frames: the names are listed once (``os.scandir``
+/ the zip's central directory, nothing read), sorted into one image and one annotation per frame
+stem, and the files that are not used are listed with the reason (rules in
+:mod:`pnlviz.data.dataset`).
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .errors import DataError, member_source
+from .layout import find_root, is_junk, split_member
+from .reading import bad_name_error, is_utf8
+
+#: Image file extensions recognised as frames, in order of preference for a stem with several.
+IMAGE_EXTENSIONS: tuple[str, ...] = (".jpg", ".jpeg", ".png")
+MATCH_INFO = "match_info.json"
+CAMERAS_DIR = "cameras"
+
+__all__ = ["CAMERAS_DIR", "IMAGE_EXTENSIONS", "MATCH_INFO", "DatasetIndex", "index_folder", "index_zip"]
+
+
+def classify(base: str) -> tuple[str, str] | None:
+    """``("image"|"annotation", stem)`` for a frame file name, else None."""
+    lower = base.lower()
+    if lower == MATCH_INFO or base.startswith("."):
+        return None
+    stem, dot, ext = base.rpartition(".")
+    if not dot or not stem:
+        return None
+    ext = "." + ext.lower()
+    if ext == ".json":
+        return ("annotation", stem)
+    if ext in IMAGE_EXTENSIONS:
+        return ("image", stem)
+    return None
+
+
+def _preference(what: str, base: str) -> tuple:
+    """Sort key of the files of one frame: the first one is used (rule in the dataset docstring)."""
+    ext = "." + base.rpartition(".")[2]
+    if what == "annotation":
+        return (ext != ".json", base)
+    return (IMAGE_EXTENSIONS.index(ext.lower()), ext != ext.lower(), base)
+
+
+@dataclass
+class DatasetIndex:
+    """The frame files of a dataset. Names are file paths (a folder) or member names (a zip,
+    ``archive`` its path). ``root``: the folder holding the frames (a path, or a member prefix
+    such as ``""`` or ``"dir/"`` in a zip); ``members``: every member name of a zip (None for a
+    folder, whose other files are looked up on disk when asked for)."""
+
+    archive: Path | None
+    root: str
+    images: dict[str, str] = field(default_factory=dict)
+    annotations: dict[str, str] = field(default_factory=dict)
+    rejected: list[DataError] = field(default_factory=list)
+    members: set[str] | None = None
+    camera_members: set[str] | None = None
+
+    def source(self, name: str) -> str:
+        """The ``<file>`` part of an error message for ``name``."""
+        return member_source(self.archive, name) if self.archive is not None else name
+
+    def path(self, *parts: str) -> str:
+        """The name of a file under the root (``path("cameras", "camera_1.json")``)."""
+        if self.archive is not None:
+            return self.root + "/".join(parts)
+        return os.fspath(Path(self.root, *parts))
+
+    def _sort(self, files: list[tuple[str, str]]) -> None:
+        """One file per frame and kind (the preferred one); the others go to :attr:`rejected`."""
+        by_frame: dict[tuple[str, str], list[tuple[str, str]]] = {}
+        for base, name in files:
+            kind = classify(base)
+            if kind is None:
+                continue
+            if not is_utf8(kind[1]):
+                self.rejected.append(bad_name_error(self.source(name)))
+                continue
+            by_frame.setdefault(kind, []).append((base, name))
+        for (what, stem), candidates in by_frame.items():
+            candidates.sort(key=lambda f: _preference(what, f[0]))
+            (self.annotations if what == "annotation" else self.images)[stem] = candidates[0][1]
+            for _, name in candidates[1:]:
+                self.rejected.append(DataError(self.source(name), f"another {what} of frame {stem!r} is used "
+                                                                  f"({candidates[0][0]}): this file is ignored"))
+        self.rejected.sort(key=str)
+
+
+def index_folder(path: Path) -> DatasetIndex:
+    """The frames of a folder: at its top level, or inside its single subfolder."""
+    root = Path(path)
+    for _ in range(2):  # the folder itself, or the single folder inside it
+        subdirs, files = [], []
+        with os.scandir(root) as it:
+            for entry in it:
+                if entry.name.startswith("."):
+                    continue
+                if entry.is_dir():
+                    if entry.name != CAMERAS_DIR:
+                        subdirs.append(entry.path)
+                elif classify(entry.name) is not None:
+                    files.append((entry.name, entry.path))
+        if files or len(subdirs) != 1:
+            break
+        root = Path(subdirs[0])
+    index = DatasetIndex(None, os.fspath(root))
+    index._sort(files)
+    return index
+
+
+def index_zip(path: Path, zf: zipfile.ZipFile) -> DatasetIndex:
+    """The frames of an open zip: at its top level, or inside its single top-level folder."""
+    index = DatasetIndex(Path(path), "")
+    names, seen = [], set()
+    for n in zf.namelist():
+        if is_junk(n):
+            continue
+        if n in seen:
+            index.rejected.append(DataError(index.source(n), "appears twice in the archive: the last copy is used"))
+            continue
+        seen.add(n)
+        names.append(n)
+    candidates = [n for n in names if n.split("/", 1)[0] != CAMERAS_DIR]
+    index.root = find_root(candidates, lambda b: classify(b) is not None)
+    index.members, index.camera_members = set(names), set()
+    cam_prefix = index.root + CAMERAS_DIR + "/"
+    files = []
+    for n in names:
+        prefix, base = split_member(n)
+        if prefix == index.root:
+            files.append((base, n))
+        elif prefix == cam_prefix:
+            index.camera_members.add(base)
+    index._sort(files)
+    return index
