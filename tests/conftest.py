@@ -4,11 +4,46 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = REPO.parent / "shared"
+#: why a real-data test did not run: one reason for all of them, so pytest's summary says it on one line
+SHARED_MISSING = (f"{SHARED} not found: the real-data tests need ../shared beside the repository "
+                  "(CI stops without it)")
+
+
+#: where the reason is written (the line pytest's summary shows for those skips)
+_REASON_LINE = next(i for i, line in enumerate(Path(__file__).read_text().splitlines(), 1)
+                    if line.startswith("SHARED_MISSING"))
+
+
+def shared_found() -> bool:
+    return (SHARED / "data").is_dir() and (SHARED / "reference").is_dir()
+
+
+def pytest_report_header(config) -> str:
+    return f"../shared: {SHARED}" if shared_found() else f"../shared: MISSING, {SHARED_MISSING}"
 
 
 @pytest.fixture(scope="session")
 def shared_dir() -> Path:
-    """``../shared`` beside the repository (CI has it); tests that need it skip without it."""
-    if not (SHARED / "data").is_dir():
-        pytest.skip(f"{SHARED} not found: real-data tests need ../shared beside the repo")
+    """``../shared`` beside the repository (CI has it); a test that needs it skips without it,
+    every such skip with the same one-line reason (:data:`SHARED_MISSING`)."""
+    if not shared_found():
+        pytest.skip(SHARED_MISSING)
     return SHARED
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """The skips for a missing ../shared are reported at one place, so that pytest's summary
+    folds them into one line ("SKIPPED [N] ... ../shared not found ...")."""
+    outcome = yield
+    report = outcome.get_result()
+    longrepr = report.longrepr
+    if report.skipped and isinstance(longrepr, tuple) and str(longrepr[2]).endswith(SHARED_MISSING):
+        report.longrepr = (__file__, _REASON_LINE, longrepr[2])
+
+
+@pytest.fixture(scope="session")
+def evaluator():
+    """The official SoccerNet evaluator's helpers (``SoccerNet.Evaluation.utils_calibration``), the
+    oracle of the metric tests; a test that needs it skips where it is not installed."""
+    return pytest.importorskip("SoccerNet.Evaluation.utils_calibration")

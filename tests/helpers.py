@@ -5,6 +5,11 @@ import shutil
 import socket
 from pathlib import Path
 
+import pytest
+
+#: for tests that read ../shared through module-level paths: they skip (one reason for all) without it
+needs_shared = pytest.mark.usefixtures("shared_dir")
+
 
 def free_port() -> int:
     """A TCP port nobody listens on right now, for a test server."""

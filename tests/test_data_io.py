@@ -43,6 +43,7 @@ from pnlviz.data import (
     write_predictions,
 )
 from pnlviz.field.names import ALL_CLASSES, IGNORED_CLASSES, LINE_ID_TO_CLASS, MODEL_CLASSES
+from helpers import needs_shared
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 DATA = SHARED / "data"
@@ -52,10 +53,6 @@ WC14_PRED = DATA / "wc14_test_half" / "detections_pnlcalib.zip"
 WC14_H = DATA / "wc14_test_half" / "homographies.json"
 FRAMES = DATA / "frames"
 
-needs_real = pytest.mark.skipif(
-    not SN22_ZIP.exists() or not WC14_ZIP.exists(),
-    reason=f"real data not found in {DATA} (shared data folder absent on this machine)",
-)
 
 POST = "Goal left post left "  # the evaluator's spelling, trailing space included
 
@@ -98,7 +95,7 @@ def assert_one_line_error(excinfo, *needles: str) -> str:
 # real data
 
 
-@needs_real
+@needs_shared
 def test_real_sn22_annotations_all_read():
     with open_dataset(SN22_ZIP) as ds:
         assert len(ds) == 400
@@ -116,7 +113,7 @@ def test_real_sn22_annotations_all_read():
         assert n_post > 0  # the trailing-space goal post is present in the real data
 
 
-@needs_real
+@needs_shared
 def test_real_wc14_annotations_all_read():
     ds = open_dataset(WC14_ZIP)
     assert len(ds) == 93
@@ -128,7 +125,7 @@ def test_real_wc14_annotations_all_read():
     assert ds.match_info is None and ds.camera_dict("3") is None
 
 
-@needs_real
+@needs_shared
 def test_real_annotations_json_round_trip_exact(tmp_path):
     """Canonical real files come back byte-for-byte equal as JSON objects."""
     with zipfile.ZipFile(SN22_ZIP) as zf:
@@ -145,8 +142,7 @@ def test_real_annotations_json_round_trip_exact(tmp_path):
                 np.testing.assert_array_equal(back[cls], ann[cls])
 
 
-@needs_real
-@pytest.mark.skipif(not WC14_PRED.exists(), reason=f"{WC14_PRED} not found")
+@needs_shared
 def test_real_predictions_read_and_round_trip(tmp_path):
     preds = read_predictions(WC14_PRED)
     assert len(preds) == 93
@@ -174,8 +170,7 @@ def test_real_predictions_read_and_round_trip(tmp_path):
     assert lk in LINE_ID_TO_CLASS
 
 
-@needs_real
-@pytest.mark.skipif(not WC14_H.exists(), reason=f"{WC14_H} not found")
+@needs_shared
 def test_real_homographies(tmp_path):
     hs = read_homographies(WC14_H)
     assert len(hs) == 93
@@ -192,7 +187,7 @@ def test_real_homographies(tmp_path):
         np.testing.assert_array_equal(back[s], hs[s])
 
 
-@pytest.mark.skipif(not (FRAMES / "wc14_trainval_16.jpg").exists(), reason=f"real frames not found in {FRAMES}")
+@needs_shared
 def test_real_frames_folder_images():
     ds = open_dataset(FRAMES)
     assert ds.image_size("messi_sample") == (1073, 603)

@@ -19,15 +19,12 @@ import torch
 
 from pnlviz.detect.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from pnlviz.detect.hrnet import PnLCalibNet, keypoint_net, line_net
+from helpers import needs_shared  # noqa: E402
 
 REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference"
 SHAPES = REFERENCE / "pnlcalib_state_dict_shapes.json"
 FIXTURE = REFERENCE / "pnlcalib_forward_fixture.npz"
 
-needs_reference = pytest.mark.skipif(
-    not (SHAPES.is_file() and FIXTURE.is_file()),
-    reason=f"{REFERENCE} not found: the PnLCalib reference facts are needed",
-)
 
 FACTORIES = {"kp": keypoint_net, "lines": line_net}
 
@@ -84,7 +81,7 @@ def test_rejects_unknown_activation():
         PnLCalibNet(3, "relu")  # type: ignore[arg-type]
 
 
-@needs_reference
+@needs_shared
 @pytest.mark.parametrize("key", ["kp", "lines"])
 def test_state_dict_matches_published_checkpoints(key, reference_shapes):
     expected = reference_shapes[key]
@@ -95,7 +92,7 @@ def test_state_dict_matches_published_checkpoints(key, reference_shapes):
     assert list(got) == list(expected)  # same order too
 
 
-@needs_reference
+@needs_shared
 @pytest.mark.parametrize("key", ["kp", "lines"])
 def test_forward_reproduces_fixture(key, outputs, fixture_arrays):
     got = outputs[key].double().numpy()
@@ -127,7 +124,7 @@ def test_arbitrary_input_size_gives_half_resolution():
     assert float(y.min()) >= 0.0 and float(y.max()) <= 1.0
 
 
-@needs_reference
+@needs_shared
 def test_line_checkpoint_into_keypoint_net_is_named(filled):
     with pytest.raises(CheckpointError) as info:
         load_checkpoint(keypoint_net(), filled["lines"].state_dict())
@@ -138,7 +135,7 @@ def test_line_checkpoint_into_keypoint_net_is_named(filled):
     assert "\n" not in message
 
 
-@needs_reference
+@needs_shared
 def test_truncated_checkpoint_names_missing_tensors(filled, tmp_path):
     state = filled["kp"].state_dict()
     names = list(state)
@@ -203,7 +200,7 @@ def test_unreadable_checkpoints_raise_checkpoint_error(tmp_path):
     assert issubclass(CheckpointError, ValueError)
 
 
-@needs_reference
+@needs_shared
 def test_save_load_round_trip_is_identical(filled, outputs, fixture_arrays, tmp_path):
     path = save_checkpoint(filled["kp"], tmp_path / "sub" / "kp.pth")
     assert path.is_file()

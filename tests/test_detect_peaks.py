@@ -24,6 +24,7 @@ from pnlviz.detect.peaks import (
     detections_to_predictions, extract_keypoints, extract_lines, extract_predictions, find_peaks, heatmap_to_image,
     image_to_heatmap, nms_mask, refine_peaks,
 )
+from helpers import needs_shared  # noqa: E402
 
 SN22 = Path(__file__).resolve().parents[2] / "shared" / "data" / "sn22_test_subset" / "annotations.zip"
 H, W = 36, 52  # a small heatmap grid for the synthetic tests
@@ -260,7 +261,7 @@ def test_detections_to_predictions_and_zip_round_trip(tmp_path):
 
 
 # ------------------------------------------------------------------------------ real labels round trip
-@pytest.mark.skipif(not SN22.is_file(), reason="../shared SN22 subset not found")
+@needs_shared
 def test_sn22_label_round_trip(tmp_path):
     from pnlviz.data import open_dataset
     from pnlviz.labels import heatmap_targets, keypoints_from_annotation, line_extremities, training_targets

@@ -30,6 +30,7 @@ from pnlviz.labels import (
 )
 from pnlviz.commands.labels import add_labels_parser, run_labels
 from pnlviz.labels.fitting import fit_homography, orientation_ok, orientation_outliers
+from helpers import needs_shared
 
 W, H = 960, 540
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -445,7 +446,7 @@ def test_json_round_trip(exact_frames, tmp_path):
 
 
 # ------------------------------------------------------------------------------ real data
-@pytest.mark.skipif(not SN22.is_file(), reason="../shared SN22 subset not found")
+@needs_shared
 def test_sn22_annotations_all_label():
     from pnlviz.data import open_dataset
 

@@ -46,11 +46,6 @@ def random_camera(rng, width=960, height=540, k1=0.0):
                                roll_deg=rng.normal(0, 2), k1=k1)
 
 
-def needs_shared():
-    if not (DATA / "wc14_test_half" / "annotations.zip").is_file():
-        pytest.skip(f"{DATA} not found: real-data tests need ../shared beside the repository")
-
-
 def run_cli(*argv) -> int:
     from pnlviz.commands.evaluate import add_eval_parser
 
@@ -271,8 +266,7 @@ def compare_with_official(tmp_path, gt_frames: dict[str, bytes], cameras: dict[s
 
 
 @pytest.fixture(scope="module")
-def wc14():
-    needs_shared()
+def wc14(shared_dir):
     ds = open_dataset(DATA / "wc14_test_half" / "annotations.zip")
     Hs = read_homographies(DATA / "wc14_test_half" / "homographies.json")
     raw = {s: ds._read(ds.frame(s).annotation_path) for s in ds.stems}
@@ -425,8 +419,7 @@ def test_eval_command_prints_scores_and_writes_the_csv(tmp_path, wc14, capsys):
 
 # ============================================================================ homography metrics
 @pytest.fixture(scope="module")
-def gt_h():
-    needs_shared()
+def gt_h(shared_dir):
     return read_homographies(DATA / "wc14_test_half" / "homographies.json")
 
 

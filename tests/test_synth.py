@@ -23,14 +23,13 @@ from pnlviz.commands.synth import add_synth_parser
 from pnlviz.synth.render import GROUND, ray_grid
 from pnlviz.synth.writer import OutputFolderError
 
-sn = pytest.importorskip("SoccerNet.Evaluation.utils_calibration")
 
 SMALL = (480, 270)
 MODEL = load_field_model()
 
 
-def evaluator_accuracy(cam_json: dict, ann_json: dict, threshold: float = 0.5):
-    """The official evaluator, used directly: (TP, FP, FN, accuracy)."""
+def evaluator_accuracy(sn, cam_json: dict, ann_json: dict, threshold: float = 0.5):
+    """The official evaluator ``sn`` (the ``evaluator`` fixture), used directly: (TP, FP, FN, accuracy)."""
     polylines = sn.get_polylines(cam_json, 960, 540, sampling_factor=0.9)
     conf, _, _ = sn.evaluate_camera_prediction(polylines, sn.scale_points(ann_json, 960, 540), threshold)
     tp, fp, fn = float(conf[0, 0]), float(conf[0, 1]), float(conf[1, 0])
@@ -86,7 +85,7 @@ def test_in_memory_frame_is_reproducible():
 
 
 # ----------------------------------------------------------------------------- (b) the oracle
-def test_oracle_ground_truth_camera_scores_perfectly_on_sampled_cameras():
+def test_oracle_ground_truth_camera_scores_perfectly_on_sampled_cameras(evaluator):
     kinds = Counter()
     for i in range(24):
         rng = np.random.default_rng([2024, i])
@@ -95,7 +94,7 @@ def test_oracle_ground_truth_camera_scores_perfectly_on_sampled_cameras():
         kinds[kind] += 1
         ann_json = json.loads(json.dumps(annotation_to_json(annotate(camera, rng))))
         cam_json = json.loads(json.dumps(camera.scaled(960, 540).to_soccernet()))
-        tp, fp, fn, acc = evaluator_accuracy(cam_json, ann_json)
+        tp, fp, fn, acc = evaluator_accuracy(evaluator, cam_json, ann_json)
         assert (fp, fn, acc) == (0.0, 0.0, 1.0), (i, kind, tp, fp, fn)
         assert tp == len(ann_json) >= 4
         for name, pts in ann_json.items():
@@ -107,7 +106,7 @@ def test_oracle_ground_truth_camera_scores_perfectly_on_sampled_cameras():
     assert set(kinds) == set(KINDS)
 
 
-def test_oracle_on_frames_written_to_disk(small_run, tmp_path):
+def test_oracle_on_frames_written_to_disk(small_run, tmp_path, evaluator):
     full = tmp_path / "full"
     generate(full, 1, seed=77, progress=False)  # 960 x 540
     for root in (small_run, full):
@@ -116,7 +115,7 @@ def test_oracle_on_frames_written_to_disk(small_run, tmp_path):
         for stem in stems:
             ann_json = json.loads((root / f"{stem}.json").read_text())
             cam_json = json.loads((root / "cameras" / f"camera_{stem}.json").read_text())
-            tp, fp, fn, acc = evaluator_accuracy(cam_json, ann_json)
+            tp, fp, fn, acc = evaluator_accuracy(evaluator, cam_json, ann_json)
             assert (fp, fn, acc) == (0.0, 0.0, 1.0), (root, stem)
             assert "Goal left post left " in ann_json or "Goal left post left" not in ann_json
             assert cam_json["principal_point"] == [480.0, 270.0]
@@ -136,14 +135,14 @@ def test_annotation_is_at_evaluation_scale_whatever_the_image_size():
         np.testing.assert_allclose(a[name], b[name], atol=1e-9)
 
 
-def test_a_class_seen_as_a_single_point_still_gets_two_clicks_within_tolerance():
+def test_a_class_seen_as_a_single_point_still_gets_two_clicks_within_tolerance(evaluator):
     camera = evaluation_camera(Camera.from_look_at([0, 50, -15], [0, 0, 0], hfov_deg=40, width=960, height=540))
     poly = visible_pitch(camera, 960, 540, evaluator_precision=True)["Middle line"]
     single = poly[len(poly) // 2][None, :]
     clicks = clicks_for_class(camera, "Middle line", single, np.random.default_rng(0))
     assert len(clicks) == 2 and not np.array_equal(clicks[0], clicks[1])
     for x, y in clicks:
-        d = sn.distance_to_polyline({"x": x, "y": y}, [{"x": single[0, 0], "y": single[0, 1]}])
+        d = evaluator.distance_to_polyline({"x": x, "y": y}, [{"x": single[0, 0], "y": single[0, 1]}])
         assert d < 0.5
 
 
