@@ -44,21 +44,73 @@ def _grass_tile() -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- markings
-@dataclass(frozen=True)
-class _Piece:
-    kind: str  # "seg", "arc" or "spot"
-    params: tuple
-    points: np.ndarray  # (K, 3) samples whose projection bounds the piece
-
-
 PIECE_POINTS = 6
 
 
+@dataclass(frozen=True)
+class _Stripe:
+    """A piece of a straight marking from ``A`` along ``e`` (unit) for ``L`` metres (``n``: its normal)."""
+
+    A: np.ndarray
+    e: np.ndarray
+    n: np.ndarray
+    L: float
+    points: np.ndarray  # (K, 3) samples whose projection bounds the piece
+
+    def coverage(self, x, y, xu, xv, yu, yv, half_width: float) -> np.ndarray:
+        A, e, n, L = self.A, self.e, self.n, self.L
+        if e[1] == 0 or e[0] == 0:  # axis-aligned: every line of the pitch
+            horizontal = e[1] == 0
+            along = (x - F32(A[0])) * F32(e[0]) if horizontal else (y - F32(A[1])) * F32(e[1])
+            across = np.abs(y - F32(A[1])) if horizontal else np.abs(x - F32(A[0]))
+            pa, pn = (np.hypot(xu, xv), np.hypot(yu, yv)) if horizontal else (np.hypot(yu, yv), np.hypot(xu, xv))
+        else:
+            rx, ry = x - F32(A[0]), y - F32(A[1])
+            along = rx * F32(e[0]) + ry * F32(e[1])
+            across = np.abs(rx * F32(n[0]) + ry * F32(n[1]))
+            pn = np.hypot(xu * F32(n[0]) + yu * F32(n[1]), xv * F32(n[0]) + yv * F32(n[1]))
+            pa = np.hypot(xu * F32(e[0]) + yu * F32(e[1]), xv * F32(e[0]) + yv * F32(e[1]))
+        c = box_coverage(across, half_width, pn + F32(1e-6))
+        c *= interval_coverage(along, -half_width, L + half_width, pa + F32(1e-6))
+        return c
+
+
+@dataclass(frozen=True)
+class _ArcPiece:
+    """A piece of a circle or arc marking (``full``: a whole circle, no angle test)."""
+
+    arc: object
+    full: bool
+    points: np.ndarray
+
+    def coverage(self, x, y, xu, xv, yu, yv, half_width: float) -> np.ndarray:
+        arc = self.arc
+        rx, ry = x - F32(arc.center[0]), y - F32(arc.center[1])
+        rho = np.hypot(rx, ry) + F32(1e-6)
+        cx, cy = rx / rho, ry / rho
+        pn = np.hypot(xu * cx + yu * cy, xv * cx + yv * cy) + F32(1e-6)
+        c = box_coverage(np.abs(rho - F32(arc.radius)), half_width, pn)
+        return c if self.full else c * arc.contains_angle(np.arctan2(ry, rx))
+
+
+@dataclass(frozen=True)
+class _Spot:
+    """A penalty or centre spot at ``centre`` (x, y)."""
+
+    centre: np.ndarray
+    points: np.ndarray
+
+    def coverage(self, x, y, xu, xv, yu, yv, half_width: float) -> np.ndarray:
+        rho = np.hypot(x - F32(self.centre[0]), y - F32(self.centre[1]))
+        p = np.sqrt(np.hypot(xu, xv) * np.hypot(yu, yv)) + F32(1e-6)
+        return interval_coverage(rho, -SPOT_RADIUS, SPOT_RADIUS, p)
+
+
 @lru_cache(maxsize=1)
-def _marking_pieces() -> tuple[list[_Piece], np.ndarray]:
+def _marking_pieces() -> tuple[list, np.ndarray]:
     """The ground markings cut into short pieces (window culling), with their sample points."""
     model = load_field_model()
-    pieces: list[_Piece] = []
+    pieces: list = []
     for seg in model.lines.values():
         if seg.plane != "ground":
             continue
@@ -71,21 +123,21 @@ def _marking_pieces() -> tuple[list[_Piece], np.ndarray]:
             s = np.linspace(L * i / k, L * (i + 1) / k, PIECE_POINTS)
             pts = np.zeros((PIECE_POINTS, 3))
             pts[:, :2] = A + s[:, None] * e
-            pieces.append(_Piece("seg", (A, e, n, L), pts))
+            pieces.append(_Stripe(A, e, n, L, pts))
     for arc in model.circles.values():
         a0, a1 = math.radians(arc.start_deg), math.radians(arc.end_deg)
         k = max(1, int(math.ceil(arc.radius * (a1 - a0) / 4.0)))
         full = arc.end_deg - arc.start_deg >= 360.0 - 1e-9
         for i in range(k):
             ang = np.linspace(a0 + (a1 - a0) * i / k, a0 + (a1 - a0) * (i + 1) / k, PIECE_POINTS)
-            pieces.append(_Piece("arc", (arc, full), arc.point_at(ang)))
+            pieces.append(_ArcPiece(arc, full, arc.point_at(ang)))
     spots = [np.zeros(2), model.circles["Circle left"].center[:2], model.circles["Circle right"].center[:2]]
     for c in spots:
         pts = np.zeros((PIECE_POINTS, 3))
         ang = np.linspace(0, 2 * math.pi, PIECE_POINTS)
         pts[:, 0] = c[0] + 0.2 * np.cos(ang)
         pts[:, 1] = c[1] + 0.2 * np.sin(ang)
-        pieces.append(_Piece("spot", (np.asarray(c, float),), pts))
+        pieces.append(_Spot(np.asarray(c, float), pts))
     return pieces, np.stack([p.points for p in pieces])
 
 
@@ -103,35 +155,7 @@ def _paint_coverage(camera: Camera, X: np.ndarray, Y: np.ndarray, half_width: fl
         # Jacobian of the pixel -> ground map inside the window (metres per pixel).
         xv, xu = np.gradient(x)
         yv, yu = np.gradient(y)
-        if piece.kind == "seg":
-            A, e, n, L = piece.params
-            if e[1] == 0 or e[0] == 0:  # axis-aligned: every line of the pitch
-                horizontal = e[1] == 0
-                along = (x - F32(A[0])) * F32(e[0]) if horizontal else (y - F32(A[1])) * F32(e[1])
-                across = np.abs(y - F32(A[1])) if horizontal else np.abs(x - F32(A[0]))
-                pa, pn = (np.hypot(xu, xv), np.hypot(yu, yv)) if horizontal else (np.hypot(yu, yv), np.hypot(xu, xv))
-            else:
-                rx, ry = x - F32(A[0]), y - F32(A[1])
-                along = rx * F32(e[0]) + ry * F32(e[1])
-                across = np.abs(rx * F32(n[0]) + ry * F32(n[1]))
-                pn = np.hypot(xu * F32(n[0]) + yu * F32(n[1]), xv * F32(n[0]) + yv * F32(n[1]))
-                pa = np.hypot(xu * F32(e[0]) + yu * F32(e[1]), xv * F32(e[0]) + yv * F32(e[1]))
-            c = box_coverage(across, half_width, pn + F32(1e-6))
-            c *= interval_coverage(along, -half_width, L + half_width, pa + F32(1e-6))
-        elif piece.kind == "arc":
-            arc, full = piece.params
-            rx, ry = x - F32(arc.center[0]), y - F32(arc.center[1])
-            rho = np.hypot(rx, ry) + F32(1e-6)
-            cx, cy = rx / rho, ry / rho
-            pn = np.hypot(xu * cx + yu * cy, xv * cx + yv * cy) + F32(1e-6)
-            c = box_coverage(np.abs(rho - F32(arc.radius)), half_width, pn)
-            if not full:
-                c = c * arc.contains_angle(np.arctan2(ry, rx))
-        else:
-            (centre,) = piece.params
-            rho = np.hypot(x - F32(centre[0]), y - F32(centre[1]))
-            p = np.sqrt(np.hypot(xu, xv) * np.hypot(yu, yv)) + F32(1e-6)
-            c = interval_coverage(rho, -SPOT_RADIUS, SPOT_RADIUS, p)
+        c = piece.coverage(x, y, xu, xv, yu, yv, half_width)
         np.maximum(cov[win], c.astype(F32), out=cov[win])
     return cov
 

@@ -7,6 +7,9 @@ made of capsules).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
+
 import numpy as np
 
 from pnlviz.field.model import load_field_model
@@ -186,33 +189,40 @@ def draw_player(cv: Canvas, player, shade: float, light_side: float) -> None:
         cv.blend(win, alpha.astype(F32), colour.astype(F32))
 
 
-def goal_sprites(scene: Scene, camera: Camera) -> list:
-    """Goal parts as (distance, draw-callable-args) for depth sorting."""
+def goal_sprites(scene: Scene, camera: Camera) -> list[tuple[float, Callable[[Canvas], None]]]:
+    """The parts of both goals (nets, posts, crossbars, the back frame) as (distance from the
+    camera, draw(canvas)), for depth sorting."""
     out = []
     net, op = scene.net_colour, scene.net_opacity
     white = np.array([0.97, 0.97, 0.97], F32)
     grey = np.array([0.7, 0.7, 0.72], F32)
     r = POST_RADIUS
+
+    def mesh(axis, value, ranges):
+        return partial(draw_net, axis=axis, value=value, ranges=ranges, colour=net, opacity=op, light=0.95)
+
+    def bar(a, b, radius, colour):
+        return partial(draw_bar, P0=np.array(a), P1=np.array(b), radius=radius, colour=colour, light=1.0)
+
     for sign in (-1.0, 1.0):
         gx = sign * HALF_LENGTH
         bx = gx + sign * 2.0
         gw, gh = GOAL_HALF_WIDTH, GOAL_HEIGHT
         xs = (min(gx, bx), max(gx, bx))
-        items = [
-            ((bx, 0.0, -gh / 2), ("net", 0, bx, {1: (-gw, gw), 2: (-gh, 0.0)}, net, op)),
-            ((gx + sign, 0.0, -gh), ("net", 2, -gh, {0: xs, 1: (-gw, gw)}, net, op)),
-            ((gx + sign, -gw, -gh / 2), ("net", 1, -gw, {0: xs, 2: (-gh, 0.0)}, net, op)),
-            ((gx + sign, gw, -gh / 2), ("net", 1, gw, {0: xs, 2: (-gh, 0.0)}, net, op)),
-            ((bx, -gw, -gh / 2), ("bar", np.array([bx, -gw, 0.0]), np.array([bx, -gw, -gh]), 0.035, grey)),
-            ((bx, gw, -gh / 2), ("bar", np.array([bx, gw, 0.0]), np.array([bx, gw, -gh]), 0.035, grey)),
-            ((gx + sign, -gw, -gh), ("bar", np.array([gx, -gw, -gh]), np.array([bx, -gw, -gh]), 0.03, grey)),
-            ((gx + sign, gw, -gh), ("bar", np.array([gx, gw, -gh]), np.array([bx, gw, -gh]), 0.03, grey)),
-            ((gx, -gw, -gh / 2), ("bar", np.array([gx, -gw, 0.0]), np.array([gx, -gw, -gh - r]), r, white)),
-            ((gx, gw, -gh / 2), ("bar", np.array([gx, gw, 0.0]), np.array([gx, gw, -gh - r]), r, white)),
-            ((gx, 0.0, -gh), ("bar", np.array([gx, -gw - r, -gh]), np.array([gx, gw + r, -gh]), r, white)),
+        out += [
+            ((bx, 0.0, -gh / 2), mesh(0, bx, {1: (-gw, gw), 2: (-gh, 0.0)})),
+            ((gx + sign, 0.0, -gh), mesh(2, -gh, {0: xs, 1: (-gw, gw)})),
+            ((gx + sign, -gw, -gh / 2), mesh(1, -gw, {0: xs, 2: (-gh, 0.0)})),
+            ((gx + sign, gw, -gh / 2), mesh(1, gw, {0: xs, 2: (-gh, 0.0)})),
+            ((bx, -gw, -gh / 2), bar([bx, -gw, 0.0], [bx, -gw, -gh], 0.035, grey)),
+            ((bx, gw, -gh / 2), bar([bx, gw, 0.0], [bx, gw, -gh], 0.035, grey)),
+            ((gx + sign, -gw, -gh), bar([gx, -gw, -gh], [bx, -gw, -gh], 0.03, grey)),
+            ((gx + sign, gw, -gh), bar([gx, gw, -gh], [bx, gw, -gh], 0.03, grey)),
+            ((gx, -gw, -gh / 2), bar([gx, -gw, 0.0], [gx, -gw, -gh - r], r, white)),
+            ((gx, gw, -gh / 2), bar([gx, gw, 0.0], [gx, gw, -gh - r], r, white)),
+            ((gx, 0.0, -gh), bar([gx, -gw - r, -gh], [gx, gw + r, -gh], r, white)),
         ]
-        out.extend(items)
-    return [(float(np.linalg.norm(np.asarray(c) - camera.C)), item) for c, item in out]
+    return [(float(np.linalg.norm(np.asarray(c) - camera.C)), draw) for c, draw in out]
 
 
 def draw_sprites(canvas: Canvas, scene: Scene) -> None:
@@ -220,14 +230,9 @@ def draw_sprites(canvas: Canvas, scene: Scene) -> None:
     camera = canvas.camera
     light_side = float(scene.sun_dir[0])
     sprites = goal_sprites(scene, camera)
-    sprites += [(float(np.linalg.norm(np.array([p.foot[0], p.foot[1], -0.9]) - camera.C)), ("player", p))
+    sprites += [(float(np.linalg.norm(np.array([p.foot[0], p.foot[1], -0.9]) - camera.C)),
+                 partial(draw_player, player=p, shade=shade_at(scene, p.foot), light_side=light_side))
                 for p in scene.players]
     sprites.sort(key=lambda item: -item[0])
-    for _, item in sprites:
-        if item[0] == "bar":
-            draw_bar(canvas, item[1], item[2], item[3], item[4], light=1.0)
-        elif item[0] == "net":
-            draw_net(canvas, item[1], item[2], item[3], item[4], item[5], light=0.95)
-        else:
-            p = item[1]
-            draw_player(canvas, p, shade=shade_at(scene, p.foot), light_side=light_side)
+    for _, draw in sprites:
+        draw(canvas)
