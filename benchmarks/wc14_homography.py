@@ -1,6 +1,7 @@
 """WC14 homography metrics from the published PnLCalib detections: homography-only calibration
 (:mod:`pnlviz.calib.homography`) with and without PnL, and the full camera pipeline
-(:func:`pnlviz.calib.calibrate.calibrate`) converted to a homography, with and without PnL.
+(:func:`pnlviz.calib.calibrate.calibrate`) converted to a homography, with and without PnL (both
+the frame pipeline of :mod:`pnlviz.calib.pipeline`, the homography its ground-plane case).
 
     python benchmarks/wc14_homography.py [--data ../shared/data/wc14_test_half] [--one-thread]
 

@@ -144,6 +144,65 @@ def test_analytic_jacobian_matches_finite_differences():
         np.testing.assert_allclose(J[:, i], (plus - minus) / (2 * h), atol=2e-3 * np.abs(J).max())
 
 
+def test_the_solver_takes_a_jacobian_asked_for_at_accepted_steps_and_sparse():
+    """The shot's way through the one solver: trial steps evaluated without a Jacobian, the
+    Jacobian asked for (sparse) only where a step was accepted, a robust loss; the same minimum as
+    with the Jacobian evaluated with every step, and a soft-L1 loss keeps an outlier from pulling
+    the fit."""
+    import scipy.sparse
+
+    from pnlviz.calib.solver import SolverParams, levenberg_marquardt
+
+    t = np.linspace(0, 1, 40)
+    y = 2.0 * np.exp(-1.5 * t)
+    y[7] += 3.0  # an outlier
+
+    def residuals(x):
+        return x[0] * np.exp(-x[1] * t) - y
+
+    def dense(x, jac):
+        e = np.exp(-x[1] * t)
+        return residuals(x), (np.column_stack([e, -x[0] * t * e]) if jac else None)
+
+    asked, accepted = [], []
+
+    def lazy(x, jac):
+        assert not jac
+        return residuals(x), None
+
+    def jacobian(x, r):
+        accepted.append(x.copy())
+        np.testing.assert_array_equal(r, residuals(x))
+        return scipy.sparse.csr_matrix(dense(x, True)[1])
+
+    def retract(x, d):
+        asked.append(d)
+        return x + d
+
+    params = SolverParams(loss="soft_l1", f_scale=0.1, tol=1e-12)
+    a, info_a = levenberg_marquardt(dense, lambda x, d: x + d, np.array([1.0, 1.0]), params)
+    b, info_b = levenberg_marquardt(lazy, retract, np.array([1.0, 1.0]), params, jacobian=jacobian)
+    np.testing.assert_allclose(b, a, rtol=1e-9)
+    np.testing.assert_allclose(b, [2.0, 1.5], atol=0.02)  # the outlier all but left aside
+    assert info_b["success"] and len(accepted) <= len(asked) and len(accepted) == info_b["iterations"]
+    plain, _ = levenberg_marquardt(dense, lambda x, d: x + d, np.array([1.0, 1.0]), SolverParams(tol=1e-12))
+    assert abs(plain[0] - 2.0) > 10 * abs(b[0] - 2.0)  # least squares is pulled by it
+    # a limit on rejected steps in a row ends the search sooner than the damping's own limit (a
+    # Jacobian of the wrong sign: every step goes uphill)
+    calls = []
+
+    def uphill(x, jac):
+        calls.append(1)
+        r, J = dense(x, jac)
+        return r, (-J if jac else None)
+
+    for max_trials, expected in ((3, 1 + 3), (None, 1 + 25)):  # 1e-3 * 4^25 > 1e12
+        calls.clear()
+        x, info = levenberg_marquardt(uphill, lambda x, d: x + d, np.array([1.0, 1.0]),
+                                      SolverParams(max_trials=max_trials))
+        assert np.array_equal(x, [1.0, 1.0]) and info["iterations"] == 1 and len(calls) == expected
+
+
 def test_refinement_recovers_focal_pose_and_k1_from_lines_and_circles():
     rng = np.random.default_rng(6)
     for _ in range(10):

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from pnlviz.calib.homography import (
-    HomographyProblem, HomographyResult, estimate_homography, refine_homography_pnl, template_homography,
+    HomographyKind, HomographyParams, HomographyResult, estimate_homography, template_homography,
 )
 from pnlviz.calib.observations import Observations
+from pnlviz.calib.problem import FrameData
 from pnlviz.field import load_field_model
 from pnlviz.geometry import Camera, visible_pitch
 from pnlviz.metrics.homography import homography_from_camera
@@ -124,10 +125,12 @@ def test_pnl_with_exact_lines_corrects_noisy_points():
 def test_pnl_keeps_an_exact_homography_and_uses_circles():
     cam = cameras(5, 1)[0]
     obs = keypoint_obs(cam, lines=True, circles=True)
-    H0 = unit(cam.ground_homography())
-    H, joined = refine_homography_pnl(H0, obs)
+    res = estimate_homography(obs, pnl=True)
+    assert np.linalg.norm(res.initial_H - unit(cam.ground_homography())) < 1e-6
+    joined = res.pnl_lines
     assert joined and set(joined) <= {k for k in obs.lines if MODEL.lines[k].plane == "ground"} | set(obs.circles)
-    assert np.percentile(pitch_mapping_error(cam, H), 99) < 0.05
+    assert set(joined) & set(obs.circles)
+    assert np.percentile(pitch_mapping_error(cam, res.H), 99) < 0.05
 
 
 def test_pnl_gate_keeps_a_wrong_line_out():
@@ -150,12 +153,12 @@ def test_analytic_jacobian_matches_finite_differences():
     name = next(k for k in obs.lines if MODEL.lines[k].plane == "ground")
     p = obs.lines[name]
     obs.lines[name] = np.vstack([p, p[-1] + 3 * (p[-1] - p[0])]) + 1.5
-    prob = HomographyProblem(obs, 0.6, MODEL)
-    assert len(prob.line_q) and prob.circle_items
-    model, problem = prob.model, prob.problem
+    kind = HomographyKind(FrameData.build(obs, MODEL), HomographyParams())
+    problem, model = kind.problem(0.6), kind.model
+    assert len(problem.line_pts) and problem.circle_items
     M = model.retract(model.start(unit(cam.ground_homography())), rng.normal(0, 1e-3, 8))
     r, J = problem.evaluate(M, jac=True)
-    assert J.shape == (len(r), 8) and len(r) == prob.n_res
+    assert J.shape == (len(r), 8) and len(r) == problem.n_res
     h = 1e-7
     for k in range(8):
         d = np.zeros(8)
@@ -205,11 +208,12 @@ def test_wc14_pnl_does_not_lower_iou_part():
     for stem, H_gt in gt.items():
         obs = observations_from_predictions(preds[stem], 1280, 720, model=MODEL)
         res = estimate_homography(obs, model=MODEL)
-        assert res.ok, (stem, res.failure)
-        H, lines = refine_homography_pnl(res.H, obs, model=MODEL)
-        joined += bool(lines)
+        refined = estimate_homography(obs, pnl=True, model=MODEL)
+        assert res.ok and refined.ok, (stem, res.failure, refined.failure)
+        assert np.array_equal(refined.initial_H, res.H)
+        joined += bool(refined.pnl_lines)
         base.append(iou_part(H_gt, res.template_homography(model=MODEL)))
-        pnl.append(iou_part(H_gt, H @ T))
+        pnl.append(iou_part(H_gt, refined.H @ T))
     assert len(base) == 93 and joined >= 80
     assert np.mean(base) > 0.95  # published detections, no fine-tuning on WC14
     assert np.mean(pnl) >= np.mean(base) - 0.005

@@ -219,3 +219,50 @@ def test_public_helpers_check_their_shapes_on_entry():
     with pytest.raises(ValueError, match="frame size"):
         FrameInputs((0, 540))
     assert closest_on_polyline([[0.0, 1.0]], [[0.0, 0.0], [2.0, 0.0]]).distance.tolist() == [1.0]
+
+
+def test_rotations_from_angles_are_vectorised_over_frames():
+    """Arrays of angles (the frames of a shot) give each frame's rotation to the last bit of the
+    scalar call, and the angles come back from the rotation (the SoccerNet convention)."""
+    from pnlviz.geometry.camera import pan_tilt_roll_from_rotation, rotation_from_pan_tilt_roll
+
+    rng = np.random.default_rng(0)
+    a = np.column_stack([rng.uniform(-3, 3, 50), rng.uniform(0.1, 3.0, 50), rng.uniform(-1, 1, 50)])
+    R = rotation_from_pan_tilt_roll(a[:, 0], a[:, 1], a[:, 2])
+    assert R.shape == (50, 3, 3)
+    for t in range(50):
+        assert np.array_equal(R[t], rotation_from_pan_tilt_roll(*a[t]))
+        np.testing.assert_allclose(R[t] @ R[t].T, np.eye(3), atol=1e-14)
+        np.testing.assert_allclose(pan_tilt_roll_from_rotation(R[t]), a[t], atol=1e-12)
+    cam = Camera.from_soccernet({"pan_degrees": 10.0, "tilt_degrees": 80.0, "roll_degrees": 1.0,
+                                 "position_meters": [0.0, 50.0, -15.0], "x_focal_length": 1000.0,
+                                 "y_focal_length": 1000.0, "principal_point": [480.0, 270.0]})
+    assert np.array_equal(cam.R, rotation_from_pan_tilt_roll(*np.radians([10.0, 80.0, 1.0])))
+
+
+def test_projection_takes_one_rotation_and_focal_length_per_point():
+    """The shot model's projection: points of several frames at once, each with its frame's
+    rotation and focal length, equal frame by frame calls; the Jacobian and the undistortion too."""
+    from pnlviz.geometry.projection import camera_to_pixels, to_camera, undistort_k1
+
+    rng = np.random.default_rng(3)
+    C = np.array([5.0, 55.0, -15.0])
+    cams = [Camera.from_look_at(C, [x, 0.0, 0.0], hfov_deg=h, width=960, height=540) for x, h in ((-30, 20), (0, 35), (30, 60))]
+    frame = np.repeat(np.arange(3), 4)
+    # points each frame sees (a little beyond its image, where the lens model still holds)
+    X = np.vstack([cam.back_project_to_ground(rng.uniform((-50, 50), (1010, 490), (4, 2))) for cam in cams])
+    R = np.stack([c.R for c in cams])[frame]
+    f = np.array([c.fx for c in cams])[frame]
+    Xc = to_camera(X, R, C)
+    uv, J = camera_to_pixels(Xc, R, f, 1.0, 480.0, 270.0, -0.05, jac=True)
+    q, Jq = undistort_k1(uv, f, 1.0, 480.0, 270.0, -0.05, jac=True)
+    for t, cam in enumerate(cams):
+        m = frame == t
+        Xc1 = to_camera(X[m], cam.R, C)
+        uv1, J1 = camera_to_pixels(Xc1, cam.R, cam.fx, 1.0, 480.0, 270.0, -0.05, jac=True)
+        q1, Jq1 = undistort_k1(uv1, cam.fx, 1.0, 480.0, 270.0, -0.05, jac=True)
+        for a, b in ((Xc[m], Xc1), (uv[m], uv1), (J[m], J1), (q[m], q1), (Jq[m], Jq1)):
+            np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-9)
+    # and the undistortion inverts the lens: the undistorted points project back to the pixels
+    back = q * (1 - 0.05 * (q * q).sum(1))[:, None] * f[:, None] + (480.0, 270.0)
+    np.testing.assert_allclose(back, uv, atol=1e-6)

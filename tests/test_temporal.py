@@ -8,9 +8,12 @@ import pytest
 
 from pnlviz.calib.calibrate import CalibParams, calibrate
 from pnlviz.calib.observations import Observations
-from pnlviz.calib.temporal import TemporalParams, fit_shot, image_change, rotations, segment_shots
+from pnlviz.calib.cuts import segment_shots
+from pnlviz.calib.shot import ShotModel, TemporalParams, flatten, jacobian
+from pnlviz.calib.shot_fit import fit_shot, initial
+from pnlviz.calib.temporal import image_change
 from pnlviz.field import load_field_model
-from pnlviz.geometry.camera import Camera, rotation_from_pan_tilt_roll
+from pnlviz.geometry.camera import Camera
 
 W, H = 960, 540
 GRID = np.array([[x, y, 0.0] for x in np.arange(-50, 51, 5) for y in np.arange(-30, 31, 5)])
@@ -68,13 +71,6 @@ def _grid_error(a: Camera, b: Camera) -> float:
     pb, _ = b.project(GRID)
     m = np.all(np.isfinite(pa), 1) & (pa[:, 0] >= 0) & (pa[:, 0] < W) & (pa[:, 1] >= 0) & (pa[:, 1] < H)
     return float(np.median(np.linalg.norm(pa[m] - pb[m], axis=1)))
-
-
-def test_rotations_match_the_soccernet_convention():
-    rng = np.random.default_rng(0)
-    a = rng.uniform(-3, 3, (5, 3))
-    R = rotations(a[:, 0], a[:, 1], a[:, 2])
-    assert all(np.allclose(R[i], rotation_from_pan_tilt_roll(*a[i])) for i in range(5))
 
 
 @pytest.mark.parametrize("noise, centre_cm, angle_deg", [(0.3, 1.0, 0.01), (1.0, 5.0, 0.02)])
@@ -253,14 +249,10 @@ def test_a_video_file_goes_through_detect_and_calibrate(tmp_path, capsys):
 
 
 def test_the_jacobian_groups_share_no_row_and_match_plain_differences():
-    from pnlviz.calib.temporal import _flatten, _jacobian, _Model
-
     _, obs = _shot(7, np.array([5.0, 58.0, -16.0]), seed=12)
     cams = _per_frame(obs)
-    m = _Model(_flatten(obs, load_field_model()), 7, (W, H), TemporalParams())
-    from pnlviz.calib.temporal import _initial
-
-    C, k1, per = _initial(cams, 7)
+    m = ShotModel(flatten(obs, load_field_model()), 7, (W, H), TemporalParams())
+    C, k1, per = initial(cams, 7)
     x = np.concatenate([C, [k1], per.ravel()])
     S = m.sparsity().tocsc()
     groups = m.column_groups()
@@ -269,7 +261,7 @@ def test_the_jacobian_groups_share_no_row_and_match_plain_differences():
         rows = [set(S.indices[S.indptr[c]:S.indptr[c + 1]]) for c in g]
         assert sum(len(r) for r in rows) == len(set().union(*rows))  # disjoint
     r0 = m.residuals(x)
-    J = _jacobian(m.residuals, x, r0, S, groups).toarray()
+    J = jacobian(m.residuals, x, r0, S, groups).toarray()
     plain = np.empty_like(J)
     for c in range(len(x)):  # one column at a time
         xh = x.copy()

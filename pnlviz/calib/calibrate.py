@@ -1,5 +1,7 @@
 """Camera calibration from keypoints (and lines): candidates over keypoint subsets and RANSAC
-thresholds, heuristic voting, PnL refinement (by default over focal length and k1 too).
+thresholds, heuristic voting, PnL refinement (by default over focal length and k1 too). The steps
+are the frame pipeline's (:mod:`pnlviz.calib.pipeline`, shared with the ground homography); the
+camera's part of them is :class:`CameraKind`.
 
 The pipeline for one frame (paper Sec. "Camera Parameters Estimation" and "Point and Line
 Refinement Module", plus what the data asked for):
@@ -29,15 +31,16 @@ image width.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 
 from pnlviz.calib.observations import Observations
+from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_frame, plane_masks
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.refine import CameraProblem, RefineParams
-from pnlviz.calib.voting import SUBSETS, best, subset_mask, truncated_score
+from pnlviz.calib.voting import SUBSETS, subset_mask
 from pnlviz.conventions import DEFAULT_ALPHA, EVAL_WIDTH
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
@@ -90,62 +93,21 @@ class CalibParams:
         return replace(self, **{k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()})  # JSON lists
 
 
-@dataclass(eq=False)  # compared by identity: fields hold arrays
-class Candidate:
-    subset: str
-    threshold: float
-    plane: str
-    camera: Camera
-    inliers: np.ndarray  # keypoint ids
-    rms: float
-    score: float = np.inf
-
-
 @dataclass
-class CalibrationResult:
-    """One frame's calibration and the evidence for it (what the app shows)."""
-
-    camera: Camera | None
-    initial_camera: Camera | None = None
-    subset: str | None = None
-    threshold: float | None = None
-    plane: str | None = None
-    inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
-    point_residuals_initial: dict[int, float] = field(default_factory=dict)
-    point_residuals: dict[int, float] = field(default_factory=dict)
-    line_residuals_initial: dict[str, float] = field(default_factory=dict)
-    line_residuals: dict[str, float] = field(default_factory=dict)
-    pnl_lines: list[str] = field(default_factory=list)
-    candidates: list[dict] = field(default_factory=list)
-    failure: str | None = None  #: why there is no camera, in words
-    failure_code: str | None = None  #: and as one of FAILURE_CODES
+class CalibrationResult(FrameResult):
+    """One frame's calibration and the evidence for it (what the app shows; see
+    :class:`pnlviz.calib.pipeline.FrameResult`): the camera, and the voted one before PnL."""
 
     @property
-    def ok(self) -> bool:
-        return self.camera is not None
+    def camera(self) -> Camera | None:
+        return self.estimate
+
+    @property
+    def initial_camera(self) -> Camera | None:
+        return self.initial_estimate
 
 
 # ------------------------------------------------------------------------------ initial cameras
-def _plane_frame(plane: str, model: FieldModel) -> tuple[np.ndarray, np.ndarray] | None:
-    """Rotation ``B`` (rows: local x', y', z' in world) and origin of a plane's local frame in
-    which the plane is z' = 0 and the camera side is z' < 0."""
-    hl = model.dimensions["pitch_length"] / 2
-    if plane == "ground":
-        return np.eye(3), np.zeros(3)
-    if plane == "goal_left":  # x = -52.5, pitch side x > -52.5: z' = -(x + 52.5)
-        return np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]), np.array([-hl, 0.0, 0.0])
-    if plane == "goal_right":  # x = +52.5, pitch side x < 52.5: z' = x - 52.5
-        return np.array([[0.0, 1, 0], [0, 0, 1], [1, 0, 0]]), np.array([hl, 0.0, 0.0])
-    return None
-
-
-def plane_masks(xyz: np.ndarray, model: FieldModel) -> dict[str, np.ndarray]:
-    hl = model.dimensions["pitch_length"] / 2
-    return {"ground": np.abs(xyz[:, 2]) < 1e-9,
-            "goal_left": np.abs(xyz[:, 0] + hl) < 1e-9,
-            "goal_right": np.abs(xyz[:, 0] - hl) < 1e-9}
-
-
 def plane_homography(local_xy: np.ndarray, xy: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray] | None:
     """RANSAC homography (OpenCV, least-squares refit on the inliers) from plane coordinates to
     pixels, with its inlier mask; exact for 4 points; None when degenerate."""
@@ -163,14 +125,15 @@ def plane_homography(local_xy: np.ndarray, xy: np.ndarray, threshold: float) -> 
 
 def camera_from_plane_homography(H: np.ndarray, plane: str, width: int, height: int,
                                   model: FieldModel) -> Camera | None:
-    """Decompose a homography from a plane's local coordinates (see :func:`_plane_frame`) to
-    pixels into a world camera (centred principal point, square pixels)."""
+    """Decompose a homography from a plane's local coordinates (see
+    :func:`pnlviz.calib.pipeline.plane_frame`) to pixels into a world camera (centred principal
+    point, square pixels)."""
     cam = camera_from_ground_homography(H, width, height)
     if cam is None:
         return None
     if plane == "ground":  # its local frame is the world's
         return cam
-    B, origin = _plane_frame(plane, model)
+    B, origin = plane_frame(plane, model)
     # back to the world frame: x_cam = R_l (B (X - o) - C_l) = (R_l B) (X - (o + B^T C_l))
     return cam.with_pose(cam.R @ B, origin + B.T @ cam.C)
 
@@ -191,56 +154,6 @@ def _kp_errors(cam: Camera, obs: Observations) -> np.ndarray:
     return np.where(z > 1e-3, err, np.inf)
 
 
-def make_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
-    """Step 1: per (subset, threshold), the camera decomposed from a RANSAC plane homography and
-    its inliers over the subset, non-planar points included. Identical inlier sets are kept once."""
-    obs, model = data.obs, data.model
-    W, H = obs.width, obs.height
-    seen: set[tuple] = set()
-    out: list[Candidate] = []
-    thresholds = {params.px(t, W): t for t in params.ransac_thresholds}
-    done: set[bytes] = set()
-    for subset in params.subsets:
-        mask = subset_mask(obs, subset)
-        if mask.sum() < params.min_points or mask.tobytes() in done:
-            continue  # too small, or the same points as an earlier subset (e.g. no goal keypoints)
-        done.add(mask.tobytes())
-        sub = obs.subset(mask)
-        planes = plane_masks(sub.kp_xyz, model)
-        # the ground plane; a goal plane only when the ground has too few points
-        if planes["ground"].sum() >= params.min_points:
-            order = ["ground"]
-        else:
-            order = sorted((p for p in planes if p != "ground" and planes[p].sum() >= params.min_points),
-                           key=lambda p: -planes[p].sum())
-        for plane in order:
-            pm = planes[plane]
-            B, origin = _plane_frame(plane, model)
-            local = (sub.kp_xyz[pm] - origin) @ B.T
-            found = False
-            for thr_px in thresholds:
-                fit = plane_homography(local[:, :2], sub.kp_xy[pm], thr_px)
-                if fit is None:
-                    continue
-                Hp, inl_plane = fit
-                cam0 = camera_from_plane_homography(Hp, plane, W, H, model)
-                if cam0 is None or _sane(cam0, params):
-                    continue
-                err = _kp_errors(cam0, sub)
-                inl = err < max(thr_px, params.px(5.0, W))
-                inl[np.flatnonzero(pm)[inl_plane]] = True
-                key = tuple(sub.kp_ids[inl])
-                found = True
-                if key in seen:
-                    continue
-                seen.add(key)
-                out.append(Candidate(subset, thresholds[thr_px], plane, cam0, sub.kp_ids[inl],
-                                     float(np.sqrt(np.mean(err[inl] ** 2)))))
-            if found:
-                break
-    return out
-
-
 def refine_candidate(c: Candidate, data: FrameData, params: CalibParams) -> Candidate | None:
     """Focal length and pose of a candidate refined on its inliers (all three planes), with one
     re-selection of the inliers among the subset's keypoints."""
@@ -255,7 +168,7 @@ def refine_candidate(c: Candidate, data: FrameData, params: CalibParams) -> Cand
         return CameraProblem(start, data, quick, use_keypoints=use, lines=(), circles=()).solve()[0]
 
     inl = np.isin(sub.kp_ids, c.inliers)
-    cam = solve(c.camera, inl)
+    cam = solve(c.estimate, inl)
     err = _kp_errors(cam, sub)
     inl2 = err < params.px(c.threshold, obs.width)
     if inl2.sum() >= params.min_points and not np.array_equal(inl2, inl):
@@ -323,19 +236,6 @@ def prior_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
     return out
 
 
-# ------------------------------------------------------------------------------ voting
-def vote(cands: list[Candidate], data: FrameData, params: CalibParams) -> Candidate | None:
-    """Step 2: truncated-quadratic score of each candidate on all observations (its residuals,
-    lines and points weighted alike); lowest wins."""
-    if not cands:
-        return None
-    tau = params.px(params.vote_tau, data.obs.width)
-    problem = CameraProblem(cands[0].camera, data, RefineParams(alpha=0.5))  # residuals at any camera
-    for c in cands:
-        c.score = truncated_score(problem.residuals(c.camera), tau)
-    return best(cands)
-
-
 # ------------------------------------------------------------------------------ residual reports
 def point_residuals(cam: Camera, obs: Observations) -> dict[int, float]:
     return {int(i): float(e) for i, e in zip(obs.kp_ids, _kp_errors(cam, obs))}
@@ -348,79 +248,78 @@ def line_residuals(cam: Camera, data: FrameData) -> dict[str, float]:
     return {name: float(np.max(r)) for name, r in per_class.items()}
 
 
-# ------------------------------------------------------------------------------ PnL
-def pnl_refine(cam: Camera, data: FrameData, params: CalibParams, *, refine_focal: bool = False,
-               refine_k1: bool = False, loss: str = "linear", line_errors: dict[str, float] | None = None,
-               point_errors: dict[int, float] | None = None) -> tuple[Camera, list[str]]:
-    """Step 3 (and 4 with ``refine_focal``/``refine_k1``): refine against gated points and lines.
-    ``line_errors`` / ``point_errors``: the residuals of ``cam``, when already known."""
-    obs = data.obs
-    gate_l = params.px(params.line_gate_px, obs.width)
-    gate_p = params.px(params.point_gate_px, obs.width)
-    lres = line_residuals(cam, data) if line_errors is None else line_errors
-    lines = [k for k in obs.lines if lres.get(k, np.inf) < gate_l]
-    circles = [k for k in obs.circles if lres.get(k, np.inf) < gate_l]
-    kp_err = _kp_errors(cam, obs) if point_errors is None else np.array([point_errors[int(i)] for i in obs.kp_ids])
-    kp_ok = kp_err < gate_p
-    rp = RefineParams(alpha=params.alpha, refine_focal=refine_focal, refine_k1=refine_k1, loss=loss,
-                      f_scale=params.px(params.final_f_scale, obs.width), tol=params.tol)
-    prob = CameraProblem(cam, data, rp, use_keypoints=kp_ok, lines=lines, circles=circles)
-    if prob.n_res < prob.n_free + 1:
-        return cam, []
-    new, _ = prob.solve()
-    if _sane(new, params):
-        return cam, []
-    return new, sorted(list(lines) + list(circles))
+# ------------------------------------------------------------------------------ the camera's part of the pipeline
+class CameraKind:
+    """The camera in the frame pipeline: candidates from plane homographies decomposed into
+    cameras, with inliers over all three planes; refined on them (focal length and pose); the
+    broadcast priors when nothing is left; PnL over the pose (and focal length and k1 unless the
+    settings say not)."""
+
+    ground_only = False
+
+    def __init__(self, data: FrameData, params: CalibParams):
+        self.data, self.params = data, params
+
+    @staticmethod
+    def new_result() -> CalibrationResult:
+        return CalibrationResult()
+
+    def too_few(self) -> str | None:
+        obs, p = self.data.obs, self.params
+        needed = 2 if p.prior_search and (obs.lines or obs.circles) else p.min_points
+        return f"too few keypoints ({obs.n_keypoints} < {needed})" if obs.n_keypoints < needed else None
+
+    def fit(self, sub: Observations, plane: str, on_plane: np.ndarray, local_xy: np.ndarray, thr_px: float):
+        """The camera of a RANSAC homography of the plane's points, its inliers over the subset
+        (within the threshold, at least 5 px, and the homography's own) and its errors."""
+        obs, p = self.data.obs, self.params
+        fit = plane_homography(local_xy, sub.kp_xy[on_plane], thr_px)
+        if fit is None:
+            return None
+        Hp, inl_plane = fit
+        cam0 = camera_from_plane_homography(Hp, plane, obs.width, obs.height, self.data.model)
+        if cam0 is None or _sane(cam0, p):
+            return None
+        err = _kp_errors(cam0, sub)
+        inl = err < max(thr_px, p.px(5.0, obs.width))
+        inl[np.flatnonzero(on_plane)[inl_plane]] = True
+        return cam0, inl, err
+
+    def scorer(self, first: Camera):
+        return CameraProblem(first, self.data, RefineParams(alpha=0.5)).residuals  # residuals at any camera
+
+    def refine(self, c: Candidate) -> Candidate | None:
+        return refine_candidate(c, self.data, self.params)
+
+    def fallback(self) -> list[Candidate]:
+        return prior_candidates(self.data, self.params) if self.params.prior_search else []
+
+    def degenerate(self) -> str:
+        planes = plane_masks(self.data.obs.kp_xyz, self.data.model)
+        counts = ", ".join(f"{p} {int(m.sum())}" for p, m in planes.items())
+        return f"degenerate geometry: no plane with {self.params.min_points} consistent keypoints ({counts})"
+
+    def point_errors(self, cam: Camera) -> dict[int, float]:
+        return point_residuals(cam, self.data.obs)
+
+    def class_errors(self, cam: Camera) -> dict[str, float]:
+        return line_residuals(cam, self.data)
+
+    def pnl_solve(self, cam: Camera, keypoints: np.ndarray, lines: list[str], circles: list[str]) -> Camera | None:
+        """The paper's PnL (pose, K fixed) or, by default, PnL over pose + focal + k1 (with the
+        final loss); None when there is too little to fit or the result is not a sane camera."""
+        p = self.params
+        intrinsics = p.refine_focal or p.refine_k1
+        rp = RefineParams(alpha=p.alpha, refine_focal=p.refine_focal, refine_k1=p.refine_k1,
+                          loss=p.final_loss if intrinsics else "linear",
+                          f_scale=p.px(p.final_f_scale, self.data.obs.width), tol=p.tol)
+        prob = CameraProblem(cam, self.data, rp, use_keypoints=keypoints, lines=lines, circles=circles)
+        if prob.n_res < prob.n_free + 1:
+            return None
+        new, _ = prob.solve()
+        return None if _sane(new, p) else new
 
 
-# ------------------------------------------------------------------------------ the whole frame
 def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: FieldModel | None = None) -> CalibrationResult:
     """Calibrate one frame. Never raises on bad geometry: failures come back with a reason."""
-    data = FrameData.build(obs, model or load_field_model())
-    needed = 2 if params.prior_search and (obs.lines or obs.circles) else params.min_points
-    if obs.n_keypoints < needed:
-        return CalibrationResult(None, failure=f"too few keypoints ({obs.n_keypoints} < {needed})",
-                                 failure_code="too_few_keypoints")
-    raw = make_candidates(data, params)
-    # vote on the decomposed cameras, refine the best few, vote again among the refined ones
-    vote(raw, data, params)
-    raw.sort(key=lambda c: c.score)
-    cands = [r for r in (refine_candidate(c, data, params) for c in raw[: params.refine_top]) if r is not None]
-    if not cands and params.prior_search:
-        cands = prior_candidates(data, params)
-    winner = vote(cands, data, params)
-    # the evidence: every decomposed candidate (first vote), then the refined ones (second vote)
-    table = [{"stage": stage, "subset": c.subset, "threshold": c.threshold, "plane": c.plane,
-              "inliers": len(c.inliers), "rms": c.rms, "score": c.score, "won": c is winner}
-             for stage, group in (("candidate", raw), ("refined", cands)) for c in group]
-    if winner is None:
-        planes = plane_masks(obs.kp_xyz, data.model)
-        counts = ", ".join(f"{p} {int(m.sum())}" for p, m in planes.items())
-        return CalibrationResult(None, candidates=table, failure_code="degenerate",
-                                 failure=f"degenerate geometry: no plane with {params.min_points} consistent keypoints ({counts})")
-    result = CalibrationResult(winner.camera, initial_camera=winner.camera, subset=winner.subset,
-                               threshold=winner.threshold, plane=winner.plane, inliers=winner.inliers, candidates=table)
-    result.point_residuals_initial = point_residuals(winner.camera, obs)
-    result.line_residuals_initial = line_residuals(winner.camera, data)
-    cam = winner.camera
-    if params.pnl and (obs.lines or obs.circles):
-        # one refinement: the paper's PnL (pose, K fixed) or, by default, PnL over pose + focal + k1
-        intrinsics = params.refine_focal or params.refine_k1
-        cam, result.pnl_lines = pnl_refine(cam, data, params, refine_focal=params.refine_focal,
-                                           refine_k1=params.refine_k1,
-                                           loss=params.final_loss if intrinsics else "linear",
-                                           line_errors=result.line_residuals_initial,
-                                           point_errors=result.point_residuals_initial)
-    result.camera = cam
-    result.point_residuals = point_residuals(cam, obs)
-    result.line_residuals = line_residuals(cam, data)
-    inlier_residuals = [result.point_residuals[int(i)] for i in obs.kp_ids[np.isin(obs.kp_ids, winner.inliers)]]
-    if not inlier_residuals:
-        result.camera, result.failure_code = None, "no_inliers"
-        result.failure = "no keypoint agrees with the camera (no inliers)"
-        return result
-    rms = float(np.sqrt(np.mean(np.square(inlier_residuals))))
-    if not rms <= params.px(params.max_rms, obs.width):
-        result.camera, result.failure_code = None, "residual"
-        result.failure = f"residual above the limit (inlier RMS {rms:.1f} px > {params.px(params.max_rms, obs.width):.1f})"
-    return result
+    return calibrate_with(CameraKind(FrameData.build(obs, model or load_field_model()), params), params)

@@ -2,26 +2,26 @@
 model. Paper Sec. "Homography Estimation" and "Point and Line Refinement Module" ("or a
 homography matrix H in the case of planar estimation").
 
-The pipeline for one frame, the planar twin of :mod:`pnlviz.calib.calibrate`:
+The steps are the frame pipeline's (:mod:`pnlviz.calib.pipeline`, shared with the camera);
+:class:`HomographyKind` is the ground homography's part of them, everything restricted to the
+ground plane (keypoints with z = 0, the straight classes on the ground, the circles):
 
 1. Candidates. For each keypoint subset (``full``, ``main``, ``ground``, each restricted to the
-   keypoints on the ground, z = 0) and each RANSAC threshold (pixels at 960 px width, scaled with
-   the image width), ``cv2.findHomography`` with RANSAC between the keypoints' field positions
-   (X, Y metres) and their pixels, then a least-squares refit on the inliers (OpenCV's method 0:
-   DLT followed by Levenberg-Marquardt on the reprojection error, the paper's refinement) and one
-   re-selection of the inliers with the refitted H. Identical inlier sets are kept once. For a
-   homography ``full`` restricted to the ground is the ``ground`` subset itself: a subset with
-   the same points as an earlier one is skipped (OpenCV's RANSAC is deterministic), so
-   ``ground`` only counts when asked for alone (``subsets=("ground",)``); the names stay those of
-   the camera pipeline.
-2. Heuristic voting: every candidate is scored on *all* ground observations, the ground keypoints
-   and the points observed on ground lines (distance to the segment mapped by H) and circles
-   (distance to the mapped arc), with a truncated quadratic ``sum(min(d^2, tau^2))``; the lowest
-   score wins, ``full`` winning ties. The winner is polished by Levenberg-Marquardt on its
-   inliers in float64 (``findHomography`` works on float32 points: ~1e-7 relative).
-3. Optional PnL refinement (:func:`refine_homography_pnl`): the 8 degrees of freedom of H
-   against ``alpha * lines + (1 - alpha) * points`` (in squares, as least squares needs), the
-   lines and keypoints gated by the voted H.
+   ground) and each RANSAC threshold, ``cv2.findHomography`` with RANSAC between the keypoints'
+   field positions (X, Y metres) and their pixels, then a least-squares refit on the inliers
+   (OpenCV's method 0: DLT followed by Levenberg-Marquardt on the reprojection error, the paper's
+   refinement) and one re-selection of the inliers with the refitted H. For a homography ``full``
+   restricted to the ground is the ``ground`` subset itself: the pipeline skips a subset with the
+   same points as an earlier one, so ``ground`` only counts when asked for alone
+   (``subsets=("ground",)``); the names stay those of the camera pipeline.
+2. Heuristic voting on every ground observation: the ground keypoints and the points observed on
+   ground lines (distance to the segment mapped by H) and circles (distance to the mapped arc),
+   each counted as its distance. The winner (``refine_top`` = 1) is polished by
+   Levenberg-Marquardt on its inliers in float64 (``findHomography`` works on float32 points:
+   ~1e-7 relative).
+3. Optional PnL refinement (``pnl=True``): the 8 degrees of freedom of H against
+   ``alpha * lines + (1 - alpha) * points`` (in squares), lines, circles and keypoints gated by
+   the voted H.
 
 Sign and scale of the returned H (field metres (X, Y, 1) -> pixels of ``obs``): unit Frobenius
 norm and the third homogeneous coordinate positive for points in front of the camera, like
@@ -29,29 +29,28 @@ norm and the third homogeneous coordinate positive for points in front of the ca
 down) then has ``det(H) > 0``; a candidate with ``det(H) < 0`` would be the mirror image of the
 pitch (a camera under the ground, or left/right-swapped labels) and is rejected.
 
-The residuals are the camera's (:mod:`pnlviz.calib.problem`: keypoints, the distance to the
-image of each model segment with its overshoot beyond the ends, the distance to mapped arcs) with
-the homography model of :mod:`pnlviz.calib.models`, solved by the same solver
-(:mod:`pnlviz.calib.solver`).
+The residuals are the camera's (:mod:`pnlviz.calib.problem`) with the homography model of
+:mod:`pnlviz.calib.models`, solved by the same solver (:mod:`pnlviz.calib.solver`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 
 from pnlviz.calib.models import HomographyModel
 from pnlviz.calib.observations import Observations
+from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with
 from pnlviz.calib.problem import FrameData, Problem
 from pnlviz.calib.solver import SolverParams, levenberg_marquardt
-from pnlviz.calib.voting import SUBSETS, best, subset_mask, truncated_score
-from pnlviz.conventions import DEFAULT_ALPHA
+from pnlviz.calib.voting import SUBSETS
+from pnlviz.conventions import DEFAULT_ALPHA, EVAL_WIDTH
 from pnlviz.field.model import FieldModel, load_field_model
 
-__all__ = ["SUBSETS", "HomographyParams", "HomographyResult", "estimate_homography", "refine_homography_pnl",
-           "HomographyProblem", "template_homography", "normalize_visible"]
+__all__ = ["HomographyKind", "HomographyParams", "HomographyResult", "estimate_homography", "normalize_visible",
+           "template_homography"]
 
 
 @dataclass(frozen=True)
@@ -64,48 +63,41 @@ class HomographyParams:
     ransac_iters: int = 500
     ransac_confidence: float = 0.999
     vote_tau: float = 10.0  #: truncation of the voting score, pixels
+    refine_top: int = 1  #: candidates polished after the first vote
     max_rms: float = 15.0  #: a homography whose inlier RMS (px) is above this is a failure
     pnl: bool = False  #: run the PnL refinement after the vote
     alpha: float = DEFAULT_ALPHA  #: PnL weight of lines vs points (paper: 0.6)
-    gate_px: float = 20.0  #: a line joins PnL when all its points are this close to the initial mapped segment
-    point_gate_px: float | None = None  #: a keypoint joins PnL when this close to its initial projection (default gate_px)
+    line_gate_px: float = 20.0  #: a line/circle joins PnL when all its points are this close to its mapping
+    point_gate_px: float = 20.0  #: a keypoint joins PnL when this close to its initial mapping
     circles: bool = True  #: ground circles take part in voting and PnL
     circle_step: float = 0.25  #: metres between samples of mapped circles
     max_iter: int = 100  #: iterations of the PnL solver
 
     def px(self, value: float, width: float) -> float:
-        return value * width / 960.0
+        return value * width / EVAL_WIDTH
 
 
 @dataclass
-class HomographyResult:
-    """One frame's ground homography and the evidence for it.
+class HomographyResult(FrameResult):
+    """One frame's ground homography and the evidence for it (see
+    :class:`pnlviz.calib.pipeline.FrameResult`; the residuals are those of the ground keypoints
+    and classes).
 
     ``H`` and ``initial_H`` map field metres (X, Y, 1) on the ground to pixels of the
     observations' image (``width`` x ``height``), unit norm, positive third coordinate in front of
     the camera. ``initial_H`` is the voted candidate, ``H`` the final one (after PnL when run).
-    Residuals are pixel distances: per ground keypoint id, and per ground line/circle class the
-    largest distance of its observed points.
     """
 
-    H: np.ndarray | None
     width: int = 0
     height: int = 0
-    initial_H: np.ndarray | None = None
-    subset: str | None = None
-    threshold: float | None = None
-    inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
-    point_residuals_initial: dict[int, float] = field(default_factory=dict)
-    point_residuals: dict[int, float] = field(default_factory=dict)
-    line_residuals_initial: dict[str, float] = field(default_factory=dict)
-    line_residuals: dict[str, float] = field(default_factory=dict)
-    pnl_lines: list[str] = field(default_factory=list)
-    candidates: list[dict] = field(default_factory=list)
-    failure: str | None = None
 
     @property
-    def ok(self) -> bool:
-        return self.H is not None
+    def H(self) -> np.ndarray | None:
+        return self.estimate
+
+    @property
+    def initial_H(self) -> np.ndarray | None:
+        return self.initial_estimate
 
     def template_homography(self, image_size: tuple[int, int] = (1280, 720), model: FieldModel | None = None,
                             initial: bool = False) -> np.ndarray | None:
@@ -143,59 +135,23 @@ def normalize_visible(H: np.ndarray, X: np.ndarray | None = None) -> np.ndarray:
     return H if np.linalg.det(H) >= 0 else -H
 
 
-# ------------------------------------------------------------------------------ residuals
-def _hom(xy: np.ndarray) -> np.ndarray:
-    return np.hstack([np.asarray(xy, float).reshape(-1, 2), np.ones((len(xy), 1))])
+# ------------------------------------------------------------------------------ checks and fits
+def _map(H: np.ndarray, X: np.ndarray) -> np.ndarray:
+    h = X @ H[:, :2].T + H[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return h[:, :2] / h[:, 2:]
 
 
-class HomographyProblem:
-    """The residuals of a ground homography against :class:`Observations` (or their
-    :class:`FrameData`): ground keypoints, the straight classes on the ground and (optionally)
-    the circles, as :class:`pnlviz.calib.problem.Problem` with the homography model (its
-    parameters: ``M <- M (I + P)``, ``H = M diag(s, s, 1)``, s = 1/50 m)."""
-
-    def __init__(self, obs: Observations | FrameData, alpha: float = DEFAULT_ALPHA, model: FieldModel | None = None, *,
-                 use_keypoints: np.ndarray | None = None, lines=None, circles=None, circle_step: float = 0.25):
-        data = obs if isinstance(obs, FrameData) else FrameData.build(obs, model or load_field_model())
-        self.model = HomographyModel()
-        self.problem = Problem(self.model, data, alpha, keypoints=use_keypoints, lines=lines, circles=circles,
-                               ground_only=True, circle_step=circle_step)
-        prob = self.problem
-        self.kp_ids, self.kp_xy = prob.kp_ids, prob.kp_xy
-        self.kp_X = data.obs.kp_xyz[prob.kp_mask, :2]
-        self.line_q, self.circle_items, self.n_res = prob.line_pts, prob.circle_items, prob.n_res
-
-    def residuals(self, H: np.ndarray) -> np.ndarray:
-        return self.problem.residuals(self.model.start(H))
-
-    def solve(self, H0: np.ndarray, params: SolverParams) -> np.ndarray:
-        """``H0`` refined (the starting H when there are fewer residuals than parameters)."""
-        if self.n_res < self.model.n_params:
-            return np.asarray(H0, float)
-        M, _ = levenberg_marquardt(self.problem.evaluate, self.model.retract, self.model.start(H0), params)
-        return self.model.homography(M)
-
-    def keypoint_distances(self, H: np.ndarray) -> np.ndarray:
-        """Pixel distance of each ground keypoint to its mapping (inf behind the camera)."""
-        xh = self.kp_X @ np.asarray(H, float)[:, :2].T + H[:, 2]
-        w = xh[:, 2] * np.sign(np.linalg.det(H))  # sign-free: in front <=> w det(H) > 0 for a non-mirrored H
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.linalg.norm(xh[:, :2] / xh[:, 2:] - self.kp_xy, axis=1)
-        return np.where(w > 0, d, np.inf)
-
-    def class_distances(self, H: np.ndarray) -> dict[str, np.ndarray]:
-        """Unweighted distances (px) of each line/circle class's observed points."""
-        return self.problem.class_distances(self.model.start(H))
-
-    def observation_distances(self, H: np.ndarray) -> np.ndarray:
-        """Every ground observation's pixel distance: keypoints, then line and circle points."""
-        cls = self.class_distances(H)
-        parts = [self.keypoint_distances(H)] + [cls[k] for k in cls]
-        d = np.concatenate(parts) if parts else np.zeros(0)
-        return np.where(np.isfinite(d), d, np.inf)
+def keypoint_distances(H: np.ndarray, X: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Pixel distance of field points ``X`` (N, 2) mapped by ``H`` to their pixels ``xy`` (inf
+    behind the camera)."""
+    xh = X @ np.asarray(H, float)[:, :2].T + H[:, 2]
+    w = xh[:, 2] * np.sign(np.linalg.det(H))  # sign-free: in front <=> w det(H) > 0 for a non-mirrored H
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.linalg.norm(xh[:, :2] / xh[:, 2:] - xy, axis=1)
+    return np.where(w > 0, d, np.inf)
 
 
-# ------------------------------------------------------------------------------ candidates
 def _problem_with(H: np.ndarray, X: np.ndarray, xy: np.ndarray) -> str | None:
     """Why ``H`` (fitted to field points ``X`` -> pixels ``xy``) is unusable, or None."""
     if H is None or H.shape != (3, 3) or not np.all(np.isfinite(H)):
@@ -215,16 +171,6 @@ def _problem_with(H: np.ndarray, X: np.ndarray, xy: np.ndarray) -> str | None:
     if np.linalg.det(Hn) <= 0:
         return "mirrored pitch (camera under the ground)"
     return None
-
-
-@dataclass
-class _Candidate:
-    subset: str
-    threshold: float
-    H: np.ndarray
-    inliers: np.ndarray  # keypoint ids
-    rms: float
-    score: float = np.inf
 
 
 def _fit(X: np.ndarray, xy: np.ndarray, thr: float, params: HomographyParams) -> tuple[np.ndarray, np.ndarray] | None:
@@ -255,102 +201,6 @@ def _fit(X: np.ndarray, xy: np.ndarray, thr: float, params: HomographyParams) ->
     return normalize_visible(H, X[mask]), mask
 
 
-def _map(H: np.ndarray, X: np.ndarray) -> np.ndarray:
-    h = X @ H[:, :2].T + H[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return h[:, :2] / h[:, 2:]
-
-
-#: the polish of the voted homography on its inlier keypoints, and the PnL refinement
-_POLISH = SolverParams(max_iter=50, tol=1e-12)
-
-
-def _polish(H: np.ndarray, obs: Observations | FrameData, inliers: np.ndarray, model: FieldModel) -> np.ndarray:
-    """Levenberg-Marquardt on the reprojection error of the inliers, in float64 (OpenCV's own
-    refinement in ``findHomography`` works on float32 points, ~1e-7 relative)."""
-    kp_ids = obs.obs.kp_ids if isinstance(obs, FrameData) else obs.kp_ids
-    prob = HomographyProblem(obs, 0.0, model, use_keypoints=np.isin(kp_ids, inliers), lines=(), circles=())
-    if prob.n_res < 8:
-        return H
-    H1 = prob.solve(H, _POLISH)
-    if (not np.all(np.isfinite(H1)) or _problem_with(H1, prob.kp_X, prob.kp_xy)
-            or np.sum(prob.residuals(H1) ** 2) > np.sum(prob.residuals(H) ** 2)):
-        return H
-    return normalize_visible(H1, prob.kp_X)
-
-
-def make_candidates(obs: Observations, params: HomographyParams) -> list[_Candidate]:
-    """Step 1: one homography per (subset, threshold) with a distinct inlier set."""
-    out, seen, masks = [], set(), []
-    for subset in params.subsets:
-        mask = subset_mask(obs, subset, ground_only=True)
-        if mask.sum() < params.min_points or any(np.array_equal(mask, m) for m in masks):
-            continue  # the same points as an earlier subset give the same (deterministic) RANSAC fits
-        masks.append(mask)
-        X, xy, ids = obs.kp_xyz[mask, :2], obs.kp_xy[mask], obs.kp_ids[mask]
-        for thr in params.ransac_thresholds:
-            fit = _fit(X, xy, params.px(thr, obs.width), params)
-            if fit is None:
-                continue
-            H, inl = fit
-            key = tuple(ids[inl])
-            if key in seen:
-                continue
-            seen.add(key)
-            err = np.linalg.norm(_map(H, X[inl]) - xy[inl], axis=1)
-            out.append(_Candidate(subset, float(thr), H, ids[inl], float(np.sqrt(np.mean(err**2)))))
-    return out
-
-
-def vote(cands: list[_Candidate], prob: HomographyProblem, tau: float) -> _Candidate | None:
-    """Step 2: truncated-quadratic score on every ground observation; lowest wins (``full`` on ties)."""
-    for c in cands:
-        c.score = truncated_score(prob.observation_distances(c.H), tau)
-    return best(cands)
-
-
-# ------------------------------------------------------------------------------ PnL
-def refine_homography_pnl(H: np.ndarray, obs: Observations | FrameData, alpha: float = DEFAULT_ALPHA,
-                          gate_px: float = 20.0, *, point_gate_px: float | None = None, circles: bool = True,
-                          scale_gates: bool = True, model: FieldModel | None = None, circle_step: float = 0.25,
-                          max_iter: int = 100) -> tuple[np.ndarray, list[str]]:
-    """The paper's PnL refinement for a ground homography: the 8 degrees of freedom of ``H``
-    (field metres -> pixels of ``obs``) against ``alpha * lines + (1 - alpha) * points``.
-
-    Gating by the starting ``H``: a ground line (or circle, with ``circles``) joins when every
-    observed point of it lies within ``gate_px`` of its mapped segment (arc); a ground keypoint
-    joins when within ``point_gate_px`` (default ``gate_px``) of its mapping. Gates are pixels at
-    960 px width scaled with the image width (``scale_gates=False``: pixels as given).
-
-    Returns ``(H, joined classes)``; the starting ``H`` (normalised) and ``[]`` when too few
-    residuals join or the solution is unusable (an observed point crossing the horizon, a
-    mirrored or singular H).
-    """
-    data = obs if isinstance(obs, FrameData) else FrameData.build(obs, model or load_field_model())
-    o = data.obs
-    k = o.width / 960.0 if scale_gates else 1.0
-    gate_l = gate_px * k
-    gate_p = (gate_px if point_gate_px is None else point_gate_px) * k
-    full = HomographyProblem(data, alpha, circles=None if circles else (), circle_step=circle_step)
-    H0 = normalize_visible(np.asarray(H, float), full.kp_X if len(full.kp_X) else None)
-    joined = {name for name, d in full.class_distances(H0).items() if len(d) and np.all(d < gate_l)}
-    kp_ok = np.zeros(o.n_keypoints, bool)
-    kp_ok[np.flatnonzero(full.problem.kp_mask)] = full.keypoint_distances(H0) < gate_p
-    prob = HomographyProblem(data, alpha, use_keypoints=kp_ok, lines=[n for n in o.lines if n in joined],
-                             circles=[n for n in o.circles if n in joined and circles], circle_step=circle_step)
-    if prob.n_res < 9:
-        return H0, []
-    # the model starts at the sign-normalised H0 and moves continuously, so the sign carries over
-    H1 = prob.solve(H0, SolverParams(max_iter=max_iter, tol=1e-12))
-    H1 = H1 / np.linalg.norm(H1)
-    pts = np.vstack([prob.line_q] + [p for _, _, p in prob.circle_items])
-    if not np.all(np.isfinite(H1)) or np.linalg.det(H1) <= 0 or not _in_front(H1, prob.kp_X, pts):
-        return H0, []
-    if len(prob.kp_X) and _problem_with(H1, prob.kp_X, prob.kp_xy):
-        return H0, []
-    return H1, sorted(joined)
-
-
 def _in_front(H: np.ndarray, X: np.ndarray, q: np.ndarray) -> bool:
     """True when the field points ``X`` and the ground seen at pixels ``q`` lie in front of the
     camera of the sign-normalised ``H`` (third coordinate of ``H X`` > 0; for a pixel, the third
@@ -359,7 +209,7 @@ def _in_front(H: np.ndarray, X: np.ndarray, q: np.ndarray) -> bool:
         return False
     if len(q):
         try:
-            b = _hom(q) @ np.linalg.inv(H).T
+            b = np.hstack([q, np.ones((len(q), 1))]) @ np.linalg.inv(H).T
         except np.linalg.LinAlgError:
             return False
         if not np.all(b[:, 2] > 0):
@@ -367,16 +217,111 @@ def _in_front(H: np.ndarray, X: np.ndarray, q: np.ndarray) -> bool:
     return True
 
 
-# ------------------------------------------------------------------------------ residual reports
-def _point_report(prob: HomographyProblem, H: np.ndarray) -> dict[int, float]:
-    return {int(i): float(d) for i, d in zip(prob.kp_ids, prob.keypoint_distances(H))}
+#: the polish of the voted homography on its inlier keypoints
+_POLISH = SolverParams(max_iter=50, tol=1e-12)
 
 
-def _class_report(prob: HomographyProblem, H: np.ndarray) -> dict[str, float]:
-    return {name: float(np.max(d)) for name, d in prob.class_distances(H).items() if len(d)}
+def _solve(problem: Problem, H0: np.ndarray, params: SolverParams) -> np.ndarray:
+    """``H0`` refined against ``problem`` (itself when there are fewer residuals than parameters)."""
+    model = problem.model
+    if problem.n_res < model.n_params:
+        return np.asarray(H0, float)
+    M, _ = levenberg_marquardt(problem.evaluate, model.retract, model.start(H0), params)
+    return model.homography(M)
 
 
-# ------------------------------------------------------------------------------ the whole frame
+# ------------------------------------------------------------------------------ the homography's part of the pipeline
+class HomographyKind:
+    """The ground homography in the frame pipeline (see the module docstring)."""
+
+    ground_only = True
+
+    def __init__(self, data: FrameData, params: HomographyParams):
+        self.data, self.params = data, params
+        self.model = HomographyModel()
+        #: every ground observation (keypoints, lines and, with ``params.circles``, circles)
+        self.full = self.problem(0.5)
+        self.kp_X = data.obs.kp_xyz[self.full.kp_mask, :2]
+
+    def problem(self, alpha: float, keypoints=None, lines=None, circles=None) -> Problem:
+        """The residuals of a ground homography against the frame's ground observations."""
+        if not self.params.circles:
+            circles = ()
+        return Problem(self.model, self.data, alpha, keypoints=keypoints, lines=lines, circles=circles,
+                       ground_only=True, circle_step=self.params.circle_step)
+
+    def new_result(self) -> HomographyResult:
+        return HomographyResult(width=self.data.obs.width, height=self.data.obs.height)
+
+    def too_few(self) -> str | None:
+        n, need = int(self.data.obs.ground.sum()), self.params.min_points
+        return f"too few ground keypoints ({n} < {need})" if n < need else None
+
+    def fit(self, sub: Observations, plane: str, on_plane: np.ndarray, local_xy: np.ndarray, thr_px: float):
+        """The ground homography of RANSAC and refits (every point of ``sub`` is on the ground)."""
+        fit = _fit(local_xy, sub.kp_xy, thr_px, self.params)
+        if fit is None:
+            return None
+        H, inl = fit
+        return H, inl, np.linalg.norm(_map(H, local_xy) - sub.kp_xy, axis=1)
+
+    def scorer(self, first: np.ndarray):
+        def distances(H: np.ndarray) -> np.ndarray:  # every ground observation's pixel distance
+            cls = self.full.class_distances(self.model.start(H))
+            d = np.concatenate([keypoint_distances(H, self.kp_X, self.full.kp_xy)] + [cls[k] for k in cls])
+            return np.where(np.isfinite(d), d, np.inf)
+
+        return distances
+
+    def refine(self, c: Candidate) -> Candidate:
+        """Levenberg-Marquardt on the reprojection error of the inliers, in float64 (OpenCV's own
+        refinement in ``findHomography`` works on float32 points, ~1e-7 relative); the candidate
+        unchanged when that does not help."""
+        H = c.estimate
+        prob = self.problem(0.0, keypoints=np.isin(self.data.obs.kp_ids, c.inliers), lines=(), circles=())
+        X = self.data.obs.kp_xyz[prob.kp_mask, :2]
+        if prob.n_res >= 8:
+            H1 = _solve(prob, H, _POLISH)
+            if (np.all(np.isfinite(H1)) and not _problem_with(H1, X, prob.kp_xy)
+                    and np.sum(prob.residuals(self.model.start(H1)) ** 2) <= np.sum(prob.residuals(self.model.start(H)) ** 2)):
+                H = normalize_visible(H1, X)
+        err = keypoint_distances(H, X, prob.kp_xy)
+        return Candidate(c.subset, c.threshold, c.plane, H, c.inliers, float(np.sqrt(np.mean(err ** 2))))
+
+    @staticmethod
+    def fallback() -> list[Candidate]:
+        return []
+
+    def degenerate(self) -> str:
+        return (f"degenerate geometry: no homography from {int(self.data.obs.ground.sum())} ground keypoints "
+                "(collinear, or no 4 consistent ones)")
+
+    def point_errors(self, H: np.ndarray) -> dict[int, float]:
+        return {int(i): float(d) for i, d in zip(self.full.kp_ids, keypoint_distances(H, self.kp_X, self.full.kp_xy))}
+
+    def class_errors(self, H: np.ndarray) -> dict[str, float]:
+        return {name: float(np.max(d)) for name, d in self.full.class_distances(self.model.start(H)).items() if len(d)}
+
+    def pnl_solve(self, H: np.ndarray, keypoints: np.ndarray, lines: list[str], circles: list[str]) -> np.ndarray | None:
+        """The paper's PnL for a ground homography: its 8 degrees of freedom; None when too few
+        residuals join or the solution is unusable (an observed point crossing the horizon, a
+        mirrored or singular H)."""
+        H0 = normalize_visible(np.asarray(H, float), self.kp_X if len(self.kp_X) else None)
+        prob = self.problem(self.params.alpha, keypoints=keypoints, lines=lines, circles=circles)
+        if prob.n_res < 9:
+            return None
+        # the model starts at the sign-normalised H0 and moves continuously, so the sign carries over
+        H1 = _solve(prob, H0, SolverParams(max_iter=self.params.max_iter, tol=1e-12))
+        H1 = H1 / np.linalg.norm(H1)
+        X = self.data.obs.kp_xyz[prob.kp_mask, :2]
+        pts = np.vstack([prob.line_pts] + [p for _, _, p in prob.circle_items])
+        if not np.all(np.isfinite(H1)) or np.linalg.det(H1) <= 0 or not _in_front(H1, X, pts):
+            return None
+        if len(X) and _problem_with(H1, X, prob.kp_xy):
+            return None
+        return H1
+
+
 def estimate_homography(obs: Observations, params: HomographyParams | None = None, *,
                         thresholds: tuple[float, ...] | None = None, subsets: tuple[str, ...] | None = None,
                         pnl: bool | None = None, model: FieldModel | None = None, **overrides) -> HomographyResult:
@@ -387,8 +332,6 @@ def estimate_homography(obs: Observations, params: HomographyParams | None = Non
     :class:`HomographyParams` field given as a keyword override ``params``. Never raises on bad
     geometry: failures come back with a reason in ``failure``.
     """
-    from dataclasses import replace
-
     params = params or HomographyParams()
     if thresholds is not None:
         overrides["ransac_thresholds"] = tuple(thresholds)
@@ -398,38 +341,4 @@ def estimate_homography(obs: Observations, params: HomographyParams | None = Non
         overrides["pnl"] = bool(pnl)
     if overrides:
         params = replace(params, **overrides)
-    model = model or load_field_model()
-    W, Hh = obs.width, obs.height
-    n_ground = int(obs.ground.sum())
-    if n_ground < params.min_points:
-        return HomographyResult(None, W, Hh, failure=f"too few ground keypoints ({n_ground} < {params.min_points})")
-    data = FrameData.build(obs, model)
-    prob = HomographyProblem(data, 0.5, circles=None if params.circles else (), circle_step=params.circle_step)
-    cands = make_candidates(obs, params)
-    winner = vote(cands, prob, params.px(params.vote_tau, W))
-    table = [{"subset": c.subset, "threshold": c.threshold, "inliers": len(c.inliers), "rms": c.rms, "score": c.score}
-             for c in cands]
-    if winner is None:
-        return HomographyResult(None, W, Hh, candidates=table,
-                                failure=f"degenerate geometry: no homography from {n_ground} ground keypoints "
-                                        "(collinear, or no 4 consistent ones)")
-    winner.H = _polish(winner.H, data, winner.inliers, model)
-    res = HomographyResult(winner.H, W, Hh, initial_H=winner.H, subset=winner.subset, threshold=winner.threshold,
-                           inliers=winner.inliers, candidates=table)
-    res.point_residuals_initial = _point_report(prob, winner.H)
-    res.line_residuals_initial = _class_report(prob, winner.H)
-    H = winner.H
-    if params.pnl and (obs.lines or obs.circles):
-        H, res.pnl_lines = refine_homography_pnl(H, data, params.alpha, params.gate_px,
-                                                 point_gate_px=params.point_gate_px, circles=params.circles,
-                                                 model=model, circle_step=params.circle_step,
-                                                 max_iter=params.max_iter)
-    res.H = H
-    res.point_residuals = _point_report(prob, H)
-    res.line_residuals = _class_report(prob, H)
-    inl = np.array([res.point_residuals[int(i)] for i in winner.inliers])
-    rms = float(np.sqrt(np.mean(inl**2))) if len(inl) else np.inf
-    if not rms <= params.px(params.max_rms, W):
-        res.H = None
-        res.failure = f"residual above the limit (inlier RMS {rms:.1f} px > {params.px(params.max_rms, W):.1f})"
-    return res
+    return calibrate_with(HomographyKind(FrameData.build(obs, model or load_field_model()), params), params)

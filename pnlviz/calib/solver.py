@@ -5,14 +5,16 @@ Written here rather than taken from ``scipy.optimize.least_squares`` because the
 re-linearised at every step (a rotation updated as ``R <- exp([dw]x) R``, a homography as
 ``M <- M (I + P)``), which a fixed parametrisation cannot express, and because the analytic
 Jacobians come with the residuals at no extra cost: each trial step is evaluated with its
-Jacobian, which the next iteration uses when the step is accepted.
+Jacobian, which the next iteration uses when the step is accepted. The clip's model (one camera
+per shot, :mod:`pnlviz.calib.shot`) has no analytic Jacobian: it gives its own by finite
+differences, asked for only at accepted steps, as a sparse matrix.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -25,6 +27,8 @@ class SolverParams:
     f_scale: float = 2.0  #: where a robust loss bends (the residuals' unit: pixels)
     max_iter: int = 50
     tol: float = 1e-8  #: stop when the cost drops by less than this fraction
+    step_tol: float = 1e-12  #: ... or the step is shorter than this
+    max_trials: int | None = None  #: stop after this many rejected steps in a row (None: until lam > 1e12)
 
 
 def robust_weights(r: np.ndarray, loss: str, c: float) -> np.ndarray:
@@ -60,54 +64,95 @@ def robust_cost(r: np.ndarray, loss: str, c: float) -> float:
 Evaluate = Callable[[Any, bool], tuple[np.ndarray, np.ndarray | None]]
 
 
+class _Step(NamedTuple):
+    """An accepted step: its size, the point it leads to, that point's residuals, Jacobian (None
+    until asked for) and cost."""
+
+    delta: np.ndarray
+    x: Any
+    r: np.ndarray
+    J: Any
+    cost: float
+
+
 def levenberg_marquardt(evaluate: Evaluate, retract: Callable[[Any, np.ndarray], Any], x0: Any,
-                        params: SolverParams = SolverParams()) -> tuple[Any, dict]:
+                        params: SolverParams = SolverParams(),
+                        jacobian: Callable[[Any, np.ndarray], Any] | None = None) -> tuple[Any, dict]:
     """Minimise the robust cost of ``evaluate(x, jac) -> (r (n,), J (n, p) or None)``.
 
     ``retract(x, delta)`` is the model after a step ``delta`` (p,) from ``x``. Returns the final
     model and ``{"success", "cost", "iterations"}``. Damping: ``lam`` starts at 1e-3, times 4 on a
     rejected step (times 10 on a singular system), divided by 3 after an accepted one; it stops
-    when the cost drops by less than ``tol`` relatively, or no descent is left (``lam > 1e12``).
+    when the cost drops by less than ``tol`` relatively or the step is shorter than ``step_tol``,
+    or no descent is left (``lam > 1e12``, or ``max_trials`` steps rejected in a row).
+
+    ``jacobian(x, r) -> J``: when given, trial steps are evaluated without their Jacobian
+    (``evaluate(x, False)``) and the Jacobian is asked for once a step is accepted, with the
+    residuals at that point (a Jacobian by finite differences costs many evaluations: the clip's
+    in :mod:`pnlviz.calib.shot`). ``J`` may be a scipy sparse matrix; the normal matrix is then
+    made dense (it has one row and column per parameter).
     """
     p = params
     x = x0
-    r, J = evaluate(x, True)
+    r, J = evaluate(x, jacobian is None)
     cost = robust_cost(r, p.loss, p.f_scale)
     lam, it, success = 1e-3, 0, False
     for it in range(1, p.max_iter + 1):
-        if p.loss == "linear":
-            Jw, rw = J, r
-        else:
-            w = robust_weights(r, p.loss, p.f_scale)
-            Jw, rw = J * w[:, None], r * w
-        A, g = Jw.T @ Jw, Jw.T @ rw
-        d = np.maximum(A.diagonal(), 1e-9)  # Marquardt's scaling of the damping
-        while True:
-            damped = A.copy()
-            damped.flat[::len(d) + 1] += lam * d
-            try:
-                delta = -np.linalg.solve(damped, g)
-            except np.linalg.LinAlgError:
-                lam *= 10
-                if lam > 1e12:
-                    break
-                continue
-            x2 = retract(x, delta)
-            with np.errstate(all="ignore"):  # a wild trial step is simply rejected below
-                r2, J2 = evaluate(x2, True)
-                cost2 = robust_cost(r2, p.loss, p.f_scale)
-            if np.isfinite(cost2) and cost2 <= cost:
-                break
-            lam *= 4
-            if lam > 1e12:
-                break
-        if lam > 1e12:
+        if J is None:
+            J = jacobian(x, r)
+        A, g = _normal_equations(J, r, p)
+        step, lam = _descend(evaluate, retract, x, A, g, cost, lam, p, jacobian is None)
+        if step is None:
             success = True  # no descent direction left: at a minimum
             break
-        rel = (cost - cost2) / max(cost, 1e-30)
-        x, r, J, cost = x2, r2, J2, cost2
+        rel = (cost - step.cost) / max(cost, 1e-30)
+        x, r, J, cost = step.x, step.r, step.J, step.cost
         lam = max(lam / 3, 1e-12)
-        if rel < p.tol or np.linalg.norm(delta) < 1e-12:
+        if rel < p.tol or np.linalg.norm(step.delta) < p.step_tol:
             success = True
             break
     return x, {"success": success, "cost": cost, "iterations": it}
+
+
+def _normal_equations(J, r: np.ndarray, p: SolverParams) -> tuple[np.ndarray, np.ndarray]:
+    """``J^T W J`` (dense) and ``J^T W r`` with the loss's IRLS weights ``W``; ``J`` a dense
+    array or a scipy sparse matrix."""
+    dense = isinstance(J, np.ndarray)
+    if p.loss == "linear":
+        Jw, rw = J, r
+    else:
+        w = robust_weights(r, p.loss, p.f_scale)
+        rw = r * w
+        if dense:
+            Jw = J * w[:, None]
+        else:
+            import scipy.sparse  # only the clip's model gives a sparse Jacobian
+
+            Jw = scipy.sparse.diags(w) @ J
+    A, g = Jw.T @ Jw, Jw.T @ rw
+    return (A if dense else A.toarray()), g
+
+
+def _descend(evaluate: Evaluate, retract, x, A: np.ndarray, g: np.ndarray, cost: float, lam: float,
+             p: SolverParams, with_jacobian: bool) -> tuple[_Step | None, float]:
+    """Damped steps from ``x``, more damped after each rejection, until one does not raise the
+    cost: ``(that step, lam)``, or ``(None, lam)`` when none is left to try."""
+    d = np.maximum(A.diagonal(), 1e-9)  # Marquardt's scaling of the damping
+    trials = 0
+    while lam <= 1e12 and (p.max_trials is None or trials < p.max_trials):
+        trials += 1
+        damped = A.copy()
+        damped.flat[::len(d) + 1] += lam * d
+        try:
+            delta = -np.linalg.solve(damped, g)
+        except np.linalg.LinAlgError:
+            lam *= 10
+            continue
+        x2 = retract(x, delta)
+        with np.errstate(all="ignore"):  # a wild trial step is simply rejected below
+            r2, J2 = evaluate(x2, with_jacobian)
+            cost2 = robust_cost(r2, p.loss, p.f_scale)
+        if np.isfinite(cost2) and cost2 <= cost:
+            return _Step(delta, x2, r2, J2, cost2), lam
+        lam *= 4
+    return None, lam

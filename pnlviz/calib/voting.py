@@ -1,6 +1,7 @@
-"""Candidates and the heuristic vote, shared by the camera and the homography pipelines (paper
-Sec. "Camera Parameters Estimation"): a candidate per keypoint subset and RANSAC threshold, each
-scored on *all* observations with a truncated quadratic; the lowest score wins, ``full`` on ties.
+"""The parts of the heuristic vote (paper Sec. "Camera Parameters Estimation") that the frame
+pipeline (:mod:`pnlviz.calib.pipeline`) uses for the camera and the homography alike: the keypoint
+subsets a candidate is fitted to, the truncated quadratic every candidate is scored with on *all*
+observations, and the winner (the lowest score, ``full`` on ties).
 """
 
 from __future__ import annotations

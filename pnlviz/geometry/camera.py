@@ -34,19 +34,34 @@ def _frozen_zeros(n: int) -> np.ndarray:
 _NO_RADIAL, _NO_TANGENTIAL, _NO_THIN_PRISM = _frozen_zeros(6), _frozen_zeros(2), _frozen_zeros(4)
 
 
-def _rz(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+def _rz(a) -> np.ndarray:
+    """Rotation(s) about z by ``a`` (radians): (3, 3) for a scalar, (..., 3, 3) for an array."""
+    a = np.asarray(a, float)
+    c, s = np.cos(a), np.sin(a)
+    out = np.zeros(a.shape + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1], out[..., 2, 2] = c, -s, s, c, 1.0
+    return out
 
 
-def _rx(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+def _rx(a) -> np.ndarray:
+    """Rotation(s) about x by ``a`` (radians), as :func:`_rz`."""
+    a = np.asarray(a, float)
+    c, s = np.cos(a), np.sin(a)
+    out = np.zeros(a.shape + (3, 3))
+    out[..., 0, 0], out[..., 1, 1], out[..., 1, 2], out[..., 2, 1], out[..., 2, 2] = 1.0, c, -s, s, c
+    return out
 
 
-def rotation_from_pan_tilt_roll(pan: float, tilt: float, roll: float) -> np.ndarray:
-    """World-to-camera rotation from SoccerNet angles (radians): ``R = (Rz(pan) Rx(tilt) Rz(roll))^T``."""
-    return (_rz(pan) @ _rx(tilt) @ _rz(roll)).T
+def rotation_from_pan_tilt_roll(pan, tilt, roll) -> np.ndarray:
+    """World-to-camera rotation from SoccerNet angles (radians): ``R = (Rz(pan) Rx(tilt) Rz(roll))^T``;
+    (3, 3) for scalar angles, (T, 3, 3) for arrays of T angles (the frames of a shot), each the
+    same to the last bit as the scalar call.
+
+    >>> R = rotation_from_pan_tilt_roll(np.array([0.1, 0.2]), np.array([1.2, 1.3]), np.array([0.0, 0.01]))
+    >>> R.shape, bool(np.array_equal(R[1], rotation_from_pan_tilt_roll(0.2, 1.3, 0.01)))
+    ((2, 3, 3), True)
+    """
+    return np.swapaxes(_rz(pan) @ _rx(tilt) @ _rz(roll), -1, -2)
 
 
 def pan_tilt_roll_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
@@ -182,12 +197,6 @@ class Camera:
     @property
     def has_distortion(self) -> bool:
         return self._lens != "none"
-
-    @property
-    def opencv_dist_coeffs(self) -> np.ndarray:
-        """Distortion in OpenCV's order (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4)."""
-        k, p, s = self.radial, self.tangential, self.thin_prism
-        return np.array([k[0], k[1], p[0], p[1], k[2], k[3], k[4], k[5], s[0], s[1], s[2], s[3]])
 
     def scaled(self, width: float, height: float) -> "Camera":
         """The same camera for the image resized to ``width`` x ``height``."""

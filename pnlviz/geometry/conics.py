@@ -71,11 +71,6 @@ class Conic:
         return cls(Q)
 
     @property
-    def coeffs(self) -> np.ndarray:
-        Q = self.Q
-        return np.array([Q[0, 0], 2 * Q[0, 1], Q[1, 1], 2 * Q[0, 2], 2 * Q[1, 2], Q[2, 2]])
-
-    @property
     def is_ellipse(self) -> bool:
         Q = self.Q
         return bool(Q[0, 0] * Q[1, 1] - Q[0, 1] ** 2 > 0)

@@ -4,7 +4,8 @@ The camera is the refinements' model: ``x_cam = R (X - C)``, pixels ``u = f x g 
 ``v = a f y g + cy`` with ``(x, y)`` the normalised coordinates, ``g = 1 + k1 (x^2 + y^2)`` and
 the aspect ``a = fy / fx`` fixed. Derivatives are taken with respect to the 8 parameters
 ``(dw (3), dC (3), log f, k1)``, the rotation updated on the left (``R <- exp([dw]x) R``), so the
-Jacobian is always taken at ``dw = 0``.
+Jacobian is always taken at ``dw = 0``. The rotation and the focal length may differ from point
+to point (the frames of a shot in :mod:`pnlviz.calib.shot`); the centre and k1 are one.
 """
 
 from __future__ import annotations
@@ -18,20 +19,16 @@ N_CAMERA_PARAMS = 8
 
 
 def to_camera(X: np.ndarray, R: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """Camera coordinates (N, 3) of world points (N, 3)."""
+    """Camera coordinates (N, 3) of world points (N, 3); ``R`` is one rotation (3, 3) or one per
+    point (N, 3, 3) (the frames of a shot, each point with its frame's).
+
+    >>> R = np.stack([np.eye(3), np.diag([1.0, -1.0, -1.0])])
+    >>> to_camera(np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]]), R, np.zeros(3)).tolist()
+    [[1.0, 2.0, 3.0], [1.0, -2.0, -3.0]]
+    """
+    if R.ndim == 3:
+        return np.einsum("nij,nj->ni", R, X - C)
     return (X - C) @ R.T
-
-
-def camera_point_jacobian(Xc: np.ndarray, R: np.ndarray, n_params: int = 6) -> np.ndarray:
-    """d(x_cam)/d(dw, dC) of camera-frame points (N, 3): ``[-[x_cam]x | -R]``, (N, 3, n_params)
-    (the columns past the sixth are zero: x_cam depends on the pose only)."""
-    J = np.zeros((len(Xc), 3, n_params))
-    x, y, z = Xc[:, 0], Xc[:, 1], Xc[:, 2]
-    J[:, 0, 1], J[:, 0, 2] = z, -y
-    J[:, 1, 0], J[:, 1, 2] = -z, x
-    J[:, 2, 0], J[:, 2, 1] = y, -x
-    J[:, :, 3:6] = -R
-    return J
 
 
 def project_k1(X: np.ndarray, R: np.ndarray, C: np.ndarray, f: float, aspect: float, cx: float, cy: float,
@@ -52,15 +49,21 @@ def project_k1(X: np.ndarray, R: np.ndarray, C: np.ndarray, f: float, aspect: fl
 _DP_DW = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
 
 
-def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float, aspect: float, cx: float, cy: float, k1: float,
-                     jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float | np.ndarray, aspect: float, cx: float, cy: float,
+                     k1: float, jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """:func:`project_k1` from camera coordinates ``Xc`` (N, 3) (``R`` is needed for the
-    Jacobian only); points behind the camera are clamped to :data:`CLAMP_DEPTH`."""
+    Jacobian only); points behind the camera are clamped to :data:`CLAMP_DEPTH`. ``f`` and ``R``
+    may be given per point, (N,) and (N, 3, 3) (the frames of a shot).
+
+    >>> Xc = np.array([[1.0, 0.5, 10.0], [1.0, 0.5, 10.0]])
+    >>> camera_to_pixels(Xc, np.eye(3), np.array([1000.0, 2000.0]), 1.0, 480.0, 270.0, 0.0)[0].tolist()
+    [[580.0, 320.0], [680.0, 370.0]]
+    """
     z = np.where(Xc[:, 2] > CLAMP_DEPTH, Xc[:, 2], CLAMP_DEPTH)
     p = Xc[:, :2] / z[:, None]  # normalised (xn, yn)
     r2 = p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1]
     g = 1 + k1 * r2
-    focal = np.array([f, f * aspect])
+    focal = np.array([f, f * aspect]) if np.ndim(f) == 0 else np.stack([f, f * aspect], axis=1)
     uv = p * g[:, None] * focal + (cx, cy)
     if not jac:
         return uv, None
@@ -74,23 +77,28 @@ def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float, aspect: float, cx:
     perp[:, 0], perp[:, 1], perp[:, 2] = -p[:, 1], p[:, 0], 0.0
     Jp[:, :, :3] = p[:, :, None] * perp[:, None, :] + (Xc[:, 2] / z)[:, None, None] * _DP_DW
     Jp[:, :, 2] += perp[:, :2]
-    Jp[:, :, 3:] = (p[:, :, None] * R[2] - R[:2]) / z[:, None, None]
+    Jp[:, :, 3:] = (p[:, :, None] * R[..., None, 2, :] - R[..., :2, :]) / z[:, None, None]
     # then the lens and the focal length: d(pixels)/dp = diag(f, f aspect) (g I + 2 k1 p p^T)
     D = 2 * k1 * p[:, :, None] * p[:, None, :]
     D[:, 0, 0] += g
     D[:, 1, 1] += g
     J = np.empty((n, 2, N_CAMERA_PARAMS))
-    J[:, :, :6] = (D * focal[None, :, None]) @ Jp
+    J[:, :, :6] = (D * focal[..., :, None]) @ Jp
     J[:, :, 6] = uv - (cx, cy)  # d/d log f
     J[:, :, 7] = p * (r2[:, None] * focal)  # d/d k1
     return uv, J
 
 
-def undistort_k1(pts: np.ndarray, f: float, aspect: float, cx: float, cy: float, k1: float,
+def undistort_k1(pts: np.ndarray, f: float | np.ndarray, aspect: float, cx: float, cy: float, k1: float,
                  jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Undistorted normalised coordinates q (N, 2) of pixels (N, 2) and, with ``jac``,
     dq/d(log f, k1) (N, 2, 2). ``q = x_d s`` with ``s (1 + k1 |x_d|^2 s^2) = 1``, solved by 8
-    fixed-point steps (k1 is small)."""
+    fixed-point steps (k1 is small). ``f`` may be given per point (N,).
+
+    >>> q, _ = undistort_k1(np.array([[580.0, 320.0], [680.0, 370.0]]), np.array([1000.0, 2000.0]), 1.0, 480.0, 270.0, 0.0)
+    >>> q.tolist()
+    [[0.1, 0.05], [0.1, 0.05]]
+    """
     xd = np.empty((len(pts), 2))
     xd[:, 0] = (pts[:, 0] - cx) / f
     xd[:, 1] = (pts[:, 1] - cy) / (f * aspect)

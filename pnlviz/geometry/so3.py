@@ -8,11 +8,6 @@ import math
 import numpy as np
 
 
-def skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrix ``[v]x`` (3, 3) of a vector (3,): ``skew(v) @ w == cross(v, w)``."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
 def so3_exp(w: np.ndarray) -> np.ndarray:
     """Rotation matrix (3, 3) of the rotation vector ``w`` (3,), radians (Rodrigues' formula).
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -153,16 +154,13 @@ def build_catalogue(model: FieldModel) -> Catalogue:
                      frozenset(ground), belongs)
 
 
-_CACHE: dict[int, Catalogue] = {}
-
-
 def get_catalogue(model: FieldModel | None = None) -> Catalogue:
-    """The catalogue of ``model`` (default: the bundled pitch), cached per model object (the
-    cached catalogue holds the model, so its id stays valid)."""
-    model = model or load_field_model()
-    cat = _CACHE.get(id(model))
-    if cat is None or cat.model is not model:
-        if len(_CACHE) > 8:
-            _CACHE.clear()
-        cat = _CACHE[id(model)] = build_catalogue(model)
-    return cat
+    """The catalogue of ``model`` (default: the bundled pitch), built once per model."""
+    return _catalogue_of(model or load_field_model())
+
+
+@lru_cache(maxsize=8)
+def _catalogue_of(model: FieldModel) -> Catalogue:
+    """Cached by the model itself (a pitch model hashes by identity; the cache holds it, so a
+    model that was dropped cannot be mistaken for a new one)."""
+    return build_catalogue(model)

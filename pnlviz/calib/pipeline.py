@@ -1,0 +1,243 @@
+"""The pipeline of one frame, the same for the camera and the ground homography (paper Sec.
+"Camera Parameters Estimation", "Homography Estimation" and "Point and Line Refinement Module"):
+
+1. **candidates**: per keypoint subset (:data:`pnlviz.calib.voting.SUBSETS`) and RANSAC threshold,
+   a plane homography fitted to the subset's keypoints on one plane (the ground, or a goal plane
+   x = +-52.5 when the ground has too few), turned into the model (a camera, or the homography
+   itself); identical inlier sets are kept once;
+2. **the heuristic vote**: every candidate scored on *all* observations with a truncated quadratic
+   ``sum(min(r^2, tau^2))``; the best ``refine_top`` are refined on their inliers and scored
+   again; the lowest score wins, ``full`` on ties;
+3. **PnL**: lines, circles and keypoints gated by the voted model, then the model refined against
+   ``alpha * lines + (1 - alpha) * points`` (:mod:`pnlviz.calib.problem`, the one solver);
+4. the evidence (residuals before and after, the candidates) and the verdict: a model whose
+   inlier keypoints are farther than ``max_rms`` (RMS) is a failure.
+
+What differs between the models is a :class:`Kind`: the camera (:mod:`pnlviz.calib.calibrate`,
+all three planes, the 3D rig) and the ground homography (:mod:`pnlviz.calib.homography`, the
+ground-plane subset of everything: keypoints, lines and circles). Pixel thresholds are given at
+960 px image width and scaled with the width (``params.px``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from pnlviz.calib.observations import Observations
+from pnlviz.calib.problem import FrameData
+from pnlviz.calib.voting import best, subset_mask, truncated_score
+from pnlviz.field.model import FieldModel
+
+@dataclass(eq=False)  # compared by identity: fields hold arrays
+class Candidate:
+    subset: str
+    threshold: float
+    plane: str
+    estimate: Any  #: the model: a Camera, or a 3x3 homography
+    inliers: np.ndarray  # keypoint ids
+    rms: float
+    score: float = np.inf
+
+
+@dataclass
+class FrameResult:
+    """One frame's estimate (``None``: a failure, with ``failure`` in words and ``failure_code``,
+    one of :data:`pnlviz.calib.calibrate.FAILURE_CODES`) and the evidence for it: the voted
+    candidate's subset, threshold, plane and inlier keypoint ids, the residuals (px) of each
+    keypoint and of each line or circle class (its farthest point) before and after PnL, the
+    classes PnL used, and every candidate of both votes."""
+
+    estimate: Any = None
+    initial_estimate: Any = None
+    subset: str | None = None
+    threshold: float | None = None
+    plane: str | None = None
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    point_residuals_initial: dict[int, float] = field(default_factory=dict)
+    point_residuals: dict[int, float] = field(default_factory=dict)
+    line_residuals_initial: dict[str, float] = field(default_factory=dict)
+    line_residuals: dict[str, float] = field(default_factory=dict)
+    pnl_lines: list[str] = field(default_factory=list)
+    candidates: list[dict] = field(default_factory=list)
+    failure: str | None = None
+    failure_code: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.estimate is not None
+
+
+class Kind(Protocol):
+    """What the pipeline needs of a model, for one frame (``data``) and its settings."""
+
+    data: FrameData
+    ground_only: bool  #: keypoints off the ground plane take no part (the homography)
+
+    def new_result(self) -> FrameResult: ...  # an empty result of the model's type
+
+    def too_few(self) -> str | None: ...  # why the frame has too few keypoints, or None
+
+    def fit(self, sub: Observations, plane: str, on_plane: np.ndarray, local_xy: np.ndarray,
+            threshold_px: float) -> tuple[Any, np.ndarray, np.ndarray] | None: ...  # (estimate, inliers, errors)
+
+    def scorer(self, first: Any): ...  # estimate -> the residuals the vote scores
+
+    def refine(self, c: Candidate) -> Candidate | None: ...
+
+    def fallback(self) -> list[Candidate]: ...  # candidates when no refined one is left
+
+    def degenerate(self) -> str: ...  # why no candidate, in words
+
+    def point_errors(self, estimate) -> dict[int, float]: ...
+
+    def class_errors(self, estimate) -> dict[str, float]: ...
+
+    def pnl_solve(self, estimate, keypoints: np.ndarray, lines: list[str], circles: list[str]) -> Any | None: ...
+
+
+def plane_frame(plane: str, model: FieldModel) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``B`` (rows: local x', y', z' in world) and origin of a plane's local frame in
+    which the plane is z' = 0 and the camera side is z' < 0."""
+    hl = model.dimensions["pitch_length"] / 2
+    if plane == "goal_left":  # x = -52.5, pitch side x > -52.5: z' = -(x + 52.5)
+        return np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]), np.array([-hl, 0.0, 0.0])
+    if plane == "goal_right":  # x = +52.5, pitch side x < 52.5: z' = x - 52.5
+        return np.array([[0.0, 1, 0], [0, 0, 1], [1, 0, 0]]), np.array([hl, 0.0, 0.0])
+    return np.eye(3), np.zeros(3)
+
+
+def plane_masks(xyz: np.ndarray, model: FieldModel) -> dict[str, np.ndarray]:
+    """The points (N, 3) on each plane a candidate may be fitted on: the ground, the goal planes."""
+    hl = model.dimensions["pitch_length"] / 2
+    return {"ground": np.abs(xyz[:, 2]) < 1e-9,
+            "goal_left": np.abs(xyz[:, 0] + hl) < 1e-9,
+            "goal_right": np.abs(xyz[:, 0] - hl) < 1e-9}
+
+
+def make_candidates(kind: Kind, params) -> list[Candidate]:
+    """Step 1: per (subset, threshold), ``kind.fit`` on the ground plane (a goal plane, the one
+    with the most points, when the ground has too few), with its inliers over the subset.
+    Identical inlier sets are kept once; a subset with the same points as an earlier one is
+    skipped (OpenCV's RANSAC is deterministic)."""
+    obs, model = kind.data.obs, kind.data.model
+    seen: set[tuple] = set()
+    out: list[Candidate] = []
+    thresholds = {params.px(t, obs.width): t for t in params.ransac_thresholds}
+    done: set[bytes] = set()
+    for subset in params.subsets:
+        mask = subset_mask(obs, subset, kind.ground_only)
+        if mask.sum() < params.min_points or mask.tobytes() in done:
+            continue
+        done.add(mask.tobytes())
+        sub = obs.subset(mask)
+        planes = plane_masks(sub.kp_xyz, model)
+        if planes["ground"].sum() >= params.min_points:
+            order = ["ground"]
+        else:
+            order = sorted((p for p in planes if p != "ground" and planes[p].sum() >= params.min_points),
+                           key=lambda p: -planes[p].sum())
+        for plane in order:
+            pm = planes[plane]
+            B, origin = plane_frame(plane, model)
+            local = (sub.kp_xyz[pm] - origin) @ B.T
+            found = False
+            for thr_px in thresholds:
+                fit = kind.fit(sub, plane, pm, local[:, :2], thr_px)
+                if fit is None:
+                    continue
+                estimate, inl, err = fit
+                key = tuple(sub.kp_ids[inl])
+                found = True
+                if key in seen:
+                    continue
+                seen.add(key)
+                out.append(Candidate(subset, thresholds[thr_px], plane, estimate, sub.kp_ids[inl],
+                                     float(np.sqrt(np.mean(err[inl] ** 2)))))
+            if found:
+                break
+    return out
+
+
+def vote(cands: list[Candidate], kind: Kind, params) -> Candidate | None:
+    """Step 2: truncated-quadratic score of each candidate on all observations; lowest wins."""
+    if not cands:
+        return None
+    tau = params.px(params.vote_tau, kind.data.obs.width)
+    residuals = kind.scorer(cands[0].estimate)
+    for c in cands:
+        c.score = truncated_score(residuals(c.estimate), tau)
+    return best(cands)
+
+
+def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
+               point_errors: dict[int, float]) -> tuple[Any, list[str]]:
+    """Step 3: a line or circle joins when all its observed points are within ``line_gate_px``
+    of its image by ``estimate`` (``line_errors``: their farthest), a keypoint when within
+    ``point_gate_px``; then ``kind.pnl_solve``. Returns the estimate and the classes used (the
+    estimate unchanged and none when the solve had too little to go on or failed)."""
+    obs = kind.data.obs
+    gate_l = params.px(params.line_gate_px, obs.width)
+    gate_p = params.px(params.point_gate_px, obs.width)
+    lines = [k for k in obs.lines if line_errors.get(k, np.inf) < gate_l]
+    circles = [k for k in obs.circles if line_errors.get(k, np.inf) < gate_l]
+    kp_ok = np.array([point_errors.get(int(i), np.inf) for i in obs.kp_ids]).reshape(-1) < gate_p
+    new = kind.pnl_solve(estimate, kp_ok, lines, circles)
+    if new is None:
+        return estimate, []
+    return new, sorted(lines + circles)
+
+
+def calibrate_with(kind: Kind, params) -> FrameResult:
+    """The whole frame (steps 1-4), as ``kind.new_result()``. Never raises on bad geometry:
+    failures come back with a reason."""
+    obs = kind.data.obs
+    result = kind.new_result()
+    why = kind.too_few()
+    if why:
+        result.failure, result.failure_code = why, "too_few_keypoints"
+        return result
+    raw = make_candidates(kind, params)
+    # vote on the raw candidates, refine the best few, vote again among the refined ones
+    vote(raw, kind, params)
+    raw.sort(key=lambda c: c.score)
+    cands = [r for r in (kind.refine(c) for c in raw[: params.refine_top]) if r is not None]
+    if not cands:
+        cands = kind.fallback()
+    winner = vote(cands, kind, params)
+    result.candidates = [{"stage": stage, "subset": c.subset, "threshold": c.threshold, "plane": c.plane,
+                          "inliers": len(c.inliers), "rms": c.rms, "score": c.score, "won": c is winner}
+                         for stage, group in (("candidate", raw), ("refined", cands)) for c in group]
+    if winner is None:
+        result.failure, result.failure_code = kind.degenerate(), "degenerate"
+        return result
+    result.estimate = result.initial_estimate = estimate = winner.estimate
+    result.subset, result.threshold, result.plane, result.inliers = winner.subset, winner.threshold, winner.plane, \
+        winner.inliers
+    result.point_residuals_initial = kind.point_errors(estimate)
+    result.line_residuals_initial = kind.class_errors(estimate)
+    if params.pnl and (obs.lines or obs.circles):
+        estimate, result.pnl_lines = pnl_refine(estimate, kind, params, result.line_residuals_initial,
+                                                result.point_residuals_initial)
+    result.estimate = estimate
+    result.point_residuals = kind.point_errors(estimate)
+    result.line_residuals = kind.class_errors(estimate)
+    _verdict(result, obs, params)
+    return result
+
+
+def _verdict(result: FrameResult, obs: Observations, params) -> None:
+    """Step 4: no estimate when no inlier keypoint has a residual, or their RMS is above ``max_rms``."""
+    inlier_residuals = [result.point_residuals[int(i)] for i in obs.kp_ids[np.isin(obs.kp_ids, result.inliers)]
+                        if int(i) in result.point_residuals]
+    if not inlier_residuals:
+        result.estimate, result.failure_code = None, "no_inliers"
+        result.failure = "no keypoint agrees with the camera (no inliers)"
+        return
+    rms = float(np.sqrt(np.mean(np.square(inlier_residuals))))
+    limit = params.px(params.max_rms, obs.width)
+    if not rms <= limit:
+        result.estimate, result.failure_code = None, "residual"
+        result.failure = f"residual above the limit (inlier RMS {rms:.1f} px > {limit:.1f})"
