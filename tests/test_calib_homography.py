@@ -15,6 +15,7 @@ from pnlviz.field import load_field_model
 from pnlviz.geometry import Camera, visible_pitch
 from pnlviz.metrics.homography import homography_from_camera
 from pnlviz.synth import sample_camera
+from helpers import needs_shared
 
 MODEL = load_field_model()
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -195,7 +196,7 @@ def test_template_homography_scales_pixels_and_composes_the_template_map():
 
 
 # ------------------------------------------------------------------------------ real data
-@pytest.mark.skipif(not (WC14 / "detections_pnlcalib.zip").is_file(), reason=f"{WC14} not found")
+@needs_shared
 def test_wc14_pnl_does_not_lower_iou_part():
     from pnlviz.calib.inputs import observations_from_predictions
     from pnlviz.data import read_homographies, read_predictions

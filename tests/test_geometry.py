@@ -13,7 +13,6 @@ from pnlviz.geometry.conics import Conic, ConicError, fit_ellipse, intersect_lin
 from pnlviz.geometry.homography import apply_homography
 
 MODEL = load_field_model()
-sn = pytest.importorskip("SoccerNet.Evaluation.utils_calibration")
 
 
 def random_camera(rng, distortion=False, width=960, height=540):
@@ -29,7 +28,7 @@ def random_camera(rng, distortion=False, width=960, height=540):
     return cam
 
 
-def sn_camera(d):
+def sn_camera(sn, d):
     c = sn.Camera()
     c.from_json_parameters(d)
     return c
@@ -68,7 +67,7 @@ def test_points_behind_the_camera_do_not_project():
 
 
 @pytest.mark.parametrize("distortion", [False, True])
-def test_soccernet_json_round_trip_and_agreement_with_the_official_package(distortion):
+def test_soccernet_json_round_trip_and_agreement_with_the_official_package(distortion, evaluator):
     rng = np.random.default_rng(3 + distortion)
     X = MODEL.keypoint_xyz()
     for _ in range(40):
@@ -78,10 +77,10 @@ def test_soccernet_json_round_trip_and_agreement_with_the_official_package(disto
         np.testing.assert_allclose(back.R, cam.R, atol=1e-12)
         np.testing.assert_allclose(back.C, cam.C)
         assert (back.width, back.height) == (960, 540)
-        theirs = sn_camera(d)
+        theirs = sn_camera(evaluator, d)
         np.testing.assert_allclose(theirs.rotation, cam.R, atol=1e-12)
         # the package's own decomposition gives the same angles
-        pan, tilt, roll = sn.rotation_matrix_to_pan_tilt_roll(cam.R)
+        pan, tilt, roll = evaluator.rotation_matrix_to_pan_tilt_roll(cam.R)
         np.testing.assert_allclose([d["pan_degrees"], d["tilt_degrees"], d["roll_degrees"]],
                                    np.degrees([pan, tilt, roll]), atol=1e-9)
         uv, depth = cam.project(X)
@@ -111,23 +110,23 @@ def test_distortion_is_inverted_by_pixel_rays():
     np.testing.assert_allclose(uv2, uv, atol=1e-6)
 
 
-def test_visible_pitch_is_identical_to_the_official_get_polylines():
+def test_visible_pitch_is_identical_to_the_official_get_polylines(evaluator):
     rng = np.random.default_rng(7)
     for i in range(120):
         cam = random_camera(rng, distortion=i % 4 == 0)
         d = cam.to_soccernet()
-        theirs = sn.get_polylines(d, 960, 540, sampling_factor=0.9)
+        theirs = evaluator.get_polylines(d, 960, 540, sampling_factor=0.9)
         ours = visible_pitch(Camera.from_soccernet(d), evaluator_precision=True)
         assert set(ours) == set(theirs)
         for name, pts in theirs.items():
             np.testing.assert_array_equal(ours[name], [[p["x"], p["y"]] for p in pts])
 
 
-def test_visible_pitch_in_float64_stays_within_a_millipixel_of_the_evaluator():
+def test_visible_pitch_in_float64_stays_within_a_millipixel_of_the_evaluator(evaluator):
     rng = np.random.default_rng(8)
     for _ in range(30):
         cam = random_camera(rng)
-        theirs = sn.get_polylines(cam.to_soccernet(), 960, 540, sampling_factor=0.9)
+        theirs = evaluator.get_polylines(cam.to_soccernet(), 960, 540, sampling_factor=0.9)
         ours = visible_pitch(cam)
         assert set(ours) == set(theirs)
         for name, pts in theirs.items():
