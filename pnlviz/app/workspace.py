@@ -5,7 +5,8 @@ once and then updated in place, so an edit sends only what changed and a drag in
 never cut short by a redraw.
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
-select, move, place) is the session's business. Nothing here computes a calibration.
+select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
+:mod:`pnlviz.app.editing`). Nothing here computes a calibration.
 """
 
 from __future__ import annotations
