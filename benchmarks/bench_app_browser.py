@@ -131,14 +131,14 @@ def main() -> None:
             page.goto(app.url)
             page.get_by_text("review:").first.wait_for(timeout=60_000)
             deadline = time.time() + 20
-            while time.time() < deadline and not (app.tabs() and app.tabs()[0]._css_canvas):
+            while time.time() < deadline and not (app.tabs() and app.tabs()[0].view_control.css_canvas):
                 time.sleep(0.2)
             session = app.tabs()[0]
             for layer in args.hide:
-                session.enqueue(lambda layer=layer: session.set_layer(layer, False))
+                session.queue.enqueue(lambda layer=layer: session.painter.set_layer(layer, False))
             session.flush()
-            print(f"served {len(app.state.stems)} frames from {data}; browser canvas {session.canvas[0]}x"
-                  f"{session.canvas[1]} CSS px, WebGL: "
+            print(f"served {len(app.state.stems)} frames from {data}; browser canvas {session.view_control.canvas[0]}x"
+                  f"{session.view_control.canvas[1]} CSS px, WebGL: "
                   + page.evaluate("() => { const gl = document.createElement('canvas').getContext('webgl');"
                                   "const i = gl.getExtension('WEBGL_debug_renderer_info');"
                                   "return i ? gl.getParameter(i.UNMASKED_RENDERER_WEBGL) : 'unknown'; }"))
@@ -152,12 +152,12 @@ def main() -> None:
                     view = session.view()
                     obs = view.observations
                     if obs is None or not obs.n_keypoints or not view.result or not view.result.ok:
-                        session.enqueue(lambda: session.step(1))
+                        session.queue.enqueue(lambda: session.step(1))
                         session.flush()
                         continue
                     k = i % obs.n_keypoints
                     uv = obs.kp_xy[k]
-                    x, y = session.view2d.to_screen(uv, session.canvas)
+                    x, y = session.view_control.view2d.to_screen(uv, session.view_control.canvas)
                     region = (box["x"] + max(0, x - 150), box["y"] + max(0, y - 100), 300, 200)
                     cast.wait(0.3)
                     page.mouse.move(box["x"] + x, box["y"] + y)
@@ -167,18 +167,18 @@ def main() -> None:
                         cast.wait(0.04)
                     page.mouse.up()
                     out.append(cast.visible_after("up", region))
-                    session.enqueue(lambda: session.step(1))  # a fresh frame for the next drag
+                    session.queue.enqueue(lambda: session.step(1))  # a fresh frame for the next drag
                     session.flush()
                     cast.wait(0.5)
                 return out
 
             live = drags(args.drags)
-            session.live_preview = False
+            session.editor.live_preview = False
             round_trip = drags(args.drags)
-            session.live_preview = True
+            session.editor.live_preview = True
             steps = []
             for _ in range(args.steps):
-                x, y = box["x"] + session.canvas[0] / 2, box["y"] + session.canvas[1] / 3
+                x, y = box["x"] + session.view_control.canvas[0] / 2, box["y"] + session.view_control.canvas[1] / 3
                 cast.wait(0.3)
                 page.keyboard.press("n")
                 steps.append(cast.visible_after("key", (x - 200, y - 100, 400, 200), settle=1.0))
@@ -186,7 +186,7 @@ def main() -> None:
             print(f"drag release -> overlay (no preview: release -> save -> recalibrate -> send -> draw): "
                   f"{percentiles(round_trip)}")
             print(f"next frame -> image: {percentiles(steps)}")
-            print(f"server-side recalibration of the last drag: {session.last_recalibration_ms:.0f} ms")
+            print(f"server-side recalibration of the last drag: {session.editor.last_recalibration_ms:.0f} ms")
             browser.close()
         app.stop()
         app.state.close()

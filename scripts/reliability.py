@@ -419,7 +419,7 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
                 page.get_by_text("focal").first.wait_for(timeout=60000)
                 deadline = time.time() + 30
                 while time.time() < deadline and not any(
-                        t._css_canvas is not None and all(t is not s for _, s in tabs) for t in app.tabs()):
+                        t.view_control.css_canvas is not None and all(t is not s for _, s in tabs) for t in app.tabs()):
                     time.sleep(0.2)
                 session = next(t for t in app.tabs() if all(t is not s for _, s in tabs))
                 tabs.append((page, session))
@@ -436,7 +436,8 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
                 session.flush()
                 box = canvas_box(page)
                 nodes = session.workspace.points["keypoints"]
-                x0, y0 = session.view2d.to_screen(nodes.uv[nodes.keys.index(kid)], session.canvas)
+                view = session.view_control
+                x0, y0 = view.view2d.to_screen(nodes.uv[nodes.keys.index(kid)], view.canvas)
                 x0, y0 = box["x"] + x0, box["y"] + y0
                 page.mouse.move(x0, y0)
                 page.mouse.down()
@@ -444,8 +445,8 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
                 page.mouse.move(x0 + 8, y0 + 10, steps=3)
                 page.mouse.up()
             time.sleep(4.0)
-            grabbed = sum(s.grabs for _, s in tabs)
-            released = sum(s.releases for _, s in tabs)
+            grabbed = sum(s.editor.grabs for _, s in tabs)
+            released = sum(s.editor.releases for _, s in tabs)
             browser.close()
         stem = st.stems[st.first_index]
         saved = st.edits.get(stem).get("keypoints") or {}

@@ -19,6 +19,7 @@ import cv2
 from playwright.sync_api import sync_playwright
 
 from pnlviz import EXAMPLES_DIR, REPO_ROOT
+from pnlviz.app.modes import Mode
 from pnlviz.app.server import PnlvizApp
 from pnlviz.app.state import AppState
 from pnlviz.app.view2d import View2D
@@ -62,20 +63,19 @@ def session(browser, data: Path, edits: Path, shots: list[tuple[str, str, Callab
         page.get_by_text("Calibration").first.wait_for(timeout=30000)
         tab = app.tabs()[0]
         deadline = time.time() + 30
-        while tab._css_canvas is None and time.time() < deadline:  # the page bridge has reported the canvas
+        while tab.view_control.css_canvas is None and time.time() < deadline:  # the page bridge has reported the canvas
             time.sleep(0.2)
         for name, stem, before in shots:
-            tab.enqueue(lambda stem=stem: tab.goto(app.state.find(stem)))
+            tab.queue.enqueue(lambda stem=stem: tab.goto(app.state.find(stem)))
             tab.flush()
             time.sleep(1.0)
             if before is not None:
                 before(page, tab)
                 tab.flush()
             shoot(page, name)
-            if tab.mode != "image":
-                tab.enqueue(lambda: tab.set_mode("image"))
-            tab.enqueue(lambda: tab.select(None))
-            tab.enqueue(tab.fit)
+            tab.queue.enqueue(lambda: tab.set_mode(Mode.IMAGE))
+            tab.queue.enqueue(lambda: tab.editor.select(None))
+            tab.queue.enqueue(tab.view_control.fit)
             tab.flush()
         page.close()
     finally:
@@ -94,7 +94,7 @@ def select_leftmost(page, tab) -> None:
     time.sleep(1.0)
     i = int(nodes.uv[:, 0].argmin())
     box = max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
-    x, y = tab.view2d.to_screen(nodes.uv[i], tab.canvas)
+    x, y = tab.view_control.view2d.to_screen(nodes.uv[i], tab.view_control.canvas)
     page.mouse.click(box["x"] + x, box["y"] + y)
 
 
@@ -103,7 +103,7 @@ def zoom_on_densest(page, tab) -> None:
     nodes = tab.workspace.points["keypoints"]
     uv = nodes.uv
     crowd = int(((uv[:, None] - uv[None]) ** 2).sum(-1).__lt__(60.0 ** 2).sum(1).argmax())
-    tab.enqueue(lambda: tab._push_view(View2D(*uv[crowd], 4.0)))
+    tab.queue.enqueue(lambda: tab.view_control.push(View2D(*uv[crowd], 4.0)))
 
 
 def three_d(page, tab) -> None:
@@ -113,9 +113,9 @@ def three_d(page, tab) -> None:
 
 def clip_calibrated(page, tab) -> None:
     """Every frame of the clip calibrated (the background worker would get there), the panel redrawn."""
-    for i in tab.clip_members():
+    for i in tab.clip.members():
         tab.state.view(tab.state.stems[i], tab.settings)
-    tab.enqueue(tab.show)
+    tab.queue.enqueue(tab.show)
 
 
 def main() -> None:

@@ -1,6 +1,9 @@
+import contextlib
 from pathlib import Path
 
 import pytest
+
+from helpers import running_app
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = REPO.parent / "shared"
@@ -47,3 +50,11 @@ def evaluator():
     """The official SoccerNet evaluator's helpers (``SoccerNet.Evaluation.utils_calibration``), the
     oracle of the metric tests; a test that needs it skips where it is not installed."""
     return pytest.importorskip("SoccerNet.Evaluation.utils_calibration")
+
+
+@pytest.fixture()
+def serve():
+    """Start the app: ``serve(data, **options)`` (see ``helpers.running_app``) gives a running
+    ``PnlvizApp`` on a free port; every app started is stopped at the end of the test."""
+    with contextlib.ExitStack() as stack:
+        yield lambda data, **options: stack.enter_context(running_app(data, **options))

@@ -1,6 +1,7 @@
 """Small helpers the tests share (imported as ``from helpers import ...``: pytest puts this folder
 on the path)."""
 
+import contextlib
 import shutil
 import socket
 from pathlib import Path
@@ -27,3 +28,18 @@ def copy_sample_frames(dst: Path, n: int) -> Path:
     for p in sorted((EXAMPLES_DIR / "sample").glob("0*.jpg"))[:n]:
         shutil.copy(p, dst / p.name)
     return dst
+
+
+@contextlib.contextmanager
+def running_app(data, host: str = "127.0.0.1", **state_options):
+    """The app serving ``data`` on a free port (``state_options``: those of ``AppState``, e.g.
+    ``edits=`` or ``detections=``); stopped, and its state closed, on leaving."""
+    from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.state import AppState
+
+    app = PnlvizApp(AppState(data, **state_options), host=host, port=free_port())
+    try:
+        yield app
+    finally:
+        app.stop()
+        app.state.close()

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from pnlviz import EXAMPLES_DIR
-from helpers import free_port
+from helpers import free_port, running_app
 
 CHROMIUM = shutil.which("chromium")
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed "
@@ -39,18 +39,6 @@ def browser():
         b.close()
 
 
-def start(data):
-    from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.state import AppState
-
-    return PnlvizApp(AppState(data), port=free_port())
-
-
-def stop(app):
-    app.stop()
-    app.state.close()
-
-
 def wait_for_text(page, text, timeout=20.0):
     page.get_by_text(text).first.wait_for(timeout=timeout * 1000)
 
@@ -62,7 +50,7 @@ def open_page(browser, app, text, n: int = 1):
     page.goto(app.url)
     wait_for_text(page, text)
     session = tab(app, n)
-    wait_until(lambda: session._css_canvas is not None)
+    wait_until(lambda: session.view_control.css_canvas is not None)
     return page
 
 
@@ -93,10 +81,15 @@ def canvas_box(page):
     return max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
 
 
+def to_screen(session, uv):
+    """Where image pixel ``uv`` of the frame shown is on the canvas (pixels)."""
+    return session.view_control.view2d.to_screen(uv, session.view_control.canvas)
+
+
 def on_screen(page, session, uv):
     """Where image pixel ``uv`` of the frame shown is on the page."""
     box = canvas_box(page)
-    x, y = session.view2d.to_screen(uv, session.canvas)
+    x, y = to_screen(session, uv)
     return box["x"] + x, box["y"] + y
 
 
@@ -126,8 +119,7 @@ def camera_state(session):
 
 
 def test_navigate_toggle_pnl_review_and_restart(data, browser):
-    app = start(data)
-    try:
+    with running_app(data) as app:
         page = open_page(browser, app, "focal")
         session = tab(app)
         first = session.stem
@@ -146,100 +138,86 @@ def test_navigate_toggle_pnl_review_and_restart(data, browser):
         assert json.loads((app.state.edits.frames / f"{stem}.json").read_text())["review"] == "accepted"
         wait_for_text(page, "review: accepted")
         page.close()
-    finally:
-        stop(app)
     # a new server on the same data restores the review
-    app = start(data)
-    try:
+    with running_app(data) as app:
         page = open_page(browser, app, "1 of 3 reviewed")
         page.get_by_role("button", name="next").click()
         wait_for_text(page, "review: accepted")
         page.close()
-    finally:
-        stop(app)
 
 
-def test_the_image_view_holds_across_next_edit_pnl_and_source(tmp_path, shared_dir, browser):
+def test_the_image_view_holds_across_next_edit_pnl_and_source(tmp_path, shared_dir, browser, serve):
     """Zoomed in on a corner, the view stays put (the browser camera does not move) when the
     frame changes, a point is dragged, PnL is switched off and the keypoint source changes."""
     import numpy as np
 
-    from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.state import AppState
-
     half = shared_dir / "data" / "wc14_test_half"
-    app = PnlvizApp(AppState(half / "annotations.zip", detections=half / "detections_pnlcalib.zip",
-                             edits=tmp_path / "edits"), port=free_port())
-    try:
-        page = open_page(browser, app, "focal")
-        session = tab(app)
-        box = canvas_box(page)
-        page.mouse.move(box["x"] + 250, box["y"] + 450)
-        for _ in range(5):
-            page.mouse.wheel(0, -120)
-            time.sleep(0.1)
-        settle(session, 1.0)
-        zoomed = camera_state(session)
-        assert session.view2d.zoom > 1.5 * type(session.view2d).fit(session.workspace.plane, session.canvas).zoom
+    app = serve(half / "annotations.zip", detections=half / "detections_pnlcalib.zip", edits=tmp_path / "edits")
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    box = canvas_box(page)
+    page.mouse.move(box["x"] + 250, box["y"] + 450)
+    for _ in range(5):
+        page.mouse.wheel(0, -120)
+        time.sleep(0.1)
+    settle(session, 1.0)
+    zoomed = camera_state(session)
+    view = session.view_control
+    assert view.view2d.zoom > 1.5 * type(view.view2d).fit(session.workspace.plane, view.canvas).zoom
 
-        def unchanged():
-            settle(session)
-            np.testing.assert_allclose(camera_state(session), zoomed, atol=1e-6)
+    def unchanged():
+        settle(session)
+        np.testing.assert_allclose(camera_state(session), zoomed, atol=1e-6)
 
-        page.keyboard.press("n")
-        wait_until(lambda: session.index == 1)
-        unchanged()
-        kid, uv = left_keypoint(session.view())
-        if session.view2d.to_screen(uv, session.canvas)[0] < 0:  # off-screen at this zoom: drag one in view
-            inside = [(int(k), p) for k, p in zip(session.view().observations.kp_ids, session.view().observations.kp_xy)
-                      if 0 < session.view2d.to_screen(p, session.canvas)[0] < session.canvas[0] - 50 and
-                      0 < session.view2d.to_screen(p, session.canvas)[1] < session.canvas[1] - 50]
-            kid, uv = inside[0]
-        drag(page, on_screen(page, session, uv), (15, 10))
-        wait_until(lambda: bool(app.state.edits.get(session.stem).get("keypoints")))
-        unchanged()
-        page.get_by_text("PnL refinement").click()
-        wait_until(lambda: session.settings.pnl is False)
-        unchanged()
-        page.get_by_label("keypoint source").click()
-        page.get_by_role("option", name="detections", exact=True).click()
-        wait_until(lambda: session.settings.source == "detections")
-        unchanged()
-        page.close()
-    finally:
-        stop(app)
+    page.keyboard.press("n")
+    wait_until(lambda: session.index == 1)
+    unchanged()
+    kid, uv = left_keypoint(session.view())
+    if to_screen(session, uv)[0] < 0:  # off-screen at this zoom: drag one in view
+        inside = [(int(k), p) for k, p in zip(session.view().observations.kp_ids, session.view().observations.kp_xy)
+                  if 0 < to_screen(session, p)[0] < view.canvas[0] - 50 and
+                  0 < to_screen(session, p)[1] < view.canvas[1] - 50]
+        kid, uv = inside[0]
+    drag(page, on_screen(page, session, uv), (15, 10))
+    wait_until(lambda: bool(app.state.edits.get(session.stem).get("keypoints")))
+    unchanged()
+    page.get_by_text("PnL refinement").click()
+    wait_until(lambda: session.settings.pnl is False)
+    unchanged()
+    page.get_by_label("keypoint source").click()
+    page.get_by_role("option", name="detections", exact=True).click()
+    wait_until(lambda: session.settings.source == "detections")
+    unchanged()
+    page.close()
 
 
-def test_zoom_4x_then_a_drag_of_n_screen_pixels_moves_the_point_n_over_4(data, browser):
+def test_zoom_4x_then_a_drag_of_n_screen_pixels_moves_the_point_n_over_4(data, browser, serve):
     import numpy as np
 
-    app = start(data)
-    try:
-        page = open_page(browser, app, "focal")
-        session = tab(app)
-        stem = session.stem
-        kid, uv = left_keypoint(session.view())
-        page.mouse.move(*on_screen(page, session, uv))
-        page.keyboard.press("1")  # native resolution...
-        wait_until(lambda: abs(session.view2d.zoom - 1.0) < 1e-9)
-        page.mouse.move(*on_screen(page, session, uv))
-        for _ in range(4):  # ...then four steps of sqrt(2) around the pointer
-            page.keyboard.press("+")
-            time.sleep(0.15)
-        wait_until(lambda: abs(session.view2d.zoom - 4.0) < 1e-6)
-        settle(session)
-        assert abs(session.view2d.zoom - 4.0) < 1e-6
-        start_xy = on_screen(page, session, uv)
-        drag(page, start_xy, (40, -20))
-        wait_until(lambda: str(kid) in (app.state.edits.get(stem).get("keypoints") or {}))
-        moved = np.array(app.state.edits.get(stem)["keypoints"][str(kid)])
-        np.testing.assert_allclose(moved - uv, [10.0, -5.0], atol=0.6)
-        page.close()
-    finally:
-        stop(app)
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    stem = session.stem
+    kid, uv = left_keypoint(session.view())
+    page.mouse.move(*on_screen(page, session, uv))
+    page.keyboard.press("1")  # native resolution...
+    wait_until(lambda: abs(session.view_control.view2d.zoom - 1.0) < 1e-9)
+    page.mouse.move(*on_screen(page, session, uv))
+    for _ in range(4):  # ...then four steps of sqrt(2) around the pointer
+        page.keyboard.press("+")
+        time.sleep(0.15)
+    wait_until(lambda: abs(session.view_control.view2d.zoom - 4.0) < 1e-6)
+    settle(session)
+    assert abs(session.view_control.view2d.zoom - 4.0) < 1e-6
+    start_xy = on_screen(page, session, uv)
+    drag(page, start_xy, (40, -20))
+    wait_until(lambda: str(kid) in (app.state.edits.get(stem).get("keypoints") or {}))
+    moved = np.array(app.state.edits.get(stem)["keypoints"][str(kid)])
+    np.testing.assert_allclose(moved - uv, [10.0, -5.0], atol=0.6)
+    page.close()
 
 
-def test_the_point_follows_the_hand_on_every_frame_and_after_a_zoom(data, browser):
+def test_the_point_follows_the_hand_on_every_frame_and_after_a_zoom(data, browser, serve):
     """While the button is still down, the dragged point moves (viser sends drag updates and the
     frame is recalibrated live): on the first frame, on the next one, on another point after a
     drag, and after a zoom. (The browser picks a batched mesh where its instances were when it
@@ -247,65 +225,61 @@ def test_the_point_follows_the_hand_on_every_frame_and_after_a_zoom(data, browse
     instance, and no update came until the release.)"""
     import numpy as np
 
-    app = start(data)
-    try:
-        page = open_page(browser, app, "focal")
-        session = tab(app)
-        nodes = session.workspace.points["keypoints"]
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    nodes = session.workspace.points["keypoints"]
 
-        def fresh_point() -> tuple[int, np.ndarray]:
-            """A keypoint on screen, not dragged on this frame yet, nearest the canvas centre."""
-            obs = session.view().observations
-            screen = np.array([session.view2d.to_screen(uv, session.canvas) for uv in obs.kp_xy])
-            on = np.all((screen > 40) & (screen < np.array(session.canvas) - 40), axis=1)
-            done = app.state.edits.get(session.stem).get("keypoints") or {}
-            ok = [i for i in np.flatnonzero(on) if str(int(obs.kp_ids[i])) not in done]
-            i = min(ok, key=lambda i: np.hypot(*(screen[i] - np.array(session.canvas) / 2)))
-            return int(obs.kp_ids[i]), obs.kp_xy[i].copy()
+    def fresh_point() -> tuple[int, np.ndarray]:
+        """A keypoint on screen, not dragged on this frame yet, nearest the canvas centre."""
+        obs = session.view().observations
+        canvas = np.array(session.view_control.canvas)
+        screen = np.array([to_screen(session, uv) for uv in obs.kp_xy])
+        on = np.all((screen > 40) & (screen < canvas - 40), axis=1)
+        done = app.state.edits.get(session.stem).get("keypoints") or {}
+        ok = [i for i in np.flatnonzero(on) if str(int(obs.kp_ids[i])) not in done]
+        i = min(ok, key=lambda i: np.hypot(*(screen[i] - canvas / 2)))
+        return int(obs.kp_ids[i]), obs.kp_xy[i].copy()
 
-        def drag_and_watch() -> None:
-            stem = session.stem
-            kid, uv = fresh_point()
-            before = app.state.edits.get(stem).get("keypoints") or {}
-            x, y = on_screen(page, session, uv)
-            page.mouse.move(x, y)
-            page.mouse.down()
-            for k in range(1, 7):
-                page.mouse.move(x + 5 * k, y + 3 * k)
-                time.sleep(0.05)
-            # still pressed: the point has followed the pointer
-            wait_until(lambda: kid in nodes.keys and np.hypot(*(nodes.uv[nodes.keys.index(kid)] - uv)) > 5.0,
-                       timeout=8.0)
-            page.mouse.up()
-            wait_until(lambda: (app.state.edits.get(stem).get("keypoints") or {}).get(str(kid)) != before.get(str(kid)))
-            settle(session)
-
-        drag_and_watch()  # the first frame
-        first = session.stem
-        page.keyboard.press("n")
-        wait_until(lambda: session.stem != first)
+    def drag_and_watch() -> None:
+        stem = session.stem
+        kid, uv = fresh_point()
+        before = app.state.edits.get(stem).get("keypoints") or {}
+        x, y = on_screen(page, session, uv)
+        page.mouse.move(x, y)
+        page.mouse.down()
+        for k in range(1, 7):
+            page.mouse.move(x + 5 * k, y + 3 * k)
+            time.sleep(0.05)
+        # still pressed: the point has followed the pointer
+        wait_until(lambda: kid in nodes.keys and np.hypot(*(nodes.uv[nodes.keys.index(kid)] - uv)) > 5.0,
+                   timeout=8.0)
+        page.mouse.up()
+        wait_until(lambda: (app.state.edits.get(stem).get("keypoints") or {}).get(str(kid)) != before.get(str(kid)))
         settle(session)
-        drag_and_watch()  # the next frame
-        drag_and_watch()  # another point, once a drag has changed the frame
-        zoom = session.view2d.zoom
-        page.mouse.move(*on_screen(page, session, fresh_point()[1]))
-        page.keyboard.press("+")
-        wait_until(lambda: session.view2d.zoom > 1.3 * zoom)
-        settle(session)
-        drag_and_watch()  # after a zoom (the grab areas were resized)
-        page.close()
-    finally:
-        stop(app)
+
+    drag_and_watch()  # the first frame
+    first = session.stem
+    page.keyboard.press("n")
+    wait_until(lambda: session.stem != first)
+    settle(session)
+    drag_and_watch()  # the next frame
+    drag_and_watch()  # another point, once a drag has changed the frame
+    zoom = session.view_control.view2d.zoom
+    page.mouse.move(*on_screen(page, session, fresh_point()[1]))
+    page.keyboard.press("+")
+    wait_until(lambda: session.view_control.view2d.zoom > 1.3 * zoom)
+    settle(session)
+    drag_and_watch()  # after a zoom (the grab areas were resized)
+    page.close()
 
 
-def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(tmp_path, browser):
+def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(tmp_path, browser, serve):
     """An image and nothing else: shift+click places the chosen ids, the fourth calibrates it
     (close to the truth the synthetic frame was made with), and a placed point can be dragged."""
     import cv2
     import numpy as np
 
-    from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.state import AppState
     from pnlviz.field.model import load_field_model
     from pnlviz.geometry.camera import Camera
     from pnlviz.synth import make_frame
@@ -322,153 +296,138 @@ def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(t
     chosen = [min(inside, key=lambda t: t[1][0] + t[1][1])]  # four points spread over the frame
     while len(chosen) < 4:
         chosen.append(max(inside, key=lambda t: min(np.hypot(*(t[1] - c[1])) for c in chosen)))
-    app = PnlvizApp(AppState(data, edits=tmp_path / "edits"), port=free_port())
-    try:
-        page = open_page(browser, app, "place four keypoints")
-        session = tab(app)
-        assert session.view().camera is None and session.workspace.plane is not None
-        for n, (kid, p) in enumerate(chosen):
-            page.get_by_label("place id").click()
-            page.get_by_role("option", name=str(kid), exact=True).click()
-            wait_until(lambda kid=kid: session.place_id == kid)
-            page.keyboard.down("Shift")
-            page.mouse.click(*on_screen(page, session, p))
-            page.keyboard.up("Shift")
-            wait_until(lambda n=n: len(app.state.edits.get("bare").get("keypoints") or {}) == n + 1)
-            if n < 3:
-                assert not session.view().result or not session.view().result.ok
-        wait_for_text(page, "focal")
-        cam = session.view().result.camera
-        err = np.hypot(*(cam.project(model.keypoint_xyz(ground))[0] - uv).T)
-        assert np.nanmedian(err) < 3.0  # four clicks to the nearest pixel: the whole pitch within a few px
-        kid, p = chosen[0]
-        drag(page, on_screen(page, session, p), (12, 8))
-        wait_until(lambda: not np.allclose(app.state.edits.get("bare")["keypoints"][str(kid)], p, atol=1.0))
-        np.testing.assert_allclose(np.array(app.state.edits.get("bare")["keypoints"][str(kid)]) - p,
-                                   np.array([12, 8]) / session.view2d.zoom, atol=1.0)
-        page.close()
-    finally:
-        stop(app)
+    app = serve(data, edits=tmp_path / "edits")
+    page = open_page(browser, app, "place four keypoints")
+    session = tab(app)
+    assert session.view().camera is None and session.workspace.plane is not None
+    for n, (kid, p) in enumerate(chosen):
+        page.get_by_label("place id").click()
+        page.get_by_role("option", name=str(kid), exact=True).click()
+        wait_until(lambda kid=kid: session.editor.place_id == kid)
+        page.keyboard.down("Shift")
+        page.mouse.click(*on_screen(page, session, p))
+        page.keyboard.up("Shift")
+        wait_until(lambda n=n: len(app.state.edits.get("bare").get("keypoints") or {}) == n + 1)
+        if n < 3:
+            assert not session.view().result or not session.view().result.ok
+    wait_for_text(page, "focal")
+    cam = session.view().result.camera
+    err = np.hypot(*(cam.project(model.keypoint_xyz(ground))[0] - uv).T)
+    assert np.nanmedian(err) < 3.0  # four clicks to the nearest pixel: the whole pitch within a few px
+    kid, p = chosen[0]
+    drag(page, on_screen(page, session, p), (12, 8))
+    wait_until(lambda: not np.allclose(app.state.edits.get("bare")["keypoints"][str(kid)], p, atol=1.0))
+    np.testing.assert_allclose(np.array(app.state.edits.get("bare")["keypoints"][str(kid)]) - p,
+                               np.array([12, 8]) / session.view_control.view2d.zoom, atol=1.0)
+    page.close()
 
 
-def test_a_review_key_advances_and_undo_comes_back(data, browser):
-    app = start(data)
-    try:
-        page = open_page(browser, app, "focal")
-        session = tab(app)
-        first = session.stem
-        page.mouse.click(200, 200)  # the canvas has the keyboard, not a text box
-        page.keyboard.press("g")
-        wait_until(lambda: session.stem != first)
-        assert app.state.edits.review(first) == "accepted"
-        wait_for_text(page, "review: not reviewed")  # the next frame's own status
-        page.keyboard.press("Control+z")
-        wait_until(lambda: session.stem == first and app.state.edits.review(first) is None)
-        assert session.stem == first and app.state.edits.review(first) is None
-        wait_for_text(page, "review: not reviewed")
-        page.keyboard.press("Control+Shift+z")
-        wait_until(lambda: app.state.edits.review(first) == "accepted")
-        assert app.state.edits.review(first) == "accepted"
-        page.close()
-    finally:
-        stop(app)
+def test_a_review_key_advances_and_undo_comes_back(data, browser, serve):
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    first = session.stem
+    page.mouse.click(200, 200)  # the canvas has the keyboard, not a text box
+    page.keyboard.press("g")
+    wait_until(lambda: session.stem != first)
+    assert app.state.edits.review(first) == "accepted"
+    wait_for_text(page, "review: not reviewed")  # the next frame's own status
+    page.keyboard.press("Control+z")
+    wait_until(lambda: session.stem == first and app.state.edits.review(first) is None)
+    assert session.stem == first and app.state.edits.review(first) is None
+    wait_for_text(page, "review: not reviewed")
+    page.keyboard.press("Control+Shift+z")
+    wait_until(lambda: app.state.edits.review(first) == "accepted")
+    assert app.state.edits.review(first) == "accepted"
+    page.close()
 
 
-def test_filters_with_one_match_and_with_none(data, browser):
-    app = start(data)
-    try:
-        page = open_page(browser, app, "focal")
-        session = tab(app)
-        app.state.set_review("00002", "accepted")
-        page.get_by_label("filter").click()
-        page.get_by_role("option", name="accepted", exact=True).click()
-        wait_until(lambda: session.stem == "00002")
-        wait_for_text(page, "1/1 of 'accepted'")
-        assert session.panels.slider.disabled
-        page.get_by_label("filter").click()
-        page.get_by_role("option", name="rejected", exact=True).click()
-        wait_for_text(page, "no frame matches 'rejected'")
-        assert session.stem == "00002"
-        page.close()
-    finally:
-        stop(app)
+def test_filters_with_one_match_and_with_none(data, browser, serve):
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    app.state.set_review("00002", "accepted")
+    page.get_by_label("filter").click()
+    page.get_by_role("option", name="accepted", exact=True).click()
+    wait_until(lambda: session.stem == "00002")
+    wait_for_text(page, "1/1 of 'accepted'")
+    assert session.panels.slider.disabled
+    page.get_by_label("filter").click()
+    page.get_by_role("option", name="rejected", exact=True).click()
+    wait_for_text(page, "no frame matches 'rejected'")
+    assert session.stem == "00002"
+    page.close()
 
 
-def test_two_tabs_keep_their_own_frames_and_see_each_others_edits(data, browser):
+def test_two_tabs_keep_their_own_frames_and_see_each_others_edits(data, browser, serve):
     import numpy as np
 
-    app = start(data)
-    try:
-        a_page = open_page(browser, app, "focal")
-        a = tab(app)
-        b_page = open_page(browser, app, "focal", n=2)
-        b = tab(app, 2)
-        assert a.stem == b.stem
-        b_page.mouse.click(200, 200)
-        b_page.keyboard.press("n")
-        wait_until(lambda: b.stem != a.stem)
-        assert a.stem == "00000" and b.stem == "00001"
-        wait_for_text(b_page, "00001")
-        # tab a drags a point on 00000; tab b goes back there and shows it moved
-        kid, uv = left_keypoint(a.view())
-        a_page.bring_to_front()
-        drag(a_page, on_screen(a_page, a, uv), (10, 0))
-        wait_until(lambda: str(kid) in (app.state.edits.get("00000").get("keypoints") or {}))
-        b_page.bring_to_front()
-        b_page.keyboard.press("p")
-        wait_until(lambda: b.stem == "00000")
-        settle(b)
-        moved = app.state.edits.get("00000")["keypoints"][str(kid)]
-        shown = b.workspace.points["keypoints"]
-        np.testing.assert_allclose(shown.uv[shown.keys.index(kid)], moved)
-        assert a.stem == "00000" and b.stem == "00000"
-        # now both on 00000, they drag points in turns without waiting: every drag is kept, in
-        # both tabs (each release recalibrates and moves the other tab's points in place)
-        obs = a.view().observations
-        others = [int(k) for k in obs.kp_ids[np.argsort(obs.kp_xy[:, 0])] if int(k) != kid][:4]
-        for n, k in enumerate(others):
-            page, session = ((a_page, a), (b_page, b))[n % 2]
-            page.bring_to_front()  # a page in the background does not draw (nor pick what it would draw)
-            settle(session, 0.8)
-            nodes = session.workspace.points["keypoints"]
-            drag(page, on_screen(page, session, nodes.uv[nodes.keys.index(k)]), (0, 9), steps=4)
-        wait_until(lambda: len(app.state.edits.get("00000").get("keypoints") or {}) == 5, timeout=20)
-        saved = app.state.edits.get("00000")["keypoints"]
-        assert set(saved) == {str(k) for k in [kid] + others} and a.grabs + b.grabs == 5
-        for session in (a, b):
-            settle(session)
-            nodes = session.workspace.points["keypoints"]
-            for k, xy in saved.items():
-                np.testing.assert_allclose(nodes.uv[nodes.keys.index(int(k))], xy)
-        a_page.close()
-        b_page.close()
-    finally:
-        stop(app)
+    app = serve(data)
+    a_page = open_page(browser, app, "focal")
+    a = tab(app)
+    b_page = open_page(browser, app, "focal", n=2)
+    b = tab(app, 2)
+    assert a.stem == b.stem
+    b_page.mouse.click(200, 200)
+    b_page.keyboard.press("n")
+    wait_until(lambda: b.stem != a.stem)
+    assert a.stem == "00000" and b.stem == "00001"
+    wait_for_text(b_page, "00001")
+    # tab a drags a point on 00000; tab b goes back there and shows it moved
+    kid, uv = left_keypoint(a.view())
+    a_page.bring_to_front()
+    drag(a_page, on_screen(a_page, a, uv), (10, 0))
+    wait_until(lambda: str(kid) in (app.state.edits.get("00000").get("keypoints") or {}))
+    b_page.bring_to_front()
+    b_page.keyboard.press("p")
+    wait_until(lambda: b.stem == "00000")
+    settle(b)
+    moved = app.state.edits.get("00000")["keypoints"][str(kid)]
+    shown = b.workspace.points["keypoints"]
+    np.testing.assert_allclose(shown.uv[shown.keys.index(kid)], moved)
+    assert a.stem == "00000" and b.stem == "00000"
+    # now both on 00000, they drag points in turns without waiting: every drag is kept, in
+    # both tabs (each release recalibrates and moves the other tab's points in place)
+    obs = a.view().observations
+    others = [int(k) for k in obs.kp_ids[np.argsort(obs.kp_xy[:, 0])] if int(k) != kid][:4]
+    for n, k in enumerate(others):
+        page, session = ((a_page, a), (b_page, b))[n % 2]
+        page.bring_to_front()  # a page in the background does not draw (nor pick what it would draw)
+        settle(session, 0.8)
+        nodes = session.workspace.points["keypoints"]
+        drag(page, on_screen(page, session, nodes.uv[nodes.keys.index(k)]), (0, 9), steps=4)
+    wait_until(lambda: len(app.state.edits.get("00000").get("keypoints") or {}) == 5, timeout=20)
+    saved = app.state.edits.get("00000")["keypoints"]
+    assert set(saved) == {str(k) for k in [kid] + others} and a.editor.grabs + b.editor.grabs == 5
+    for session in (a, b):
+        settle(session)
+        nodes = session.workspace.points["keypoints"]
+        for k, xy in saved.items():
+            np.testing.assert_allclose(nodes.uv[nodes.keys.index(int(k))], xy)
+    a_page.close()
+    b_page.close()
 
 
-def test_every_label_names_its_input(data, browser):
+def test_every_label_names_its_input(data, browser, serve):
     """viser labels inputs whose elements carry no id (``<label for>`` pointing nowhere); the page
     bridge mends them, so a label click (and a screen reader) reaches the input."""
-    app = start(data)
-    try:
-        page = open_page(browser, app, "focal")
-        time.sleep(1.0)
-        dangling = page.evaluate("""() => [...document.querySelectorAll('label[for]')]
-            .filter(l => !document.getElementById(l.getAttribute('for'))).map(l => l.textContent)""")
-        assert dangling == []
-        assert page.evaluate("() => document.querySelectorAll('label[for]').length") > 10
-        page.close()
-    finally:
-        stop(app)
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    time.sleep(1.0)
+    dangling = page.evaluate("""() => [...document.querySelectorAll('label[for]')]
+        .filter(l => !document.getElementById(l.getAttribute('for'))).map(l => l.textContent)""")
+    assert dangling == []
+    assert page.evaluate("() => document.querySelectorAll('label[for]').length") > 10
+    page.close()
 
 
-def test_a_page_from_another_origin_cannot_connect(data, browser):
+def test_a_page_from_another_origin_cannot_connect(data, browser, serve):
     """A page served from another local port opens a websocket to the app: refused at the
     handshake, so it reads nothing and changes nothing."""
     import http.server
     import threading
 
-    app = start(data)
+    app = serve(data)
     page_html = (f'<script>const ws = new WebSocket("ws://127.0.0.1:{app.policy.port}", ["viser-v1.1.1"]);'
                  'ws.onopen = () => document.title = "open"; ws.onmessage = () => document.title = "message";'
                  'ws.onerror = () => document.title = "refused";</script>').encode()
@@ -498,7 +457,6 @@ def test_a_page_from_another_origin_cannot_connect(data, browser):
         own.close()
     finally:
         other.shutdown()
-        stop(app)
 
 
 def test_serve_starts_clean_with_a_client_while_the_detector_loads(tmp_path, browser):

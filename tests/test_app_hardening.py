@@ -8,13 +8,13 @@ import shutil
 import threading
 import urllib.error
 import urllib.request
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app.edits import EditsFolderError, EditsStore
+from pnlviz.app.modes import DragEvent, DragPhase, PointKind
 from pnlviz.app.state import AppState, EditError
 from helpers import free_port
 
@@ -59,28 +59,22 @@ def test_concurrent_edits_from_threads_all_land_on_their_frames(data):
     st.close()
 
 
-def test_two_tabs_on_two_frames_never_touch_each_other(data):
-    from pnlviz.app.server import PnlvizApp
-
-    st = AppState(data)
-    app = PnlvizApp(st, port=free_port())
-    try:
-        a, b = app.session(), app.session()
-        a.goto(st.find("00003"))
-        b.goto(st.find("00001"))
-        kid = int(a.view().observations.kp_ids[0])
-        a._on_drag("keypoints", kid, "start", a.view().observations.kp_xy[0])
-        b.goto(st.find("00002"))  # the other tab moves while the drag is in the air
-        a._on_drag("keypoints", kid, "end", np.array([321.0, 123.0]))
-        a.flush()
-        assert a.stem == "00003" and b.stem == "00002"
-        np.testing.assert_allclose(st.edits.get("00003")["keypoints"][str(kid)], [321.0, 123.0], atol=1e-6)
-        assert st.edits.get("00002") == {} and st.edits.get("00001") == {}
-        st.set_review(b.stem, "rejected")  # a review from tab b: a's frame and progress follow
-        assert st.edits.review("00003") == "corrected" and "rejected 1" in a.panels.progress_text.content
-    finally:
-        app.stop()
-        st.close()
+def test_two_tabs_on_two_frames_never_touch_each_other(data, serve):
+    app = serve(data)
+    st = app.state
+    a, b = app.session(), app.session()
+    a.goto(st.find("00003"))
+    b.goto(st.find("00001"))
+    kid = int(a.view().observations.kp_ids[0])
+    a.editor.drag(DragEvent(PointKind.KEYPOINTS, kid, DragPhase.START, a.view().observations.kp_xy[0]))
+    b.goto(st.find("00002"))  # the other tab moves while the drag is in the air
+    a.editor.drag(DragEvent(PointKind.KEYPOINTS, kid, DragPhase.END, np.array([321.0, 123.0])))
+    a.flush()
+    assert a.stem == "00003" and b.stem == "00002"
+    np.testing.assert_allclose(st.edits.get("00003")["keypoints"][str(kid)], [321.0, 123.0], atol=1e-6)
+    assert st.edits.get("00002") == {} and st.edits.get("00001") == {}
+    st.set_review(b.stem, "rejected")  # a review from tab b: a's frame and progress follow
+    assert st.edits.review("00003") == "corrected" and "rejected 1" in a.panels.progress_text.content
 
 
 # ------------------------------------------------------------------------------ one server per folder
@@ -109,27 +103,21 @@ def test_an_unwritable_edits_folder_is_refused_at_start(data, tmp_path, capsys):
     assert "cannot be written" in capsys.readouterr().err
 
 
-def test_a_failed_write_is_shown_and_changes_nothing(data, monkeypatch):
+def test_a_failed_write_is_shown_and_changes_nothing(data, monkeypatch, serve):
     import pnlviz.app.edits as edits_module
-    from pnlviz.app.server import PnlvizApp
+    app = serve(data)
+    st = app.state
+    tab = app.session()
+    said = []
+    monkeypatch.setattr(tab, "notify", lambda title, body, error=True: said.append((title, body)))
 
-    st = AppState(data)
-    app = PnlvizApp(st, port=free_port())
-    try:
-        tab = app.session()
-        said = []
-        monkeypatch.setattr(tab, "notify", lambda title, body, error=True: said.append((title, body)))
+    def full_disk(*a, **k):
+        raise OSError(28, "No space left on device")
 
-        def full_disk(*a, **k):
-            raise OSError(28, "No space left on device")
-
-        monkeypatch.setattr(edits_module, "atomic_write_text", full_disk)
-        tab._guarded(lambda: st.set_review(tab.stem, "accepted"))
-        assert said and said[-1][0] == "not saved" and "No space left" in said[-1][1]
-        assert st.edits.review(tab.stem) is None and st.history(tab.stem) == (0, 0)  # nothing half-done
-    finally:
-        app.stop()
-        st.close()
+    monkeypatch.setattr(edits_module, "atomic_write_text", full_disk)
+    tab.guard(lambda: st.set_review(tab.stem, "accepted"))
+    assert said and said[-1][0] == "not saved" and "No space left" in said[-1][1]
+    assert st.edits.review(tab.stem) is None and st.history(tab.stem) == (0, 0)  # nothing half-done
 
 
 # ------------------------------------------------------------------------------ damaged records
@@ -188,99 +176,81 @@ def test_records_are_validated_before_they_are_written(tmp_path):
 
 
 # ------------------------------------------------------------------------------ client values
-def test_values_no_honest_browser_sends_are_refused(data):
-    from pnlviz.app.server import PnlvizApp
-
-    st = AppState(data)
-    app = PnlvizApp(st, port=free_port())
-    try:
-        tab = app.session()
-        said = []
-        tab.notify = lambda title, body, error=True: said.append(body)
-        stem = tab.stem
-        tab.panels.kp_id.value = "999"  # a dropdown value outside its options
-        tab.flush()
-        assert "999" in said[-1] and tab.panels.kp_id.value == "1" and tab.place_id == 1
-        tab._guarded(lambda: st.hide_keypoint(stem, 999))
-        assert "999" in said[-1] and st.edits.get(stem) == {}
-        for x, y in ((math.nan, 10.0), (math.inf, 10.0), (1e9, 10.0), (-2000.0, 10.0)):
-            with pytest.raises(EditError):
-                st.move_keypoint(stem, 5, x, y)
+def test_values_no_honest_browser_sends_are_refused(data, serve):
+    app = serve(data)
+    st = app.state
+    tab = app.session()
+    said = []
+    tab.notify = lambda title, body, error=True: said.append(body)
+    stem = tab.stem
+    tab.panels.kp_id.value = "999"  # a dropdown value outside its options
+    tab.flush()
+    assert "999" in said[-1] and tab.panels.kp_id.value == "1" and tab.editor.place_id == 1
+    tab.guard(lambda: st.hide_keypoint(stem, 999))
+    assert "999" in said[-1] and st.edits.get(stem) == {}
+    for x, y in ((math.nan, 10.0), (math.inf, 10.0), (1e9, 10.0), (-2000.0, 10.0)):
         with pytest.raises(EditError):
-            st.set_review(stem, "approved")
-        with pytest.raises(EditError):
-            st.move_keypoint("no-such-frame", 5, 10.0, 10.0)
-        with pytest.raises(EditError):
-            st.move_line_point(stem, "Not a class", 0, 10.0, 10.0)
-        assert st.edits.get(stem) == {}
-        p = tab.panels
-        p.filter.value = "everything"  # resets to a known filter, the panels keep working
-        tab.flush()
-        assert p.filter.value == "all" and len(tab.order) == len(st.stems)
-        p.source.value = "telepathy"
-        tab.flush()
-        assert tab.settings.source == "annotation" and p.source.value == "annotation"
-        p.alpha.value = 7.0
-        tab.flush()
-        assert tab.settings.alpha == 0.6
-        p.opacity.value = math.nan
-        tab.flush()
-        assert tab.opacity == 1.0
-        p.slider.value = 10 ** 6  # past the end: the last frame, no IndexError
-        tab.flush()
-        assert tab.stem == st.stems[-1]
-        for junk in ("", "{", "[1, 2]", '{"kind": "pointer", "n": "x"}', '{"kind": "pointer", "n": 5, "log_zoom": 1e400, '
-                     '"x": 0, "y": 0}', "a" * 10000):
-            tab.bridge_message(junk)  # nothing the page's bridge would send: ignored
-        assert tab._bridge_seen[0] == -1
-    finally:
-        app.stop()
-        st.close()
+            st.move_keypoint(stem, 5, x, y)
+    with pytest.raises(EditError):
+        st.set_review(stem, "approved")
+    with pytest.raises(EditError):
+        st.move_keypoint("no-such-frame", 5, 10.0, 10.0)
+    with pytest.raises(EditError):
+        st.move_line_point(stem, "Not a class", 0, 10.0, 10.0)
+    assert st.edits.get(stem) == {}
+    p = tab.panels
+    p.filter.value = "everything"  # resets to a known filter, the panels keep working
+    tab.flush()
+    assert p.filter.value == "all" and len(tab.frames.order) == len(st.stems)
+    p.source.value = "telepathy"
+    tab.flush()
+    assert tab.settings.source == "annotation" and p.source.value == "annotation"
+    p.alpha.value = 7.0
+    tab.flush()
+    assert tab.settings.alpha == 0.6
+    p.opacity.value = math.nan
+    tab.flush()
+    assert tab.painter.opacity == 1.0
+    p.slider.value = 10 ** 6  # past the end: the last frame, no IndexError
+    tab.flush()
+    assert tab.stem == st.stems[-1]
+    for junk in ("", "{", "[1, 2]", '{"kind": "pointer", "n": "x"}', '{"kind": "pointer", "n": 5, "log_zoom": 1e400, '
+                 '"x": 0, "y": 0}', "a" * 10000):
+        tab.view_control.bridge_message(junk)  # nothing the page's bridge would send: ignored
+    assert tab.view_control.bridge_seen[0] == -1
 
 
-def test_a_filter_with_one_match_and_the_slider_past_it(data):
+def test_a_filter_with_one_match_and_the_slider_past_it(data, serve):
     """Was an IndexError in the server (the slider's max is 1 with one match) and an empty panel."""
-    from pnlviz.app.server import PnlvizApp
-
-    st = AppState(data)
-    app = PnlvizApp(st, port=free_port())
-    try:
-        tab = app.session()
-        st.set_review("00002", "accepted")
-        tab.panels.filter.value = "accepted"
-        tab.flush()
-        assert tab.order == [st.find("00002")] and tab.stem == "00002"
-        assert tab.panels.slider.disabled and tab.panels.slider.value == 0
-        tab.panels.slider.value = 1
-        tab.flush()
-        assert tab.stem == "00002" and "1/1 of 'accepted'" in tab.panels.title.content
-    finally:
-        app.stop()
-        st.close()
+    app = serve(data)
+    st = app.state
+    tab = app.session()
+    st.set_review("00002", "accepted")
+    tab.panels.filter.value = "accepted"
+    tab.flush()
+    assert tab.frames.order == [st.find("00002")] and tab.stem == "00002"
+    assert tab.panels.slider.disabled and tab.panels.slider.value == 0
+    tab.panels.slider.value = 1
+    tab.flush()
+    assert tab.stem == "00002" and "1/1 of 'accepted'" in tab.panels.title.content
 
 
-def test_an_empty_filter_says_so_instead_of_staying_silently(data):
-    from pnlviz.app.server import PnlvizApp
-
-    st = AppState(data)
-    app = PnlvizApp(st, port=free_port())
-    try:
-        tab = app.session()
-        tab.goto(st.find("00001"))
-        tab.panels.filter.value = "rejected"  # no frame is rejected
-        tab.flush()
-        assert tab.outside_filter and tab.stem == "00001"
-        assert "no frame matches 'rejected'" in tab.panels.filter_text.content
-        assert "not in the filter" in tab.panels.title.content
-        st.set_review("00003", "rejected")
-        tab.panels.filter.value = "all"
-        tab.flush()
-        tab.panels.filter.value = "rejected"
-        tab.flush()
-        assert not tab.outside_filter and tab.stem == "00003"
-    finally:
-        app.stop()
-        st.close()
+def test_an_empty_filter_says_so_instead_of_staying_silently(data, serve):
+    app = serve(data)
+    st = app.state
+    tab = app.session()
+    tab.goto(st.find("00001"))
+    tab.panels.filter.value = "rejected"  # no frame is rejected
+    tab.flush()
+    assert tab.frames.outside_filter and tab.stem == "00001"
+    assert "no frame matches 'rejected'" in tab.panels.filter_text.content
+    assert "not in the filter" in tab.panels.title.content
+    st.set_review("00003", "rejected")
+    tab.panels.filter.value = "all"
+    tab.flush()
+    tab.panels.filter.value = "rejected"
+    tab.flush()
+    assert not tab.frames.outside_filter and tab.stem == "00003"
 
 
 # ------------------------------------------------------------------------------ who may connect
@@ -305,45 +275,31 @@ def _handshake(port, path="/", host="127.0.0.1", **headers):
         return e.response.status_code
 
 
-def test_loopback_server_refuses_foreign_origins_and_hosts(data):
-    from pnlviz.app.server import PnlvizApp
-
-    st = AppState(data)
-    app = PnlvizApp(st, port=free_port())
+def test_loopback_server_refuses_foreign_origins_and_hosts(data, serve):
+    app = serve(data)
     port = app.policy.port
-    try:
-        assert app.url == f"http://127.0.0.1:{port}/"
-        assert _http(app.url)[0] == 200
-        assert _handshake(port, Origin=f"http://127.0.0.1:{port}") == 101
-        assert _handshake(port, host="localhost", Origin=f"http://localhost:{port}") == 101
-        assert _handshake(port, Origin="http://127.0.0.1:9999") == 403  # another local port
-        assert _handshake(port, Origin="https://evil.example") == 403
-        assert _handshake(port, Host=f"evil.example:{port}") == 403  # a second Host header
-        assert _http(app.url, {"Host": f"evil.example:{port}"})[0] == 403  # DNS rebinding: the name is not ours
-    finally:
-        app.stop()
-        st.close()
+    assert app.url == f"http://127.0.0.1:{port}/"
+    assert _http(app.url)[0] == 200
+    assert _handshake(port, Origin=f"http://127.0.0.1:{port}") == 101
+    assert _handshake(port, host="localhost", Origin=f"http://localhost:{port}") == 101
+    assert _handshake(port, Origin="http://127.0.0.1:9999") == 403  # another local port
+    assert _handshake(port, Origin="https://evil.example") == 403
+    assert _handshake(port, Host=f"evil.example:{port}") == 403  # a second Host header
+    assert _http(app.url, {"Host": f"evil.example:{port}"})[0] == 403  # DNS rebinding: the name is not ours
 
 
-def test_a_non_loopback_server_needs_its_token(data):
-    from pnlviz.app.server import PnlvizApp
-
-    st = AppState(data)
-    app = PnlvizApp(st, host="0.0.0.0", port=free_port())
+def test_a_non_loopback_server_needs_its_token(data, serve):
+    app = serve(data, host="0.0.0.0")
     port, token = app.policy.port, app.policy.token
-    try:
-        assert token and len(token) >= 20
-        assert app.url == f"http://127.0.0.1:{port}/?token={token}"  # one a browser can open, not 0.0.0.0
-        assert _http(f"http://127.0.0.1:{port}/")[0] == 403
-        assert _http(f"http://127.0.0.1:{port}/?token=wrong")[0] == 403
-        status, headers, _ = _http(app.url)
-        assert status == 200 and f"pnlviz_token={token}" in headers["Set-Cookie"] and "HttpOnly" in headers["Set-Cookie"]
-        assert _handshake(port, Origin=f"http://127.0.0.1:{port}") == 403
-        assert _handshake(port, Origin=f"http://127.0.0.1:{port}", Cookie=f"pnlviz_token={token}") == 101
-        assert _handshake(port, Origin="http://evil.example", Cookie=f"pnlviz_token={token}") == 403
-    finally:
-        app.stop()
-        st.close()
+    assert token and len(token) >= 20
+    assert app.url == f"http://127.0.0.1:{port}/?token={token}"  # one a browser can open, not 0.0.0.0
+    assert _http(f"http://127.0.0.1:{port}/")[0] == 403
+    assert _http(f"http://127.0.0.1:{port}/?token=wrong")[0] == 403
+    status, headers, _ = _http(app.url)
+    assert status == 200 and f"pnlviz_token={token}" in headers["Set-Cookie"] and "HttpOnly" in headers["Set-Cookie"]
+    assert _handshake(port, Origin=f"http://127.0.0.1:{port}") == 403
+    assert _handshake(port, Origin=f"http://127.0.0.1:{port}", Cookie=f"pnlviz_token={token}") == 101
+    assert _handshake(port, Origin="http://evil.example", Cookie=f"pnlviz_token={token}") == 403
 
 
 def test_serve_on_all_interfaces_warns_and_prints_an_openable_url(data, tmp_path):
@@ -384,7 +340,7 @@ def test_unused_files_and_unreadable_images_are_said_not_hidden(data, tmp_path, 
     assert len(st.problems) == 1 and "UTF-8" in st.problems[0]
     view = st.view("00001")
     assert view.result.ok and "00001.jpg" in view.error and not view.has_image
-    from pnlviz.app.session import calibration_card
+    from pnlviz.app.cards import calibration_card
 
     assert st.image("00002") is None and "image not shown" in calibration_card(st.view("00002"), st)
     st.close()

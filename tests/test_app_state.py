@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from pnlviz import EXAMPLES_DIR
+from pnlviz.app.modes import DragEvent, DragPhase, PointKind
 from pnlviz.app.overlay import Layers, render
 from pnlviz.app.state import AppState, Settings, default_edits_dir
 from pnlviz.calib.calibrate import CalibParams
-from helpers import free_port
 
 
 @pytest.fixture()
@@ -98,36 +98,30 @@ def test_overlay_draws_keypoints_and_pitch(data):
     assert failed.shape == (540, 960, 3)
 
 
-def test_server_panels_navigate_review_and_toggle_pnl(data):
-    from pnlviz.app.server import PnlvizApp
-
-    st = AppState(data)
-    app = PnlvizApp(st, port=free_port())
-    try:
-        assert app.url.startswith("http://127.0.0.1:")
-        tab = app.session()
-        p = tab.panels
-        tab.goto(st.find("00000"))
-        assert "00000" in p.title.content and "focal" in p.card.content
-        tab.step(1)
-        assert tab.stem == st.stems[st.find("00000") + 1] and p.slider.value == st.find("00000") + 1
-        st.set_review(tab.stem, "accepted")
-        assert "1 of 5 reviewed" in p.progress_text.content  # the change reached the tab
-        assert "review: **accepted**" in p.status.content
-        p.filter.value = "accepted"
-        tab.flush()
-        assert tab.order == [tab.index]
-        p.filter.value = "all"
-        tab.flush()
-        p.pnl.value = False
-        tab.flush()
-        assert "PnL set: 0 lines" in p.card.content
-        tab.goto(st.find("bad"))
-        assert "error" in p.card.content and tab.scene3d._frustum is None
-        assert tab.workspace.plane is not None  # a frame that cannot be read still has its image plane
-    finally:
-        app.stop()
-        st.close()
+def test_server_panels_navigate_review_and_toggle_pnl(data, serve):
+    app = serve(data)
+    st = app.state
+    assert app.url.startswith("http://127.0.0.1:")
+    tab = app.session()
+    p = tab.panels
+    tab.goto(st.find("00000"))
+    assert "00000" in p.title.content and "focal" in p.card.content
+    tab.step(1)
+    assert tab.stem == st.stems[st.find("00000") + 1] and p.slider.value == st.find("00000") + 1
+    st.set_review(tab.stem, "accepted")
+    assert "1 of 5 reviewed" in p.progress_text.content  # the change reached the tab
+    assert "review: **accepted**" in p.status.content
+    p.filter.value = "accepted"
+    tab.flush()
+    assert tab.frames.order == [tab.index]
+    p.filter.value = "all"
+    tab.flush()
+    p.pnl.value = False
+    tab.flush()
+    assert "PnL set: 0 lines" in p.card.content
+    tab.goto(st.find("bad"))
+    assert "error" in p.card.content and tab.scene3d._frustum is None
+    assert tab.workspace.plane is not None  # a frame that cannot be read still has its image plane
 
 
 def test_keypoint_edits_recalibrate_undo_redo_and_persist(data):
@@ -210,34 +204,28 @@ def test_export_only_reads_the_edits(data, tmp_path):
     assert not default_edits_dir(data).exists()  # export created no edits folder
 
 
-def test_drag_end_recalibrates_on_the_server(data):
-    from pnlviz.app.server import PnlvizApp
-
-    st = AppState(data)
-    app = PnlvizApp(st, port=free_port())
-    try:
-        tab = app.session()
-        tab.goto(st.find("00002"))
-        view = tab.view()
-        assert tab.workspace.points["keypoints"].keys == [int(k) for k in view.observations.kp_ids]
-        before = view.result.camera.C.copy()
-        kid, uv0 = int(view.observations.kp_ids[0]), view.observations.kp_xy[0]
-        tab._on_drag("keypoints", kid, "start", uv0)
-        tab._on_drag("keypoints", kid, "update", np.array([300.0, 200.0]))
-        tab.flush()
-        assert "keypoints" not in st.edits.get("00002")  # only the release counts...
-        assert not np.allclose(tab._overlay.keypoints.uv[0], [300.0, 200.0])  # ...and the preview is not kept
-        tab.goto(st.find("00001"))  # the tab moves on before the release...
-        tab._on_drag("keypoints", kid, "end", np.array([300.0, 200.0]))
-        tab.flush()
-        saved = json.loads((st.edits.frames / "00002.json").read_text())  # ...which still lands on 00002
-        np.testing.assert_allclose(saved["keypoints"][str(kid)], [300.0, 200.0], atol=1e-6)
-        assert "keypoints" not in st.edits.get("00001")
-        assert not np.allclose(st.view("00002").result.camera.C, before)
-        assert tab.last_recalibration_ms > 0 and tab.grabs == tab.releases == 1
-    finally:
-        app.stop()
-        st.close()
+def test_drag_end_recalibrates_on_the_server(data, serve):
+    app = serve(data)
+    st = app.state
+    tab = app.session()
+    tab.goto(st.find("00002"))
+    view = tab.view()
+    assert tab.workspace.points["keypoints"].keys == [int(k) for k in view.observations.kp_ids]
+    before = view.result.camera.C.copy()
+    kid, uv0 = int(view.observations.kp_ids[0]), view.observations.kp_xy[0]
+    tab.editor.drag(DragEvent(PointKind.KEYPOINTS, kid, DragPhase.START, uv0))
+    tab.editor.drag(DragEvent(PointKind.KEYPOINTS, kid, DragPhase.UPDATE, np.array([300.0, 200.0])))
+    tab.flush()
+    assert "keypoints" not in st.edits.get("00002")  # only the release counts...
+    assert not np.allclose(tab.painter.overlay.keypoints.uv[0], [300.0, 200.0])  # ...and the preview is not kept
+    tab.goto(st.find("00001"))  # the tab moves on before the release...
+    tab.editor.drag(DragEvent(PointKind.KEYPOINTS, kid, DragPhase.END, np.array([300.0, 200.0])))
+    tab.flush()
+    saved = json.loads((st.edits.frames / "00002.json").read_text())  # ...which still lands on 00002
+    np.testing.assert_allclose(saved["keypoints"][str(kid)], [300.0, 200.0], atol=1e-6)
+    assert "keypoints" not in st.edits.get("00001")
+    assert not np.allclose(st.view("00002").result.camera.C, before)
+    assert tab.editor.last_recalibration_ms > 0 and tab.editor.grabs == tab.editor.releases == 1
 
 
 def test_annotation_and_detections_merge_with_the_side_convention_resolved(shared_dir, tmp_path):
@@ -275,7 +263,7 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, m
         st.run_detector(stem)
     assert not st.needs_detection("solo") and len(st.detections_for("solo").keypoints) >= 4
     import pnlviz.calib.frame as frame_module
-    from pnlviz.app.session import calibration_card
+    from pnlviz.app.cards import calibration_card
 
     used = {}
     real = frame_module.calibrate

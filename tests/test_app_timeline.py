@@ -6,9 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from pnlviz.app.state import AppState
 from pnlviz.app.timeline import clip_index, frame_error, strip_image, worst_frames
-from helpers import free_port
 
 
 def test_clips_are_named_runs_of_frames_and_plain_numbers_are_not():
@@ -45,58 +43,47 @@ def clip_data(tmp_path):
     return d
 
 
-def test_the_app_shows_the_clip_timeline_jumps_to_the_worst_and_plays(clip_data):
-    from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.session import PLAY_INTERVAL
+def test_the_app_shows_the_clip_timeline_jumps_to_the_worst_and_plays(clip_data, serve):
+    from pnlviz.app.playback import PLAY_INTERVAL
 
-    st = AppState(clip_data)
-    app = PnlvizApp(st, port=free_port())
-    try:
-        tab = app.session()
-        first = st.find("clip3-IMG_0001")
-        tab.goto(first)
-        assert tab.clip_members()[0] == first and len(tab.clip_members()) == 8
-        for i in tab.clip_members():  # calibrate the clip (the background worker would, in time)
-            st.view(st.stems[i], tab.settings)
-        tab.show()
-        p = tab.panels
-        assert "frame 1 of 8" in p.clip_text.content and "error" in p.clip_text.content
-        assert p.clip_strip.image.shape == (26, 320, 3) and p.clip_slider.value == 1
-        errors = tab.clip_errors()
-        assert not any(np.isnan(errors))
-        tab.jump_worst(restart=True)
-        assert tab.index == tab.clip_members()[int(np.argmax(errors))]
-        tab.jump_worst()
-        second = sorted(range(8), key=lambda i: (-errors[i], i))[1]
-        assert tab.index == tab.clip_members()[second]
-        tab.clip_slider_moved(3)
-        assert tab.stem == "clip3-IMG_0003" and "frame 3 of 8" in p.clip_text.content
-        tab.play()
-        deadline = time.monotonic() + 30 * PLAY_INTERVAL + 20
-        while tab._playing and time.monotonic() < deadline:
-            time.sleep(0.05)
-        tab.flush()
-        assert not tab._playing and tab.stem == "clip3-IMG_0008"  # played to the end and stopped
-        tab.goto(st.find("00000"))
-        assert "not part of a clip" in p.clip_text.content
-        tab.play()
-        assert not tab._playing  # nothing to play outside a clip
-    finally:
-        app.stop()
-        st.close()
+    app = serve(clip_data)
+    st = app.state
+    tab = app.session()
+    first = st.find("clip3-IMG_0001")
+    tab.goto(first)
+    assert tab.clip.members()[0] == first and len(tab.clip.members()) == 8
+    for i in tab.clip.members():  # calibrate the clip (the background worker would, in time)
+        st.view(st.stems[i], tab.settings)
+    tab.show()
+    p = tab.panels
+    assert "frame 1 of 8" in p.clip_text.content and "error" in p.clip_text.content
+    assert p.clip_strip.image.shape == (26, 320, 3) and p.clip_slider.value == 1
+    errors = tab.clip.errors()
+    assert not any(np.isnan(errors))
+    tab.clip.jump_worst(restart=True)
+    assert tab.index == tab.clip.members()[int(np.argmax(errors))]
+    tab.clip.jump_worst()
+    second = sorted(range(8), key=lambda i: (-errors[i], i))[1]
+    assert tab.index == tab.clip.members()[second]
+    tab.clip.slider_moved(3)
+    assert tab.stem == "clip3-IMG_0003" and "frame 3 of 8" in p.clip_text.content
+    tab.clip.play()
+    deadline = time.monotonic() + 30 * PLAY_INTERVAL + 20
+    while tab.clip.playing and time.monotonic() < deadline:
+        time.sleep(0.05)
+    tab.flush()
+    assert not tab.clip.playing and tab.stem == "clip3-IMG_0008"  # played to the end and stopped
+    tab.goto(st.find("00000"))
+    assert "not part of a clip" in p.clip_text.content
+    tab.clip.play()
+    assert not tab.clip.playing  # nothing to play outside a clip
 
 
-def test_a_dataset_without_clips_has_no_clip_panel(tmp_path):
-    from pnlviz.app.server import PnlvizApp
+def test_a_dataset_without_clips_has_no_clip_panel(tmp_path, serve):
     from pnlviz.synth import generate
 
     generate(tmp_path / "frames", 3, 2, size=(320, 180), progress=False)
-    st = AppState(tmp_path / "frames")
-    app = PnlvizApp(st, port=free_port())
-    try:
-        tab = app.session()
-        assert tab.clips == {} and tab.panels.clip_text is None
-        tab.show()
-    finally:
-        app.stop()
-        st.close()
+    app = serve(tmp_path / "frames")
+    tab = app.session()
+    assert tab.clip.clips == {} and tab.panels.clip_text is None
+    tab.show()

@@ -220,15 +220,12 @@ def test_a_damaged_history_is_refused_like_any_damaged_record(tmp_path):
 
 
 # ---------------------------------------------------------------------- a tab without a browser
-def test_a_bare_frame_takes_placements_calibrates_at_four_and_snaps_and_nudges(tmp_path):
+def test_a_bare_frame_takes_placements_calibrates_at_four_and_snaps_and_nudges(tmp_path, serve):
     """Placing, nudging and snapping as the tab does them (the browser test drives the same with
     real events): an image alone gets an image plane; the fourth placed id calibrates it."""
-    import socket
-
     import cv2
 
-    from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.state import AppState
+    from pnlviz.app.modes import PointKind, Selection
     from pnlviz.geometry.camera import Camera
     from pnlviz.synth import make_frame
 
@@ -237,49 +234,42 @@ def test_a_bare_frame_takes_placements_calibrates_at_four_and_snaps_and_nudges(t
     frame = make_frame(3, 4242, (960, 540))
     cv2.imwrite(str(data / "bare.jpg"), frame["image"])
     truth = Camera.from_soccernet(frame["camera"]).scaled(960, 540)
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    app = PnlvizApp(AppState(data, edits=tmp_path / "edits"), port=port)
-    try:
-        model = app.state.model
-        ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
-        uv, _ = truth.project(model.keypoint_xyz(ground))
-        inside = {k: p for k, p in zip(ground, uv) if 60 < p[0] < 900 and 60 < p[1] < 480}
-        chosen = [min(inside, key=lambda k: inside[k].sum())]
-        while len(chosen) < 4:  # spread over the frame
-            chosen.append(max(inside, key=lambda k: min(np.hypot(*(inside[k] - inside[c])) for c in chosen)))
-        tab = app.session()
-        assert tab.view().camera is None and tab.workspace.plane == ImagePlane(960, 540)
-        assert tab.view2d == View2D.fit(tab.workspace.plane, tab.canvas)
-        for n, kid in enumerate(chosen):
-            tab.place_id = kid
-            tab.place("bare", np.round(inside[kid]))
-            assert (tab.view().result is not None and tab.view().result.ok) == (n == 3)
-        cam = tab.view().result.camera
-        err = np.hypot(*(cam.project(model.keypoint_xyz(list(inside)))[0] - np.array(list(inside.values()))).T)
-        assert np.median(err) < 2.0
-        # arrow keys: the selected point moves by whole pixels
-        kid = chosen[0]
-        tab.select(("keypoints", kid))
-        before = np.array(app.state.edits.get("bare")["keypoints"][str(kid)])
-        tab.nudge(3, -2)
-        np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(kid)], before + [3, -2])
-        # snapping: a ghost dropped a few screen pixels off the camera's projection lands on it
-        tab.set_snap(True)
-        ghost = next(k for k in tab._overlay.ghosts.keys if k in inside)
-        target = tab._overlay.ghosts.uv[tab._overlay.ghosts.keys.index(ghost)]
-        tab.place_id = ghost
-        tab.place("bare", target + np.array([4.0, -3.0]) / tab.view2d.zoom)
-        np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(ghost)], target, atol=1e-6)
-        tab.set_snap(False)
-        tab.place_id = chosen[1]
-        off = np.array(app.state.edits.get("bare")["keypoints"][str(chosen[1])]) + [4.0, 0.0]
-        tab.place("bare", off)
-        np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(chosen[1])], off)
-    finally:
-        app.stop()
-        app.state.close()
+    app = serve(data, edits=tmp_path / "edits")
+    model = app.state.model
+    ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
+    uv, _ = truth.project(model.keypoint_xyz(ground))
+    inside = {k: p for k, p in zip(ground, uv) if 60 < p[0] < 900 and 60 < p[1] < 480}
+    chosen = [min(inside, key=lambda k: inside[k].sum())]
+    while len(chosen) < 4:  # spread over the frame
+        chosen.append(max(inside, key=lambda k: min(np.hypot(*(inside[k] - inside[c])) for c in chosen)))
+    tab = app.session()
+    assert tab.view().camera is None and tab.workspace.plane == ImagePlane(960, 540)
+    assert tab.view_control.view2d == View2D.fit(tab.workspace.plane, tab.view_control.canvas)
+    for n, kid in enumerate(chosen):
+        tab.editor.place_id = kid
+        tab.editor.place("bare", np.round(inside[kid]))
+        assert (tab.view().result is not None and tab.view().result.ok) == (n == 3)
+    cam = tab.view().result.camera
+    err = np.hypot(*(cam.project(model.keypoint_xyz(list(inside)))[0] - np.array(list(inside.values()))).T)
+    assert np.median(err) < 2.0
+    # arrow keys: the selected point moves by whole pixels
+    kid = chosen[0]
+    tab.editor.select(Selection(PointKind.KEYPOINTS, kid))
+    before = np.array(app.state.edits.get("bare")["keypoints"][str(kid)])
+    tab.editor.nudge(3, -2)
+    np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(kid)], before + [3, -2])
+    # snapping: a ghost dropped a few screen pixels off the camera's projection lands on it
+    tab.editor.set_snap(True)
+    ghost = next(k for k in tab.painter.overlay.ghosts.keys if k in inside)
+    target = tab.painter.overlay.ghosts.uv[tab.painter.overlay.ghosts.keys.index(ghost)]
+    tab.editor.place_id = ghost
+    tab.editor.place("bare", target + np.array([4.0, -3.0]) / tab.view_control.view2d.zoom)
+    np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(ghost)], target, atol=1e-6)
+    tab.editor.set_snap(False)
+    tab.editor.place_id = chosen[1]
+    off = np.array(app.state.edits.get("bare")["keypoints"][str(chosen[1])]) + [4.0, 0.0]
+    tab.editor.place("bare", off)
+    np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(chosen[1])], off)
 
 
 def test_a_released_drag_reuses_its_preview_and_nothing_else(data):
@@ -333,9 +323,10 @@ def test_steps_already_in_the_history_are_kept_and_a_new_bad_one_is_refused(data
 def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_names():
     """Another tab's edit can reorder the points after this browser picked instance i: the point
     where the pointer hit wins over the instance number."""
+    from pnlviz.app.modes import PointKind
     from pnlviz.app.workspace import GRAB_PX, _PointNodes
 
-    nodes = _PointNodes(None, "/t", "keypoints", "keypoints")
+    nodes = _PointNodes(None, "/t", PointKind.KEYPOINTS, "keypoints")
     nodes.plane = ImagePlane(960, 540)
     nodes.world_per_px = nodes.plane.scale  # 1 screen pixel per image pixel
     nodes.keys, nodes.uv = [11, 40, 57], np.array([[100.0, 100.0], [300.0, 200.0], [305.0, 260.0]])

@@ -3,7 +3,16 @@ loads it and tells it the mode, and the checked reading of what it sends.
 
 viser has no wheel event and no hotkey for + and -; the bridge takes them in the page and writes a
 small JSON message into a text field of the panel (hidden), which viser delivers like any typed
-value. Such a value comes from the browser, so :func:`parse_pointer` trusts nothing in it.
+value. Such a value comes from the browser, so :func:`parse_pointer` trusts nothing in it: it is
+read here, once, into a :class:`PointerMessage`, and nothing past this module sees the text.
+
+Why a text field: viser 1.1.1 has no channel from the page to the server for a message of the
+app's own. What a page sends it are the messages of its own widgets and scene (a value typed or
+chosen, a button pressed or held, a command, a click or drag on a node, a transform control
+moved, a click or rectangle on the scene, the camera, a file upload, a form submitted or
+changed) and answers to the server's requests (a render, a ``localStorage`` item: only the
+server can ask for those). Of these, a widget's value is the one a script in the page can send
+unasked, with text of its own; so the transport stays a hidden text field.
 """
 
 from __future__ import annotations
@@ -14,18 +23,20 @@ import math
 from dataclasses import dataclass
 from importlib import resources
 
+from pnlviz.app.modes import Mode
+
 
 def _script() -> str:
     return resources.files("pnlviz.app").joinpath("bridge.js").read_text(encoding="utf-8")
 
 
-def bridge_html(input_uuid: str, mode: str) -> str:
-    """The HTML of the panel element that runs the bridge (once per page) and configures it."""
-    if mode not in ("image", "3d"):
-        raise ValueError(f"mode must be 'image' or '3d', got {mode!r}")
+def bridge_html(input_uuid: str, mode: Mode | str) -> str:
+    """The HTML of the panel element that runs the bridge (once per page) and configures it for
+    the tab's view (a :class:`pnlviz.app.modes.Mode`, or its value; anything else: ValueError)."""
+    mode = Mode(mode)
     code = base64.b64encode(_script().encode("utf-8")).decode("ascii")
     safe_uuid = "".join(c for c in input_uuid if c.isalnum() or c in "-_")
-    return (f'<div id="pnlviz-bridge" data-input="{safe_uuid}" data-mode="{mode}" style="display:none"></div>'
+    return (f'<div id="pnlviz-bridge" data-input="{safe_uuid}" data-mode="{mode.value}" style="display:none"></div>'
             f'<img alt="" src="data:," style="display:none" onerror="eval(atob(\'{code}\'))">')
 
 

@@ -1,7 +1,7 @@
 """The panel of one tab (docked to the right of the image, narrow and collapsible): the widgets,
-the keys, and which session action each one calls. Every callback goes through the session's
-queue (:meth:`pnlviz.app.session.Session.ordered`), so actions run one at a time in the order the
-browser sent them, and every value is checked by the action it reaches.
+the keys, and which action of the tab's parts each one calls. Every callback goes through the
+tab's queue (:meth:`pnlviz.app.tabqueue.TabQueue.ordered`), so actions run one at a time in the
+order the browser sent them, and every value is checked by the action it reaches.
 """
 
 from __future__ import annotations
@@ -9,11 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from pnlviz.app.bridge import bridge_html
+from pnlviz.app.modes import DragMode, Filter, Mode, Sort, labels
 from pnlviz.app.overlay import LEGEND, SET_RGB
 
-FILTERS = ("all", "failed", "unreviewed", "accepted", "corrected", "rejected")
-SORTS = ("index", "JaC@5 (worst first)", "residual (worst first)")
-DRAG_MODES = ("keypoints", "line points")
 LAYERS = ("keypoints", "ids", "ghosts", "refined_pitch", "initial_pitch", "reference_pitch", "annotation",
           "residuals", "detected_lines")
 KEYPOINT_CHOICES = tuple(str(i) for i in range(1, 74))
@@ -59,35 +57,57 @@ class Panels:
     """The widgets of one tab's panel, bound to ``session``'s actions."""
 
     def __init__(self, session):
-        self.session = s = session
-        gui = s.gui
+        self.session, gui = session, session.gui
         gui.configure_theme(control_width="medium", show_share_button=False)
         gui.main_panel.dock_right()
         gui.main_panel.set_width(PANEL_WIDTH)
         self.title = gui.add_markdown("")
         self.status = gui.add_markdown("")
+        self._frame_folder(gui)
+        self._clip_folder(gui, session.clip.clips)
+        self._review_folder(gui)
+        self._points_folder(gui)
+        self._view_folder(gui, session.painter.layers)
+        self._calibration_folder(gui, session.settings, session.sources)
+        with gui.add_folder("Help", expand_by_default=False):
+            gui.add_markdown(help_markdown())
+        self.background = gui.add_markdown("")
+        # the pointer bridge: a text field it writes to (hidden by the bridge) and its loader
+        self.bridge_field = gui.add_text("pointer", initial_value="")
+        self.bridge = gui.add_html(bridge_html(self.bridge_field._impl.uuid, Mode.IMAGE))
+        self._bind()
+
+    def _frame_folder(self, gui) -> None:
         with gui.add_folder("Frame"):
             self.slider = gui.add_slider("frame", min=0, max=1, step=1, initial_value=0)
             self.nav = gui.add_button_group("navigate", ("previous", "next"))
             self.jump = gui.add_text("jump to stem", initial_value="")
-            self.filter = gui.add_dropdown("filter", FILTERS, initial_value="all")
-            self.sort = gui.add_dropdown("sort", SORTS, initial_value="index")
+            self.filter = gui.add_dropdown("filter", labels(Filter), initial_value=Filter.ALL.value)
+            self.sort = gui.add_dropdown("sort", labels(Sort), initial_value=Sort.INDEX.value)
             self.filter_text = gui.add_markdown("")
-        self.clip_text = self.clip_strip = self.clip_slider = self.clip_buttons = None
-        if s.clips:  # a video: the clip timeline
-            from pnlviz.app.timeline import strip_image
 
-            with gui.add_folder("Clip"):
-                self.clip_text = gui.add_markdown("")
-                self.clip_strip = gui.add_image(strip_image([], None), format="png")
-                self.clip_slider = gui.add_slider("clip frame", min=1, max=2, step=1, initial_value=1)
-                self.clip_buttons = gui.add_button_group("clip", ("play", "pause", "worst", "next worst"))
+    def _clip_folder(self, gui, clips) -> None:
+        """The clip timeline, for a video (a dataset without clips has none)."""
+        self.clip_text = self.clip_strip = self.clip_slider = self.clip_buttons = None
+        if not clips:
+            return
+        from pnlviz.app.timeline import strip_image
+
+        with gui.add_folder("Clip"):
+            self.clip_text = gui.add_markdown("")
+            self.clip_strip = gui.add_image(strip_image([], None), format="png")
+            self.clip_slider = gui.add_slider("clip frame", min=1, max=2, step=1, initial_value=1)
+            self.clip_buttons = gui.add_button_group("clip", ("play", "pause", "worst", "next worst"))
+
+    def _review_folder(self, gui) -> None:
         with gui.add_folder("Review"):
             statuses = tuple(f"{k} ({v})" for k, v in REVIEW_KEYS.items()) + ("clear",)
             self.review = gui.add_button_group("status", statuses)
             self.advance = gui.add_checkbox("then next frame", initial_value=True)
             self.progress = gui.add_progress_bar(0.0)
             self.progress_text = gui.add_markdown("")
+
+    def _points_folder(self, gui) -> None:
         with gui.add_folder("Points"):
             self.selected = gui.add_markdown("")
             self.kp_id = gui.add_dropdown("place id", KEYPOINT_CHOICES, initial_value="1",
@@ -95,92 +115,92 @@ class Panels:
             self.points = gui.add_dropdown("on this frame", ("-",), initial_value="-",
                                            hint="the frame's keypoints: choose one to select it")
             self.hide = gui.add_button("not visible (Delete)")
-            self.drag_mode = gui.add_dropdown("drag", DRAG_MODES, initial_value="keypoints")
+            self.drag_mode = gui.add_dropdown("drag", labels(DragMode), initial_value=DragMode.KEYPOINTS.value)
             self.snap = gui.add_checkbox("snap to pitch", initial_value=False,
                                          hint="a point dropped within 8 screen pixels of a projected "
                                               "intersection or line goes onto it")
             self.history = gui.add_button_group("history", ("undo", "redo"))
             self.export = gui.add_button("export labels (zip)")
+
+    def _view_folder(self, gui, layers) -> None:
         with gui.add_folder("View"):
             self.view_buttons = gui.add_button_group("view", ("fit (0)", "1:1 (1)", "3D (V)"))
             self.zoom_text = gui.add_markdown("")
             self.opacity = gui.add_slider("overlay opacity", min=0.1, max=1.0, step=0.05, initial_value=1.0)
-            self.layer_boxes = {name: gui.add_checkbox(name.replace("_", " "), initial_value=getattr(s.layers, name))
+            self.layer_boxes = {name: gui.add_checkbox(name.replace("_", " "), initial_value=getattr(layers, name))
                                 for name in LAYERS}
             self.legend = gui.add_markdown(legend_markdown())
+
+    def _calibration_folder(self, gui, settings, sources) -> None:
         with gui.add_folder("Calibration"):
             self.card = gui.add_markdown("")
-            self.pnl = gui.add_checkbox("PnL refinement", initial_value=s.settings.pnl)
+            self.pnl = gui.add_checkbox("PnL refinement", initial_value=settings.pnl)
             self.alpha = gui.add_slider("alpha (lines vs points)", min=0.0, max=1.0, step=0.05,
-                                        initial_value=s.settings.alpha)
-            self.sources = s.sources
-            self.source = gui.add_dropdown("keypoint source", self.sources, initial_value=s.settings.source)
-        with gui.add_folder("Help", expand_by_default=False):
-            gui.add_markdown(help_markdown())
-        self.background = gui.add_markdown("")
-        # the pointer bridge: a text field it writes to (hidden by the bridge) and its loader
-        self.bridge_field = gui.add_text("pointer", initial_value="")
-        self.bridge = gui.add_html(bridge_html(self.bridge_field._impl.uuid, "image"))
-        self._bind()
+                                        initial_value=settings.alpha)
+            self.sources = sources
+            self.source = gui.add_dropdown("keypoint source", sources, initial_value=settings.source)
 
-    def set_mode(self, mode: str) -> None:
+    def set_mode(self, mode: Mode) -> None:
         self.bridge.content = bridge_html(self.bridge_field._impl.uuid, mode)
 
     # ------------------------------------------------------------------ bindings
     def _bind(self) -> None:
-        s, on = self.session, self.session.ordered
+        s, on = self.session, self.session.queue.ordered
+        edit, view, painter = s.editor, s.view_control, s.painter
         self.slider.on_update(on(lambda _: s.slider_moved(self.slider.value)))
         self.nav.on_click(on(lambda e: s.step(-1 if e.target.value == "previous" else 1)
                              if e.target.value in ("previous", "next") else None))
         self.jump.on_update(on(lambda _: s.jump(self.jump.value)))
         self.filter.on_update(on(lambda _: s.set_filter(self.filter.value)))
         self.sort.on_update(on(lambda _: s.set_sort(self.sort.value)))
-        self.review.on_click(on(lambda e: s.review(str(e.target.value).split(" (")[0], advance=self.advance.value)))
-        self.kp_id.on_update(on(lambda _: s.set_place_id(self.kp_id.value)))
-        self.points.on_update(on(lambda _: s.select_listed(self.points.value)))
-        self.hide.on_click(on(lambda _: s.hide_selected()))
-        self.drag_mode.on_update(on(lambda _: s.set_drag_mode(self.drag_mode.value)))
-        self.snap.on_update(on(lambda _: s.set_snap(self.snap.value)))
-        self.history.on_click(on(lambda e: s.undo() if e.target.value == "undo" else s.redo()))
+        self.review.on_click(on(lambda e: edit.review(str(e.target.value).split(" (")[0], advance=self.advance.value)))
+        self.kp_id.on_update(on(lambda _: edit.set_place_id(self.kp_id.value)))
+        self.points.on_update(on(lambda _: edit.select_listed(self.points.value)))
+        self.hide.on_click(on(lambda _: edit.hide_selected()))
+        self.drag_mode.on_update(on(lambda _: edit.set_drag_mode(self.drag_mode.value)))
+        self.snap.on_update(on(lambda _: edit.set_snap(self.snap.value)))
+        self.history.on_click(on(lambda e: edit.undo() if e.target.value == "undo" else edit.redo()))
         self.export.on_click(on(lambda _: s.export()))
-        self.view_buttons.on_click(on(lambda e: {"fit (0)": s.fit, "1:1 (1)": s.native, "3D (V)": s.toggle_mode}
+        self.view_buttons.on_click(on(lambda e: {"fit (0)": view.fit, "1:1 (1)": view.native, "3D (V)": s.toggle_mode}
                                       .get(e.target.value, lambda: None)()))
-        self.opacity.on_update(on(lambda _: s.set_opacity(self.opacity.value)))
+        self.opacity.on_update(on(lambda _: painter.set_opacity(self.opacity.value)))
         for name, box in self.layer_boxes.items():
-            box.on_update(on(lambda _, name=name, box=box: s.set_layer(name, box.value)))
+            box.on_update(on(lambda _, name=name, box=box: painter.set_layer(name, box.value)))
         self.pnl.on_update(on(lambda _: s.set_pnl(self.pnl.value)))
         self.alpha.on_update(on(lambda _: s.set_alpha(self.alpha.value)))
         self.source.on_update(on(lambda _: s.set_source(self.source.value)))
-        self.bridge_field.on_update(on(lambda _: s.bridge_message(self.bridge_field.value)))
+        self.bridge_field.on_update(on(lambda _: view.bridge_message(self.bridge_field.value)))
         if self.clip_slider is not None:
-            self.clip_slider.on_update(on(lambda _: s.clip_slider_moved(self.clip_slider.value)))
-            actions = {"play": s.play, "pause": s.pause, "worst": lambda: s.jump_worst(restart=True),
-                       "next worst": s.jump_worst}
+            clip = s.clip
+            self.clip_slider.on_update(on(lambda _: clip.slider_moved(self.clip_slider.value)))
+            actions = {"play": clip.play, "pause": clip.pause, "worst": lambda: clip.jump_worst(restart=True),
+                       "next worst": clip.jump_worst}
             self.clip_buttons.on_click(on(lambda e: actions.get(e.target.value, lambda: None)()))
         self._bind_keys()
 
     def _bind_keys(self) -> None:
         s, gui = self.session, self.session.gui
+        edit, view = s.editor, s.view_control
         keys = (("next frame", "N", None, lambda: s.step(1)),
                 ("previous frame", "P", None, lambda: s.step(-1)),
-                ("review: accepted, next", "G", None, lambda: s.review("accepted", advance=self.advance.value)),
-                ("review: corrected, next", "C", None, lambda: s.review("corrected", advance=self.advance.value)),
-                ("review: rejected, next", "R", None, lambda: s.review("rejected", advance=self.advance.value)),
-                ("undo", "Z", "cmd/ctrl", s.undo),
-                ("redo", "Z", "cmd/ctrl+shift", s.redo),
+                ("review: accepted, next", "G", None, lambda: edit.review("accepted", advance=self.advance.value)),
+                ("review: corrected, next", "C", None, lambda: edit.review("corrected", advance=self.advance.value)),
+                ("review: rejected, next", "R", None, lambda: edit.review("rejected", advance=self.advance.value)),
+                ("undo", "Z", "cmd/ctrl", edit.undo),
+                ("redo", "Z", "cmd/ctrl+shift", edit.redo),
                 ("image view / 3D view", "V", None, s.toggle_mode),
-                ("fit the frame", "0", None, s.fit),
-                ("native resolution", "1", None, s.native),
-                ("selected point not visible", "delete", None, s.hide_selected),
-                ("selected point not visible ", "backspace", None, s.hide_selected),
-                ("clear the selection", "escape", None, lambda: s.select(None)))
-        if s.clips:
-            keys += (("play / pause the clip", "space", None, s.toggle_play),)
+                ("fit the frame", "0", None, view.fit),
+                ("native resolution", "1", None, view.native),
+                ("selected point not visible", "delete", None, edit.hide_selected),
+                ("selected point not visible ", "backspace", None, edit.hide_selected),
+                ("clear the selection", "escape", None, lambda: edit.select(None)))
+        if s.clip.clips:
+            keys += (("play / pause the clip", "space", None, s.clip.toggle),)
         for label, key, modifier, action in keys:
             prefix = modifier.replace("cmd/ctrl", "Ctrl").replace("+shift", "+Shift") + "+" if modifier else ""
             description = prefix + key
             command = gui.add_command(label, hotkey=key, modifier=modifier, description=description)
-            command.on_trigger(self.session.ordered(lambda _, action=action: action()))
+            command.on_trigger(s.queue.ordered(lambda _, action=action: action()))
 
     # ------------------------------------------------------------------ values from the browser
     def choice(self, handle, options, fallback: str) -> str:
@@ -189,11 +209,11 @@ class Panels:
         if value in options:
             return value
         self.session.notify("refused", f"{handle.label}: {str(value)[:40]!r} is not one of the options")
-        self.session.set_value(handle, fallback)
+        self.session.queue.set_value(handle, fallback)
         return fallback
 
     def set_order(self, n: int, pos: int) -> None:
         """The slider over ``n`` frames at position ``pos`` (disabled when there is only one)."""
         self.slider.max = max(1, n - 1)
         self.slider.disabled = n <= 1
-        self.session.set_value(self.slider, int(np.clip(pos, 0, max(0, n - 1))))
+        self.session.queue.set_value(self.slider, int(np.clip(pos, 0, max(0, n - 1))))

@@ -98,7 +98,7 @@ class PnlvizApp:
             if session.stem == stem:
                 session.show()
             else:
-                session.show_progress()
+                session.painter.show_progress()
 
     # ------------------------------------------------------------------ scene
     def _add_lights(self) -> None:

@@ -5,7 +5,8 @@ once and then updated in place, so an edit sends only what changed and a drag in
 never cut short by a redraw.
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
-select, move, place) is the session's business. Nothing here computes a calibration.
+select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
+:mod:`pnlviz.app.editing`). Nothing here computes a calibration.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection
 from pnlviz.app.overlay import Markers, Overlay, Segments
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter
 
@@ -46,9 +48,9 @@ class WorkspaceEvents:
 
     place: Callable[[np.ndarray], None]  # shift+click on the frame
     click: Callable[[np.ndarray], None]  # a plain click on the frame (not on a point)
-    pan: Callable[[str, np.ndarray, np.ndarray], None]  # (phase, start, now): screen fractions of the canvas
-    pick: Callable[[str, object], None]  # (kind, key): a click on a point
-    drag: Callable[[str, object, str, np.ndarray], None]  # (kind, key, phase, pixel the point is dragged to)
+    pan: Callable[[DragPhase, np.ndarray, np.ndarray], None]  # (phase, start, now): screen fractions of the canvas
+    pick: Callable[[Selection], None]  # a click on a point
+    drag: Callable[[DragEvent], None]  # a point dragged (to the pixel in the event)
     screen_to_pixel: Callable[[np.ndarray], np.ndarray]  # screen fractions of the canvas -> image pixel
 
 
@@ -84,7 +86,7 @@ class _PointNodes:
     on a mesh made anew, reports no instance in Chromium (cause not found); that drag lands by
     the pointer's screen position, as before, but without the live preview."""
 
-    def __init__(self, scene, path: str, kind: str, layer: str, opacity: float = 1.0,
+    def __init__(self, scene, path: str, kind: PointKind, layer: str, opacity: float = 1.0,
                  events: WorkspaceEvents | None = None):
         self.scene, self.path, self.kind, self.layer, self.opacity = scene, path, kind, layer, opacity
         self.events = events
@@ -207,11 +209,12 @@ class _PointNodes:
             o = np.asarray(event.ray_origin, float)
             i = self._instance(event.instance_index, self.plane.pixel_on_ray(o, o + np.asarray(event.ray_direction)))
             if i is not None:
-                events.pick(self.kind, self.keys[i])
+                events.pick(Selection(self.kind, self.keys[i]))
 
         @node.on_drag
         async def _(event) -> None:
-            if event.phase == "start":
+            phase = DragPhase(event.phase)
+            if phase is DragPhase.START:
                 at = self.plane.pixel(event.start_position)
                 exact = bool(np.all(np.isfinite(at)))
                 if not exact:  # viser lost the instance it hit: where the pointer is, on screen
@@ -227,13 +230,13 @@ class _PointNodes:
             pointer = (self.plane.pixel(event.end_position) if grabbed["exact"]
                        else events.screen_to_pixel(np.asarray(event.end_screen_pos, float)))
             now = grabbed["uv"] + pointer - grabbed["at"]
-            if event.phase != "start" and self.keys[grabbed["index"]:grabbed["index"] + 1] == [grabbed["key"]]:
+            if phase is not DragPhase.START and self.keys[grabbed["index"]:grabbed["index"] + 1] == [grabbed["key"]]:
                 self.move(grabbed["index"], now)
             key = grabbed["key"]
-            if event.phase == "end":  # before the release is handled: it makes the grab mesh anew
+            if phase is DragPhase.END:  # before the release is handled: it makes the grab mesh anew
                 grabbed.clear()
                 self.dragging = False
-            events.drag(self.kind, key, event.phase, now)
+            events.drag(DragEvent(self.kind, key, phase, now))
 
 
 class Workspace:
@@ -250,12 +253,13 @@ class Workspace:
         self._ring = None
         self._lines: dict[str, object] = {}
         self.points = {kind: _PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity, events)
-                       for kind, layer, opacity in (("keypoints", "keypoints", 1.0), ("ghosts", "ghosts", 0.55),
-                                                    ("line_points", "keypoints", 1.0))}
+                       for kind, layer, opacity in ((PointKind.KEYPOINTS, "keypoints", 1.0),
+                                                    (PointKind.GHOSTS, "ghosts", 0.55),
+                                                    (PointKind.LINE_POINTS, "keypoints", 1.0))}
         self._labels: dict[object, object] = {}  # keypoint id -> label node
         self._label_uv: dict[object, np.ndarray] = {}
         self._label_rank: dict[object, int] = {}
-        self.selected: tuple[str, object] | None = None
+        self.selected: Selection | None = None
 
     # ------------------------------------------------------------------ the frame
     def show_image(self, key: tuple, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> bool:
@@ -349,10 +353,11 @@ class Workspace:
 
         @node.on_drag
         async def _(event) -> None:
-            if event.phase == "start":
+            phase = DragPhase(event.phase)
+            if phase is DragPhase.START:
                 start["at"] = np.array(event.start_screen_pos, float)
             if "at" in start:
-                self.events.pan(event.phase, start["at"], np.array(event.end_screen_pos, float))
+                self.events.pan(phase, start["at"], np.array(event.end_screen_pos, float))
 
     def _clicked(self, event) -> np.ndarray | None:
         if self.plane is None:
@@ -380,13 +385,14 @@ class Workspace:
                                                                  thickness_units="screen")
             else:
                 update_changed(handle, points=pts, colors=cols, visible=True)
-        shown = {"keypoints": overlay.keypoints if keypoints else Markers(),
-                 "ghosts": overlay.ghosts if ghosts else Markers(),
-                 "line_points": overlay.line_points if line_points else Markers()}
+        shown = {PointKind.KEYPOINTS: overlay.keypoints if keypoints else Markers(),
+                 PointKind.GHOSTS: overlay.ghosts if ghosts else Markers(),
+                 PointKind.LINE_POINTS: overlay.line_points if line_points else Markers()}
         for kind, markers in shown.items():
             self.points[kind].show(markers, plane, self.world_per_px)
-        labelled = [(k, uv, 0) for k, uv in zip(shown["keypoints"].keys, shown["keypoints"].uv)] if ids else []
-        labelled += [(k, uv, 1) for k, uv in zip(shown["ghosts"].keys, shown["ghosts"].uv)] if ids else []
+        observed, ghosted = shown[PointKind.KEYPOINTS], shown[PointKind.GHOSTS]
+        labelled = [(k, uv, 0) for k, uv in zip(observed.keys, observed.uv)] if ids else []
+        labelled += [(k, uv, 1) for k, uv in zip(ghosted.keys, ghosted.uv)] if ids else []
         self._show_labels(labelled)
         self._show_selection()
 
@@ -422,16 +428,16 @@ class Workspace:
                 handle.visible = bool(show)
 
     # ------------------------------------------------------------------ selection and zoom
-    def select(self, selected: tuple[str, object] | None) -> None:
+    def select(self, selected: Selection | None) -> None:
         self.selected = selected
         self._show_selection()
 
     def _show_selection(self) -> None:
         uv = None
         if self.selected is not None and self.plane is not None:
-            nodes = self.points.get(self.selected[0])
-            if nodes is not None and self.selected[1] in nodes.keys:
-                uv = nodes.uv[nodes.keys.index(self.selected[1])]
+            nodes = self.points.get(self.selected.kind)
+            if nodes is not None and self.selected.key in nodes.keys:
+                uv = nodes.uv[nodes.keys.index(self.selected.key)]
         if uv is None:
             if self._ring is not None:
                 update_changed(self._ring, visible=False)
@@ -455,13 +461,3 @@ class Workspace:
         if self.plane is not None:
             self.declutter()
             self._show_selection()
-
-    def move_point(self, kind: str, key, uv) -> None:
-        """Show point ``key`` at ``uv`` (and its id and ring), before the edit comes back."""
-        nodes = self.points[kind]
-        if key in nodes.keys:
-            nodes.move(nodes.keys.index(key), uv)
-        if key in self._labels:
-            self._labels[key].position = self.plane.world(uv, "selection")
-            self._label_uv[key] = np.asarray(uv, float)
-        self._show_selection()

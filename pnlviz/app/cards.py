@@ -1,0 +1,158 @@
+"""The texts of a tab's panel, as pure functions of what they show (markdown, or the rows of a
+dropdown): the calibration card, the title and status lines, the points list, the selected
+point, the review progress, the clip line, the zoom.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+
+import numpy as np
+
+from pnlviz.app.modes import PointKind, Selection
+from pnlviz.app.overlay import Overlay
+from pnlviz.app.state import AppState, FrameView
+
+
+def calibration_card(view: FrameView, state: AppState) -> str:
+    """Markdown of the calibration card."""
+    lines = []
+    if view.error:
+        lines.append(f"**error**: {view.error}")
+    elif view.stem in state.image_errors:
+        lines.append(f"**image not shown**: {state.image_errors[view.stem]}")
+    res = view.result
+    if view.origin is not None:
+        settings = state.applied_detection_settings(view.origin, view.settings)
+        used = ", ".join(f"{k}={v}" for k, v in settings.items())
+        lines.append(f"calibrated from: **{view.origin}**"
+                     + (f" (the detector's settings: {used})" if settings else ""))
+    if view.reference_camera is not None:
+        lines.append("reference camera (magenta): known for this frame")
+    if res is None:
+        return "\n\n".join(lines or ["nothing to calibrate from yet: place four keypoints (shift+click)"])
+    if not res.ok:
+        lines.append(f"**not calibrated**: {res.failure}")
+        return "\n\n".join(lines)
+    cam = res.camera
+    pan, tilt, roll = cam.pan_tilt_roll_deg
+    errs = np.array([v for v in res.point_residuals.values() if np.isfinite(v)])
+    line_errs = np.array(list(res.line_residuals.values()))
+    lines += [
+        f"focal **{cam.fx:.1f} px** (hFOV {cam.hfov_deg:.1f} deg), k1 {cam.radial[0]:+.3f}",
+        (f"position ({cam.C[0]:.1f}, {cam.C[1]:.1f}, {cam.C[2]:.1f}) m; "
+         f"pan {pan:.2f}, tilt {tilt:.2f}, roll {roll:.2f} deg"),
+        f"keypoints: {len(errs)}, median error {np.median(errs):.2f} px" if len(errs) else "keypoints: none",
+        f"lines/circles: {len(line_errs)}, worst {line_errs.max():.1f} px" if len(line_errs) else "lines: none",
+        (f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, {len(res.inliers)} inliers; "
+         f"PnL set: {len(res.pnl_lines)} lines/circles"),
+    ]
+    if view.jac:
+        lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))
+    lines.append(f"computed in {view.ms:.0f} ms")
+    return "\n\n".join(lines)
+
+
+def keypoint_name(model, kid: int) -> str:
+    """What a keypoint is, in words (its defining lines and circles)."""
+    kp = model.keypoints.get(int(kid))
+    if kp is None:
+        return "?"
+    d = kp.definition
+    parts = d.get("lines") or [p for p in (d.get("line"), d.get("circle")) if p] or d.get("on") or []
+    return " x ".join(str(p) for p in parts) + f" ({kp.group})"
+
+
+def title_text(view: FrameView, position: int, n: int, outside: bool, flt: str) -> str:
+    """The frame's stem, where it is in the filter (``position`` from 1 of ``n``), its size."""
+    where = (f"not in the filter '{flt}' (no frame is)" if outside
+             else f"{position}/{n}" + (f" of '{flt}'" if flt != "all" else ""))
+    return f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}"
+
+
+def filter_text(stem: str, n: int, outside: bool, flt: str) -> str:
+    """How many frames the filter lets through (or that none does)."""
+    if outside:
+        return f"**no frame matches '{flt}'**: showing {stem}"
+    return f"{n} frame" + ("s" if n != 1 else "")
+
+
+def status_line(view: FrameView, review: str | None, record: Mapping, save_error: str | None,
+                detection: str | None) -> str:
+    """The frame's review status, whether its edits are saved, what the detector does there,
+    and why it has no camera (where it is seen first; the card says more)."""
+    if save_error:
+        saved = f"**not saved**: {save_error}"
+    elif record.get("updated"):
+        saved = "saved " + time.strftime("%H:%M:%S", time.localtime(record["updated"]))
+    else:
+        saved = "no edits"
+    line = f"review: **{review or 'not reviewed'}** · {saved}" + (f" · {detection}" if detection else "")
+    if view.error:
+        line += f"  \n**problem**: {view.error}"
+    elif view.result is not None and not view.result.ok:
+        line += f"  \n**not calibrated**: {view.result.failure}"
+    return line
+
+
+def point_rows(overlay: Overlay | None, hidden: set[int]) -> list[str]:
+    """The rows of the points list: "-", then every keypoint visible (with its residual), hidden
+    and ghost."""
+    rows = ["-"]
+    if overlay is not None:
+        for kid in sorted(overlay.keypoints.keys):
+            r = overlay.residuals.get(kid)
+            rows.append(f"{kid} · visible" + (f" · {r:.1f} px" if r is not None else ""))
+        rows += [f"{kid} · hidden" for kid in sorted(hidden)]
+        rows += [f"{kid} · ghost" for kid in sorted(overlay.ghosts.keys)]
+    return rows
+
+
+def listed_id(row) -> int | None:
+    """The keypoint id a row of the points list names ("12 · visible · 0.8 px": 12), else None."""
+    text = str(row).split(" ")[0]
+    return int(text) if text.isdigit() else None
+
+
+def selected_text(selected: Selection | None, overlay: Overlay | None, model, place_id: int) -> str:
+    """What is selected: its id and name (or line and index), residual, and where it is."""
+    if selected is None or overlay is None:
+        return f"nothing selected · shift+click places id **{place_id}**"
+    key = selected.key
+    if selected.kind is PointKind.LINE_POINTS:
+        m = overlay.line_points
+        text = f"**{key[0]}**, point {key[1]}"
+    else:
+        m = overlay.keypoints if selected.kind is PointKind.KEYPOINTS else overlay.ghosts
+        text = f"**{key}** {keypoint_name(model, key)}"
+        if selected.kind is PointKind.GHOSTS:
+            text += " · not observed: drag it where it is"
+        elif key in overlay.residuals:
+            text += f" · residual {overlay.residuals[key]:.2f} px"
+    if key in m.keys:
+        u, v = m.uv[m.keys.index(key)]
+        text += f" · at ({u:.1f}, {v:.1f})"
+    return text
+
+
+def progress_text(done: int, total: int, counts: Mapping[str, int]) -> str:
+    return f"{done} of {total} reviewed: " + ", ".join(f"{k} {v}" for k, v in counts.items())
+
+
+def clip_text(name: str, position: int, errors: list[float], playing: bool) -> str:
+    """The clip line: the frame's place in its clip (``position`` from 0), its error, how many
+    frames of the clip are calibrated yet, and whether it plays."""
+    e, n = errors[position], len(errors)
+    said = "not calibrated yet" if np.isnan(e) else "no camera" if np.isinf(e) else f"error {e:.1f} px"
+    done = sum(not np.isnan(v) for v in errors)
+    return (f"**{name}**: frame {position + 1} of {n} · {said}" + ("" if done == n else f" · {done} calibrated")
+            + (" · playing" if playing else ""))
+
+
+def zoom_text(zoom: float) -> str:
+    return f"zoom **{zoom:.2f}x** (screen pixels per image pixel)"
+
+
+__all__ = ["calibration_card", "clip_text", "filter_text", "keypoint_name", "listed_id", "point_rows",
+           "progress_text", "selected_text", "status_line", "title_text", "zoom_text"]

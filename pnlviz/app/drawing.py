@@ -1,0 +1,175 @@
+"""Drawing one tab: its frame's image on the image plane (and the frames either side of it sent
+ahead), the overlays and points over it, the panel's texts, and in the 3D view the camera over
+the pitch. Only what changed is sent (:func:`pnlviz.app.workspace.update_changed`), inside one
+message batch per draw.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pnlviz.app import cards
+from pnlviz.app.modes import DragMode, Mode
+from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
+from pnlviz.app.panels import LAYERS
+from pnlviz.app.state import FrameView
+from pnlviz.app.workspace import update_changed
+from pnlviz.viz import blank_canvas
+
+
+class Painter:
+    """What one tab shows (``tab``: its :class:`pnlviz.app.session.Session`): ``shown`` the view
+    drawn last, ``overlay`` its overlays, ``drawn`` how many times the tab was drawn; ``layers``
+    and ``opacity`` how the overlays are drawn."""
+
+    def __init__(self, tab):
+        self.tab = tab
+        self.layers = Layers()
+        self.opacity = 1.0
+        self.shown: FrameView | None = None
+        self.overlay: Overlay | None = None
+        self.drawn = 0
+
+    @property
+    def shown_stem(self) -> str:
+        """The frame on the tab's screen (the tab's frame until it is first drawn)."""
+        return self.shown.stem if self.shown is not None else self.tab.stem
+
+    def draw(self, view: FrameView) -> None:
+        """``view`` on the tab: image, overlays, panel, and the 3D view when it is open."""
+        tab = self.tab
+        self.shown = view
+        self.drawn += 1
+        with self._atomic():
+            self.show_image(view)
+            self.show_overlay(view)
+            self.show_panel(view)
+            if tab.view_control.mode is Mode.THREE_D:
+                tab.scene3d.show(view, render(view, tab.state.image(view.stem), self.layers))
+
+    def _atomic(self):
+        tab = self.tab
+        return tab.client.atomic() if tab.client is not None else tab.app.server.atomic()
+
+    # ------------------------------------------------------------------ settings
+    def set_layer(self, name: str, value) -> None:
+        if name in LAYERS:
+            setattr(self.layers, name, bool(value))
+            self.tab.show()
+
+    def set_opacity(self, value) -> None:
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            value = 1.0
+        self.opacity = float(np.clip(value if math.isfinite(value) else 1.0, 0.1, 1.0))
+        self.tab.show()
+
+    # ------------------------------------------------------------------ the image
+    def pixels(self, stem: str) -> np.ndarray:
+        """The frame as the browser shows it: its image (RGB), or a neutral canvas of its size."""
+        image = self.tab.state.image(stem)
+        if image is None:
+            image = blank_canvas(*self.tab.state.frame_size(stem))
+        return np.ascontiguousarray(image[:, :, ::-1])
+
+    def show_image(self, view: FrameView) -> None:
+        workspace = self.tab.workspace
+        before = workspace.plane
+        if workspace.show_image(view.stem, lambda: self.pixels(view.stem)):
+            self.tab.queue.enqueue(self.preload_neighbours)
+        self.tab.view_control.frame_placed(before)
+
+    def preload_neighbours(self) -> None:
+        """Send the frames before and after this one (in the filter's order) ahead, hidden."""
+        tab = self.tab
+        with tab.lock:
+            frames = tab.frames
+            if tab.queue.closed or frames.index not in frames.order:
+                return
+            pos = frames.order.index(frames.index)
+            stems = [tab.state.stems[frames.order[p]] for p in (pos + 1, pos - 1) if 0 <= p < len(frames.order)]
+        for stem in stems:  # the pixels are read outside the lock, the scene changed under it
+            with tab.lock:
+                if tab.queue.closed or tab.workspace.holds(stem):
+                    continue
+            pixels = self.pixels(stem)
+            with tab.lock:
+                if not tab.queue.closed:
+                    tab.workspace.preload(stem, lambda pixels=pixels: pixels)
+
+    # ------------------------------------------------------------------ overlays
+    def hidden_ids(self, stem: str) -> set[int]:
+        """The keypoints marked not visible on ``stem``."""
+        kps = self.tab.state.edits.get(stem).get("keypoints") or {}
+        return {int(k) for k, v in kps.items() if v is None}
+
+    def show_overlay(self, view: FrameView, preview: bool = False) -> None:
+        """The overlays of ``view``; a ``preview`` (while a point is dragged) is not kept as the
+        frame's overlay."""
+        tab = self.tab
+        overlay = overlay_geometry(view, self.layers, tab.state.model, hidden=self.hidden_ids(view.stem))
+        colors = self.blended(overlay, view) if self.opacity < 1.0 else None
+        tab.workspace.show_overlay(overlay, colors, keypoints=self.layers.keypoints, ghosts=self.layers.ghosts,
+                                   line_points=tab.editor.drag_mode is DragMode.LINE_POINTS, ids=self.layers.ids)
+        if not preview:
+            self.overlay = overlay
+
+    def blended(self, overlay: Overlay, view: FrameView) -> dict[str, np.ndarray]:
+        """Segment colours mixed with the image under each end: the overlays at ``opacity``."""
+        image = self.tab.state.image(view.stem)
+        W, H = view.size
+        if image is None:
+            image = blank_canvas(W, H)
+        out = {}
+        for name, seg in overlay.segments.items():
+            if not len(seg):
+                continue
+            uv = np.round(seg.points).astype(int)
+            u, v = np.clip(uv[..., 0], 0, image.shape[1] - 1), np.clip(uv[..., 1], 0, image.shape[0] - 1)
+            under = image[v, u, ::-1].astype(float)  # (N, 2, 3) RGB
+            out[name] = (self.opacity * seg.colors[:, None].astype(float) + (1 - self.opacity) * under).astype(np.uint8)
+        return out
+
+    # ------------------------------------------------------------------ the panel
+    def show_panel(self, view: FrameView) -> None:
+        tab, p = self.tab, self.tab.panels
+        st, frames = tab.state, tab.frames
+        flt, n = frames.filter.value, len(frames.order)
+        position = frames.position() + 1 if frames.index in frames.order else 0
+        update_changed(p.title, content=cards.title_text(view, position, n, frames.outside_filter, flt))
+        update_changed(p.status, content=cards.status_line(view, st.edits.review(view.stem), st.edits.get(view.stem),
+                                                           tab.guard.save_error, tab.app.detection_status(view.stem)))
+        update_changed(p.filter_text, content=cards.filter_text(view.stem, n, frames.outside_filter, flt))
+        update_changed(p.card, content=cards.calibration_card(view, st))
+        self.show_points_list(view)
+        self.show_selected()
+        self.show_progress()
+        tab.clip.show()
+
+    def show_points_list(self, view: FrameView) -> None:
+        rows = cards.point_rows(self.overlay, self.hidden_ids(view.stem))
+        p = self.tab.panels.points
+        if tuple(p.options) != tuple(rows):
+            p.options = rows
+        if p.value not in rows:
+            self.tab.queue.set_value(p, "-")
+
+    def show_selected(self) -> None:
+        tab = self.tab
+        text = cards.selected_text(tab.editor.selected, self.overlay, tab.state.model, tab.editor.place_id)
+        update_changed(tab.panels.selected, content=text)
+
+    def show_progress(self) -> None:
+        st, p = self.tab.state, self.tab.panels
+        done, total = st.review_progress()
+        update_changed(p.progress, value=100.0 * done / total)
+        update_changed(p.progress_text, content=cards.progress_text(done, total, st.edits.counts()))
+
+    def show_zoom(self, view2d) -> None:
+        self.tab.panels.zoom_text.content = cards.zoom_text(view2d.zoom)
+
+
+__all__ = ["Painter"]

@@ -1,0 +1,287 @@
+"""A tab's edits: the selected point, placing a keypoint (shift+click), nudging (arrows), dragging a
+point with the frame recalibrated as it moves, hiding, reviewing, and the tab's own undo trail.
+
+Every edit names the frame it was made on (captured when the pointer went down), so a drag
+released after the tab moved on still lands on its own frame. Edits go through
+:class:`pnlviz.app.state.AppState`, which validates ids and positions; each one is an undo step
+there, and the frames this tab changed are remembered here (:class:`EditTrail`) so that Ctrl+Z
+goes back to them.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from pnlviz.app.cards import listed_id
+from pnlviz.app.modes import DragEvent, DragMode, DragPhase, PointKind, Selection, labels
+from pnlviz.app.panels import KEYPOINT_CHOICES
+from pnlviz.app.state import REVIEW_STATES, EditError
+from pnlviz.app.view2d import snap
+
+SNAP_PX = 8.0  # screen pixels
+CLICK_REACH_PX = 12.0  # a click this close to a point (screen pixels) selects it
+
+
+class EditTrail:
+    """The frames a tab changed, most recent last (``done``), and those it took back
+    (``undone``). ``guard(action)`` runs an edit, showing a refusal (see
+    :class:`pnlviz.app.tabqueue.ActionGuard`)."""
+
+    def __init__(self, state, guard: Callable[[Callable[[], object]], object]):
+        self.state, self.guard = state, guard
+        self.done: list[str] = []
+        self.undone: list[str] = []
+
+    def act(self, stem: str, action: Callable[[], object]) -> None:
+        """An edit of ``stem``: remembered when it changed the frame's history."""
+        before = self.state.history(stem)[0]
+        self.guard(action)
+        if self.state.history(stem)[0] != before:
+            self.done.append(stem)
+            self.undone.clear()
+
+    def undo(self, current: str, goto: Callable[[str], None]) -> None:
+        """Take back this tab's last change (going to its frame with ``goto(stem)``), else the
+        last change of the ``current`` frame."""
+        self._step(self.done, self.undone, self.state.undo, current, goto)
+
+    def redo(self, current: str, goto: Callable[[str], None]) -> None:
+        self._step(self.undone, self.done, self.state.redo, current, goto)
+
+    def _step(self, trail: list[str], other: list[str], step: Callable[[str], bool], current: str,
+              goto: Callable[[str], None]) -> None:
+        stem = trail.pop() if trail else current
+        if stem != current:
+            goto(stem)
+        if self.guard(lambda: step(stem)):
+            other.append(stem)
+
+
+@dataclass
+class Drag:
+    """A point being dragged: the frame it was grabbed on, the point, where it was grabbed and
+    where it is now (image pixels), and whether a preview of it is waiting on the queue."""
+
+    stem: str
+    point: Selection
+    origin: np.ndarray
+    uv: np.ndarray
+    pending: bool = False
+
+    @property
+    def moved(self) -> bool:
+        """A press without a move changes nothing."""
+        return bool(np.hypot(*(self.uv - self.origin)) > 0.05)
+
+
+class Editor:
+    """The edits of one tab (``tab``: its :class:`pnlviz.app.session.Session`, for the frame
+    shown, the settings, the queue and the drawing)."""
+
+    def __init__(self, tab):
+        self.tab = tab
+        self.trail = EditTrail(tab.state, tab.guard)
+        self.selected: Selection | None = None
+        self.place_id = 1
+        self.snap = False
+        self.drag_mode = DragMode.KEYPOINTS
+        self.dragging: Drag | None = None
+        self.grabs = self.releases = 0  # drags started and released in this tab
+        self.live_preview = True  # recalibrate while a point is dragged (off: only on release)
+        self.last_recalibration_ms = 0.0
+
+    # ------------------------------------------------------------------ choices
+    def select(self, selected: Selection | None) -> None:
+        """Select a point, or nothing. Selecting a keypoint or a ghost also chooses its id for
+        placing."""
+        self.selected = selected
+        if selected is not None and selected.is_keypoint:
+            self.choose_id(int(selected.key))
+        self.tab.workspace.select(selected)
+        self.tab.painter.show_selected()
+
+    def choose_id(self, kid: int) -> None:
+        """The id shift+click places."""
+        self.place_id = kid
+        self.tab.queue.set_value(self.tab.panels.kp_id, str(kid))
+
+    def select_listed(self, row) -> None:
+        """A choice in the panel's keypoint list ("12 · visible · 0.8 px")."""
+        kid, overlay = listed_id(row), self.tab.painter.overlay
+        if kid is None:
+            return
+        if overlay is not None and kid in overlay.keypoints.keys:
+            self.select(Selection(PointKind.KEYPOINTS, kid))
+        elif overlay is not None and kid in overlay.ghosts.keys:
+            self.select(Selection(PointKind.GHOSTS, kid))
+        elif 1 <= kid <= 73:  # hidden: choose it, shift+click puts it back
+            self.select(None)
+            self.choose_id(kid)
+
+    def set_place_id(self, value) -> None:
+        self.place_id = int(self.tab.panels.choice(self.tab.panels.kp_id, KEYPOINT_CHOICES, str(self.place_id)))
+
+    def set_drag_mode(self, value) -> None:
+        self.drag_mode = DragMode(self.tab.panels.choice(self.tab.panels.drag_mode, labels(DragMode),
+                                                         DragMode.KEYPOINTS.value))
+        self.selected = None
+        self.tab.show()
+
+    def set_snap(self, value) -> None:
+        self.snap = bool(value)
+
+    # ------------------------------------------------------------------ edits
+    def review(self, status: str, advance: bool = True) -> None:
+        """Record a review status for the frame; with ``advance``, go on to the next frame of the
+        filter (the filter as it is after this review: "unreviewed" moves on to the next one)."""
+        tab = self.tab
+        if status not in REVIEW_STATES + ("clear",):
+            tab.notify("refused", f"review status {str(status)[:20]!r} is not one of the options")
+            return
+        stem = tab.stem
+        self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status))
+        if advance and status != "clear" and tab.state.edits.review(stem) == status:
+            tab.advance_from(stem)
+
+    def hide_selected(self) -> None:
+        if self.selected is None or self.selected.kind is not PointKind.KEYPOINTS:
+            self.tab.notify("nothing to hide", "select a keypoint first (click it)", error=False)
+            return
+        stem, kid = self.tab.stem, int(self.selected.key)
+        self.selected = None
+        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid))
+
+    def place(self, stem: str, uv) -> None:
+        """Put the chosen keypoint id at pixel ``uv`` of ``stem`` (shift+click)."""
+        kid = self.place_id
+        uv = self._snapped(uv)
+        self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv))
+        overlay = self.tab.painter.overlay
+        if stem == self.tab.stem and overlay is not None and kid in overlay.keypoints.keys:
+            self.select(Selection(PointKind.KEYPOINTS, kid))
+
+    def nudge(self, dx: int, dy: int) -> None:
+        """Move the selected point by (dx, dy) image pixels (arrow keys)."""
+        sel, overlay = self.selected, self.tab.painter.overlay
+        if sel is None or overlay is None or sel.kind is PointKind.GHOSTS:
+            return
+        markers = overlay.keypoints if sel.kind is PointKind.KEYPOINTS else overlay.line_points
+        if sel.key not in markers.keys:
+            return
+        uv = markers.uv[markers.keys.index(sel.key)] + [dx, dy]
+        self.release(self.tab.stem, sel, uv, snap_to_pitch=False)
+
+    def release(self, stem: str, point: Selection, uv, snap_to_pitch: bool = True) -> None:
+        """A point of ``stem`` was dropped at pixel ``uv``: the edit goes to ``stem``, the frame
+        the drag began on, whatever this tab shows now."""
+        t0 = time.perf_counter()
+        uv = self._snapped(uv) if snap_to_pitch else np.asarray(uv, float)
+        state, settings = self.tab.state, self.tab.settings
+
+        def edit() -> None:
+            if point.kind is PointKind.LINE_POINTS:
+                state.move_line_point(stem, point.key[0], point.key[1], *uv)
+            else:
+                state.move_keypoint(stem, int(point.key), *uv)
+            state.view(stem, settings)  # recalibrate now, to time it
+            self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
+
+        self.trail.act(stem, edit)
+        if point.kind is PointKind.GHOSTS and stem == self.tab.stem:
+            self.select(Selection(PointKind.KEYPOINTS, int(point.key)))
+
+    def undo(self) -> None:
+        """Take back this tab's last change (going back to its frame), else the frame's last one."""
+        self.trail.undo(self.tab.stem, self._goto_stem)
+
+    def redo(self) -> None:
+        self.trail.redo(self.tab.stem, self._goto_stem)
+
+    def _goto_stem(self, stem: str) -> None:
+        self.tab.goto(self.tab.state.index_of(stem))
+
+    def _snapped(self, uv) -> np.ndarray:
+        """``uv``, or with snapping on, the projected intersection or pitch line it was dropped by."""
+        uv = np.asarray(uv, float)
+        view, overlay, view2d = self.tab.painter.shown, self.tab.painter.overlay, self.tab.view_control.view2d
+        if not self.snap or view is None or view.camera is None or view2d is None:
+            return uv
+        proj, _ = view.camera.project(self.tab.state.model.keypoint_xyz())
+        ok = np.all(np.isfinite(proj), axis=1)
+        segments = overlay.segments.get("refined_pitch") if overlay is not None else None
+        snapped, _ = snap(uv, proj[ok], segments.points if segments is not None else np.zeros((0, 2, 2)),
+                          SNAP_PX / view2d.zoom)
+        return snapped
+
+    # ------------------------------------------------------------------ pointer events
+    def click(self, uv) -> None:
+        """A click beside the points: the nearest point within reach is selected, else nothing."""
+        view2d = self.tab.view_control.view2d
+        best, best_d = None, CLICK_REACH_PX / (view2d.zoom if view2d else 1.0)
+        kinds = (PointKind.KEYPOINTS, PointKind.GHOSTS)
+        kinds += (PointKind.LINE_POINTS,) if self.drag_mode is DragMode.LINE_POINTS else ()
+        for kind in kinds:
+            nodes = self.tab.workspace.points[kind]
+            for key, p in zip(nodes.keys, nodes.uv):
+                d = float(np.hypot(*(p - uv)))
+                if d < best_d:
+                    best, best_d = Selection(kind, key), d
+        self.select(best)
+
+    def on_place(self, uv) -> None:
+        """Shift+click (on viser's event loop): placed on the frame shown when it came."""
+        stem = self.tab.painter.shown_stem
+        self.tab.queue.enqueue(lambda: self.place(stem, uv))
+
+    def on_click(self, uv) -> None:
+        self.tab.queue.enqueue(lambda: self.click(uv))
+
+    def on_pick(self, point: Selection) -> None:
+        self.tab.queue.enqueue(lambda: self.select(point))
+
+    def drag(self, event: DragEvent) -> None:
+        """A point is dragged (called on viser's event loop, in order): the point follows the hand
+        on screen at once; the frame is recalibrated as it moves (the latest position only,
+        nothing saved) and for good when it is released."""
+        enqueue, uv = self.tab.queue.enqueue, np.asarray(event.uv, float)
+        if event.phase is DragPhase.START:
+            self.grabs += 1
+            self.dragging = Drag(self.tab.painter.shown_stem, event.point, uv, uv)
+            enqueue(lambda: self.select(event.point))
+            return
+        drag = self.dragging
+        if drag is None or drag.point.key != event.key:
+            return
+        drag.uv = uv
+        if event.phase is DragPhase.UPDATE and not drag.pending and self.live_preview:
+            drag.pending = True
+            enqueue(self._preview)
+        elif event.phase is DragPhase.END:
+            self.dragging = None
+            self.releases += 1
+            if drag.moved:
+                enqueue(lambda: self.release(drag.stem, event.point, drag.uv))
+            else:
+                enqueue(self.tab.show)
+
+    def _preview(self) -> None:
+        """The frame as it would be with the dragged keypoint where it is now (not kept)."""
+        drag = self.dragging
+        if drag is None:
+            return
+        drag.pending = False
+        if drag.point.kind is not PointKind.KEYPOINTS or drag.stem != self.tab.stem:
+            return  # a ghost becomes a keypoint (and a line point changes no keypoint) on release
+        try:
+            view = self.tab.state.preview(drag.stem, self.tab.settings, int(drag.point.key), *drag.uv)
+        except EditError:
+            return
+        if self.dragging is drag:  # still dragging: show the frame as it would be
+            self.tab.painter.show_overlay(view, preview=True)
+
+
+__all__ = ["CLICK_REACH_PX", "SNAP_PX", "Drag", "EditTrail", "Editor"]

@@ -1,0 +1,106 @@
+"""The app's modes and pointer events as types: which view a tab shows, its filter and sort, what
+a drag moves, which kind of point is selected or dragged, and a drag's phase. Values from the
+browser (a dropdown's text, viser's phase names) become these once, where they come in; the
+value of each dropdown option is the text the user sees in it.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class Mode(enum.Enum):
+    """The view a tab shows: the frame as an image, or the pitch and the camera in 3D."""
+
+    IMAGE = "image"
+    THREE_D = "3d"
+
+    @property
+    def other(self) -> Mode:
+        return Mode.THREE_D if self is Mode.IMAGE else Mode.IMAGE
+
+
+class Filter(enum.Enum):
+    """Which frames a tab steps through (the values are the options of the "filter" dropdown)."""
+
+    ALL = "all"
+    FAILED = "failed"  # calibrated, with no camera
+    UNREVIEWED = "unreviewed"
+    ACCEPTED = "accepted"
+    CORRECTED = "corrected"
+    REJECTED = "rejected"
+
+    @property
+    def review(self) -> str | None:
+        """The review status this filter keeps (None: it is not a filter by status)."""
+        return self.value if self in (Filter.ACCEPTED, Filter.CORRECTED, Filter.REJECTED) else None
+
+
+class Sort(enum.Enum):
+    """The order a tab steps through its frames in (the values are the "sort" dropdown's options)."""
+
+    INDEX = "index"
+    JAC5 = "JaC@5 (worst first)"
+    RESIDUAL = "residual (worst first)"
+
+
+class DragMode(enum.Enum):
+    """What a drag on the image moves (the values are the "drag" dropdown's options)."""
+
+    KEYPOINTS = "keypoints"
+    LINE_POINTS = "line points"
+
+
+class PointKind(enum.StrEnum):
+    """The points drawn on the image: observed keypoints, ghosts of the missing ones, points of
+    annotated lines. (A string enum: it names the point nodes and overlay layers.)"""
+
+    KEYPOINTS = "keypoints"
+    GHOSTS = "ghosts"
+    LINE_POINTS = "line_points"
+
+
+class DragPhase(enum.Enum):
+    """viser's drag phases: the press, the moves, the release (or a cancel)."""
+
+    START = "start"
+    UPDATE = "update"
+    END = "end"
+
+
+@dataclass(frozen=True)
+class Selection:
+    """A selected point: a keypoint or ghost id, or for a line point (class name, index)."""
+
+    kind: PointKind
+    key: object
+
+    @property
+    def is_keypoint(self) -> bool:
+        """A keypoint or a ghost: it has a keypoint id."""
+        return self.kind in (PointKind.KEYPOINTS, PointKind.GHOSTS)
+
+
+@dataclass(frozen=True, eq=False)
+class DragEvent:
+    """A point dragged: which one, the phase, and the image pixel it is dragged to."""
+
+    kind: PointKind
+    key: object
+    phase: DragPhase
+    uv: np.ndarray
+
+    @property
+    def point(self) -> Selection:
+        return Selection(self.kind, self.key)
+
+
+def labels(options: type[enum.Enum]) -> tuple[str, ...]:
+    """The texts of a dropdown whose options are ``options``' values, in their order."""
+    return tuple(member.value for member in options)
+
+
+__all__ = ["DragEvent", "DragMode", "DragPhase", "Filter", "Mode", "PointKind", "Selection", "Sort", "labels"]

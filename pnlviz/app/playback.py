@@ -1,0 +1,126 @@
+"""A tab's clip timeline (video datasets): the frames of the clip it is in, each one's error in
+the strip under the clip slider, jumps to the worst frames, and playing the clip.
+
+What a clip is and the strip's pixels are :mod:`pnlviz.app.timeline`'s (no GUI there); this part
+follows the tab's frame through them and plays on the tab's queue.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from pnlviz.app.cards import clip_text
+from pnlviz.app.timeline import frame_error, strip_image, worst_frames
+from pnlviz.app.workspace import update_changed
+
+PLAY_INTERVAL = 0.2  # seconds between frames while a clip plays
+
+
+class ClipPlayer:
+    """The clip of one tab (``tab``: its :class:`pnlviz.app.session.Session`, for the frame shown,
+    the settings, the queue and the panel). ``clips``: ``{clip: [dataset indices in frame
+    order]}`` of the dataset."""
+
+    def __init__(self, tab, clips: dict[str, list[int]]):
+        self.tab, self.clips = tab, clips
+        self.clip_of = {i: name for name, members in clips.items() for i in members}
+        self.playing = False
+        self._worst = 0  # how far "next worst" has gone down the current clip's list
+
+    def members(self) -> list[int]:
+        """Dataset indices of the frames of the tab's clip, in frame order ([] outside a clip)."""
+        name = self.clip_of.get(self.tab.index)
+        return self.clips.get(name, []) if name is not None else []
+
+    def errors(self) -> list[float]:
+        """Each clip frame's error (:func:`pnlviz.app.timeline.frame_error`), from the views already
+        computed: a lookup per clip frame, not a pass over every cached frame."""
+        st = self.tab.state
+        return [frame_error(st.cached_view(st.stems[i], self.tab.settings)) for i in self.members()]
+
+    def show(self) -> None:
+        """The clip line, the strip and the clip slider of the panel (a dataset without clips
+        has none)."""
+        p = self.tab.panels
+        if p.clip_text is None:
+            return
+        members = self.members()
+        if not members:
+            update_changed(p.clip_text, content="this frame is not part of a clip")
+            return
+        pos = members.index(self.tab.index)
+        errors = self.errors()
+        update_changed(p.clip_text, content=clip_text(self.clip_of[self.tab.index], pos, errors, self.playing))
+        strip = strip_image(errors, pos)
+        if p.clip_strip.image is None or not np.array_equal(p.clip_strip.image, strip):
+            p.clip_strip.image = strip
+        p.clip_slider.max = max(2, len(members))
+        self.tab.queue.set_value(p.clip_slider, pos + 1)
+
+    def slider_moved(self, value) -> None:
+        members = self.members()
+        if not members:
+            return
+        try:
+            pos = int(value) - 1
+        except (TypeError, ValueError, OverflowError):
+            pos = 0
+        pos = int(np.clip(pos, 0, len(members) - 1))
+        if members[pos] != self.tab.index:
+            self.tab.goto(members[pos])
+
+    def jump_worst(self, restart: bool = False) -> None:
+        """To the clip's worst frame (``restart``), else the next worse one after the last jump."""
+        members = self.members()
+        ranked = worst_frames(self.errors())
+        if not ranked:
+            self.tab.notify("nothing yet", "no frame of this clip is calibrated yet", error=False)
+            return
+        self._worst = 0 if restart else (self._worst + 1) % len(ranked)
+        self.tab.goto(members[ranked[self._worst]])
+
+    # ------------------------------------------------------------------ playing
+    def play(self) -> None:
+        """Step through the clip, about 5 frames a second, until its end or a pause (navigating
+        meanwhile moves where it plays from)."""
+        if self.playing or not self.members():
+            return
+        self.playing = True
+        threading.Thread(target=self._loop, name="pnlviz-play", daemon=True).start()
+
+    def pause(self) -> None:
+        self.playing = False
+        self.show()
+
+    def toggle(self) -> None:
+        self.pause() if self.playing else self.play()
+
+    def advance(self) -> None:
+        """One step of the playing clip: the next frame, or at the clip's end (or paused), stop."""
+        members = self.members()
+        if not members or self.tab.index == members[-1] or not self.playing:
+            self.playing = False
+            self.show()
+        else:
+            self.tab.goto(members[members.index(self.tab.index) + 1])
+
+    def _loop(self) -> None:
+        while self.playing and not self.tab.queue.closed:
+            t0 = time.monotonic()
+            done = threading.Event()
+
+            def step(done: threading.Event = done) -> None:
+                try:
+                    self.advance()
+                finally:
+                    done.set()
+
+            self.tab.queue.enqueue(step)
+            done.wait(5.0)
+            time.sleep(max(0.0, PLAY_INTERVAL - (time.monotonic() - t0)))
+
+
+__all__ = ["PLAY_INTERVAL", "ClipPlayer"]
