@@ -98,20 +98,72 @@ def _require_matches(args, summary, n_cameras: int) -> None:
                                               f"frames, {n_cameras} cameras read): nothing to evaluate")
 
 
-def run_eval(args) -> int:
-    from pnlviz.data import DataError
-
+def _args_problem(args) -> str | None:
+    """What is wrong with the options together, in one line (None: nothing)."""
     if args.gt is None and args.homographies is None:
-        print("error: give --gt (with --pred) and/or --homographies", file=sys.stderr)
-        return 2
+        return "give --gt (with --pred) and/or --homographies"
     if args.gt is not None and args.pred is None:
-        print("error: --gt needs --pred (the predicted cameras)", file=sys.stderr)
-        return 2
+        return "--gt needs --pred (the predicted cameras)"
     if args.homographies is not None and args.pred_homographies is None and args.pred is None:
-        print("error: --homographies needs --pred-homographies or --pred cameras", file=sys.stderr)
-        return 2
+        return "--homographies needs --pred-homographies or --pred cameras"
     if any(t <= 0 for t in args.thresholds):
-        print("error: thresholds must be positive", file=sys.stderr)
+        return "thresholds must be positive"
+    return None
+
+
+def _eval_soccernet(args, cameras: dict, progress: bool) -> None:
+    """The SoccerNet score of ``cameras`` against the annotations of ``--gt``, printed (and
+    written to ``--csv``)."""
+    from pnlviz.commands.common import open_input_dataset
+    from pnlviz.metrics.soccernet import evaluate_dataset
+
+    gt = open_input_dataset(args.gt)
+    summary = evaluate_dataset(gt, cameras, args.thresholds, progress=progress,
+                               count_unknown=not args.ignore_unknown, workers=max(1, args.workers),
+                               on_error=_report)
+    _require_matches(args, summary, len(cameras))
+    print(f"SoccerNet camera calibration (960x540): {args.gt} vs {args.pred}")
+    print(summary.table())
+    skipped = len(summary.skipped_annotations)
+    if skipped:
+        print(f"{skipped} annotation(s) skipped (not counted)")
+    if summary.unmatched_cameras:
+        print(f"{len(summary.unmatched_cameras)} camera(s) without an annotation (ignored)")
+    if args.csv is not None:
+        _write_csv(args.csv, summary.rows())
+        print(f"wrote {args.csv} ({summary.n_frames} frames)")
+
+
+def _eval_homographies(args, cameras: dict | None, progress: bool) -> None:
+    """The WC14 homography metrics of ``--pred-homographies`` (else of the homographies of
+    ``cameras``) against ``--homographies``, printed."""
+    from pnlviz.data import DataError, read_homographies
+    from pnlviz.metrics.homography import evaluate_homographies, homography_from_camera
+
+    gt_h = read_homographies(args.homographies)
+    if args.pred_homographies is not None:
+        pred_h = _read_homographies_leniently(args.pred_homographies)
+        what = args.pred_homographies
+    else:
+        pred_h = {}
+        for stem, cam in cameras.items():
+            try:
+                pred_h[stem] = homography_from_camera(cam, source_size=args.camera_size)
+            except (DataError, ValueError) as e:
+                _report(f"camera_{stem}.json: {e}")
+        what = args.pred
+    if not any(stem in pred_h for stem in gt_h):
+        raise DataError(os.fspath(what), f"no homography matches a frame of {args.homographies} "
+                                         f"({len(gt_h)} frames, {len(pred_h)} homographies): nothing to evaluate")
+    hs = evaluate_homographies(gt_h, pred_h, progress=progress)
+    print(f"Homography metrics (1280x720 image, 115x74 yd template): {args.homographies} vs {what}")
+    print(hs.table())
+
+
+def run_eval(args) -> int:
+    problem = _args_problem(args)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     if args.csv is not None:
         from pnlviz.data import check_output
@@ -125,44 +177,7 @@ def run_eval(args) -> int:
 
         cameras, _ = read_cameras(args.pred, on_error=_report)
     if args.gt is not None:
-        from pnlviz.commands.common import open_input_dataset
-        from pnlviz.metrics.soccernet import evaluate_dataset
-
-        gt = open_input_dataset(args.gt)
-        summary = evaluate_dataset(gt, cameras, args.thresholds, progress=progress,
-                                   count_unknown=not args.ignore_unknown, workers=max(1, args.workers),
-                                   on_error=_report)
-        _require_matches(args, summary, len(cameras))
-        print(f"SoccerNet camera calibration (960x540): {args.gt} vs {args.pred}")
-        print(summary.table())
-        skipped = len(summary.skipped_annotations)
-        if skipped:
-            print(f"{skipped} annotation(s) skipped (not counted)")
-        if summary.unmatched_cameras:
-            print(f"{len(summary.unmatched_cameras)} camera(s) without an annotation (ignored)")
-        if args.csv is not None:
-            _write_csv(args.csv, summary.rows())
-            print(f"wrote {args.csv} ({summary.n_frames} frames)")
+        _eval_soccernet(args, cameras, progress)
     if args.homographies is not None:
-        from pnlviz.data import read_homographies
-        from pnlviz.metrics.homography import evaluate_homographies, homography_from_camera
-
-        gt_h = read_homographies(args.homographies)
-        if args.pred_homographies is not None:
-            pred_h = _read_homographies_leniently(args.pred_homographies)
-            what = args.pred_homographies
-        else:
-            pred_h = {}
-            for stem, cam in cameras.items():
-                try:
-                    pred_h[stem] = homography_from_camera(cam, source_size=args.camera_size)
-                except (DataError, ValueError) as e:
-                    _report(f"camera_{stem}.json: {e}")
-            what = args.pred
-        if not any(stem in pred_h for stem in gt_h):
-            raise DataError(os.fspath(what), f"no homography matches a frame of {args.homographies} "
-                                             f"({len(gt_h)} frames, {len(pred_h)} homographies): nothing to evaluate")
-        hs = evaluate_homographies(gt_h, pred_h, progress=progress)
-        print(f"Homography metrics (1280x720 image, 115x74 yd template): {args.homographies} vs {what}")
-        print(hs.table())
+        _eval_homographies(args, cameras, progress)
     return 0

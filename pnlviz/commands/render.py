@@ -30,15 +30,10 @@ def add_render_parser(sub) -> None:
 
 
 def run_render(args) -> int:
-    import cv2
-    from tqdm import tqdm
-
     from pnlviz.commands.common import open_input_dataset, print_skipped
-    from pnlviz.data import DataError, check_output
+    from pnlviz.data import check_output
     from pnlviz.data.layout import clips
-    from pnlviz.geometry.camera import Camera
     from pnlviz.metrics.soccernet import read_cameras
-    from pnlviz.viz import cv_text, draw_pitch
 
     if args.out.suffix.lower() not in (".mp4", ".m4v", ".mov"):
         print(f"error: --out {args.out} must end in .mp4", file=sys.stderr)
@@ -59,10 +54,33 @@ def run_render(args) -> int:
     if not stems:
         print(f"{args.video or args.data}: no frames", file=sys.stderr)
         return 1
+    tmp = args.out.with_name(f".{args.out.stem}.tmp{args.out.suffix}")
+    drawn, skipped, wrote = _render_frames(args, ds, cameras, stems, fps, tmp)
+    if wrote is None:
+        return 2
+    if not wrote:
+        print(f"error: no frame could be read from {args.video or args.data}", file=sys.stderr)
+        return 1
+    tmp.replace(args.out)
+    print(f"wrote {args.out}: {len(stems) - len(skipped)} frames at {fps:g} fps, the pitch drawn on {drawn}")
+    print_skipped(skipped, prefix="  skipped: ")
+    return 0
+
+
+def _render_frames(args, ds, cameras: dict, stems: list[str], fps: float, tmp) -> tuple[int, list[str], bool | None]:
+    """The frames ``stems`` with the pitch of their camera drawn, written to the video ``tmp``:
+    (frames with a camera, the frames that could not be read, whether a frame was written; None
+    when no video can be written)."""
+    import cv2
+    from tqdm import tqdm
+
+    from pnlviz.data import DataError
+    from pnlviz.geometry.camera import Camera
+    from pnlviz.viz import cv_text, draw_pitch
+
     writer = None
     drawn = 0
     skipped: list[str] = []
-    tmp = args.out.with_name(f".{args.out.stem}.tmp{args.out.suffix}")
     for stem in tqdm(stems, desc="render", unit="frame", disable=args.no_progress or None):
         try:
             img = ds.image(stem)
@@ -74,7 +92,7 @@ def run_render(args) -> int:
             writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (w, h))
             if not writer.isOpened():
                 print(f"error: OpenCV cannot write {args.out} (no mp4 encoder)", file=sys.stderr)
-                return 2
+                return drawn, skipped, None
             size = (w, h)
         if (w, h) != size:
             img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
@@ -85,11 +103,6 @@ def run_render(args) -> int:
         else:
             cv2.putText(img, cv_text("no camera"), (12, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 255), 2, cv2.LINE_AA)
         writer.write(img)
-    if writer is None:
-        print(f"error: no frame could be read from {args.video or args.data}", file=sys.stderr)
-        return 1
-    writer.release()
-    tmp.replace(args.out)
-    print(f"wrote {args.out}: {len(stems) - len(skipped)} frames at {fps:g} fps, the pitch drawn on {drawn}")
-    print_skipped(skipped, prefix="  skipped: ")
-    return 0
+    if writer is not None:
+        writer.release()
+    return drawn, skipped, writer is not None
