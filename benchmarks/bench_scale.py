@@ -52,7 +52,7 @@ def _same_bytes(a: Path, b: Path) -> bool:
 
 
 def _same_export(a: Path, b: Path) -> bool:
-    from pnlviz.app.export import read_export_zip
+    from pnlviz.pipeline.export import read_export_zip
 
     return read_export_zip(a) == read_export_zip(b)
 

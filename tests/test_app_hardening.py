@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from pnlviz import EXAMPLES_DIR
-from pnlviz.app.edits import EditsFolderError, EditsStore
 from pnlviz.app.modes import DragEvent, DragPhase, PointKind
 from pnlviz.app.state import AppState, EditError
+from pnlviz.data.edits import EditsFolderError, EditsStore
 from helpers import free_port
 
 
@@ -104,7 +104,7 @@ def test_an_unwritable_edits_folder_is_refused_at_start(data, tmp_path, capsys):
 
 
 def test_a_failed_write_is_shown_and_changes_nothing(data, monkeypatch, serve):
-    import pnlviz.app.edits as edits_module
+    import pnlviz.data.edits as edits_module
     app = serve(data)
     st = app.state
     tab = app.session()

@@ -5,12 +5,14 @@ import shutil
 
 import numpy as np
 import pytest
+from helpers import free_port
 
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app.modes import DragEvent, DragPhase, PointKind
 from pnlviz.app.overlay import Layers, render
-from pnlviz.app.state import AppState, Settings, default_edits_dir
+from pnlviz.app.state import AppState, Settings
 from pnlviz.calib.calibrate import CalibParams
+from pnlviz.data.edits import default_edits_dir
 
 
 @pytest.fixture()
@@ -51,7 +53,7 @@ def test_review_and_edits_autosave_and_survive_a_restart(data):
     before = {p.name: p.read_bytes() for p in data.iterdir() if p.is_file()}
     st = AppState(data)
     st.set_review("00000", "accepted")
-    ann = st.annotation("00001")
+    ann = st.reader.annotation("00001")
     moved = {k: v.copy() for k, v in ann.items()}
     name = next(iter(moved))
     moved[name][0] += [0.01, 0.0]
@@ -63,7 +65,7 @@ def test_review_and_edits_autosave_and_survive_a_restart(data):
     # a new server process sees the same state
     st2 = AppState(data)
     assert st2.edits.review("00000") == "accepted" and st2.edits.review("00001") == "corrected"
-    np.testing.assert_allclose(st2.annotation("00001")[name], moved[name])
+    np.testing.assert_allclose(st2.reader.annotation("00001")[name], moved[name])
     assert st2.review_progress() == (2, len(st2.stems))
     # the source data is untouched and no temporary file is left behind
     assert {p.name: p.read_bytes() for p in data.iterdir() if p.is_file()} == before
@@ -153,19 +155,20 @@ def test_keypoint_edits_recalibrate_undo_redo_and_persist(data):
 
 def test_line_point_edit_goes_into_the_annotation(data):
     st = AppState(data)
-    ann = st.annotation("00001")
+    ann = st.reader.annotation("00001")
     name = next(iter(ann))
     st.move_line_point("00001", name, 0, 100.0, 200.0)
-    np.testing.assert_allclose(st.annotation("00001")[name][0], [100 / 959, 200 / 539])
+    np.testing.assert_allclose(st.reader.annotation("00001")[name][0], [100 / 959, 200 / 539])
     assert st.undo("00001")
-    np.testing.assert_allclose(st.annotation("00001")[name][0], ann[name][0])
+    np.testing.assert_allclose(st.reader.annotation("00001")[name][0], ann[name][0])
 
 
 def test_export_holds_the_edit_and_only_reviewed_frames(data, tmp_path):
     import zipfile
 
-    from pnlviz.app.export import export_zip_bytes, write_export
+    from pnlviz.app.export import export_zip_bytes
     from pnlviz.cli import main
+    from pnlviz.pipeline.export import write_export
 
     st = AppState(data)
     st.set_review("00000", "accepted")
@@ -193,7 +196,7 @@ def test_export_holds_the_edit_and_only_reviewed_frames(data, tmp_path):
     frames = json.loads((folder / "manifest.json").read_text())["frames"]
     assert len(frames) == len(st.stems) and frames["bad"]["exported"] is False and "bad.json" in frames["bad"]["error"]
     assert not (folder / "keypoints" / "bad.json").exists() and (folder / "keypoints" / "00001.json").exists()
-    assert len(write_export(st, tmp_path / "again")) == 2
+    assert len(write_export(st.reader, tmp_path / "again")) == 2
     assert main(["export", "--data", str(data), "--out", str(data)]) == 2  # never over the source
 
 
@@ -261,7 +264,7 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, m
     annotated = st.view("00000").observations
     for stem in ("solo", "00000"):
         st.run_detector(stem)
-    assert not st.needs_detection("solo") and len(st.detections_for("solo").keypoints) >= 4
+    assert not st.needs_detection("solo") and len(st.reader.detections("solo").keypoints) >= 4
     import pnlviz.calib.frame as frame_module
     from pnlviz.app.cards import calibration_card
 

@@ -206,8 +206,8 @@ def test_undo_history_is_saved_with_the_edits_and_outlives_a_restart(data):
 
 
 def test_a_damaged_history_is_refused_like_any_damaged_record(tmp_path):
-    from pnlviz.app.edits import HISTORY_LIMIT, validate_history
     from pnlviz.data import DataError
+    from pnlviz.data.edits import HISTORY_LIMIT, validate_history
 
     ok = validate_history({"undo": [{"review": None}, {"keypoints": {"5": [1.0, 2.0]}}], "redo": []}, "x")
     assert ok == {"undo": [{"review": None}, {"keypoints": {"5": [1.0, 2.0]}}], "redo": []}
@@ -276,6 +276,7 @@ def test_a_released_drag_reuses_its_preview_and_nothing_else(data):
     """The calibration shown while a point moves is the one its release keeps (not computed twice),
     and it is the one a fresh computation gives; a release elsewhere is computed anew."""
     from pnlviz.app.state import AppState
+    from pnlviz.pipeline import frame_view
 
     with AppState(data) as st:
         settings = st.default_settings
@@ -285,7 +286,7 @@ def test_a_released_drag_reuses_its_preview_and_nothing_else(data):
         st.move_keypoint("00000", kid, x + 4.0, y + 2.0)
         kept = st.view("00000", settings)
         assert kept is shown
-        fresh = st._compute("00000", settings)
+        fresh = frame_view(st.reader, "00000", settings)
         np.testing.assert_allclose(kept.result.camera.C, fresh.result.camera.C)
         np.testing.assert_allclose(kept.result.camera.R, fresh.result.camera.R)
         elsewhere = st.preview("00000", settings, kid, x + 9.0, y)

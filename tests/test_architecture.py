@@ -27,16 +27,19 @@ ALLOWED = {
     "pnlviz.synth": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data"},
     "pnlviz.detect": {"pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.labels", "pnlviz.synth"},
     "pnlviz.viz": {"pnlviz.field", "pnlviz.geometry"},
+    "pnlviz.pipeline": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.calib",
+                        "pnlviz.metrics"},
     "pnlviz.app": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.calib",
-                   "pnlviz.metrics", "pnlviz.viz"},  # not detect: the app never imports torch
+                   "pnlviz.metrics", "pnlviz.viz", "pnlviz.pipeline"},  # not detect: the app never imports torch
     "pnlviz.commands": {"pnlviz", "pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data",
                         "pnlviz.labels", "pnlviz.metrics", "pnlviz.calib", "pnlviz.synth", "pnlviz.detect",
-                        "pnlviz.viz", "pnlviz.app"},
+                        "pnlviz.viz", "pnlviz.pipeline", "pnlviz.app"},
     "pnlviz.cli": {"pnlviz.commands"},
     "pnlviz.__main__": {"pnlviz.commands"},
 }
 #: rooms whose functions are the engine (the app's GUI and the commands' argument handling aside)
-ENGINE = ("field", "geometry", "data", "labels", "metrics", "calib", "synth", "detect", "viz.py", "conventions.py")
+ENGINE = ("field", "geometry", "data", "labels", "metrics", "calib", "synth", "detect", "pipeline", "viz.py",
+          "conventions.py")
 MAX_FUNCTION_LINES = 60
 MAX_REPEATED_LINES = 10
 

@@ -13,6 +13,7 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 from helpers import copy_sample_frames  # noqa: E402
+
 from pnlviz.cli import main  # noqa: E402
 from pnlviz.data.zipwriter import journal_path  # noqa: E402
 
@@ -100,8 +101,8 @@ def test_export_on_the_cluster_writes_the_local_files(tmp_path, shared_dir, clus
     """`pnlviz export` on the cluster: the workers open the data and the edits read-only where they
     are; every label file is the local run's, byte for byte. A second run on the same cluster sees
     an edit made in between (the workers do not keep the edits they read before)."""
-    from pnlviz.app.export import read_export_zip
     from pnlviz.app.state import AppState
+    from pnlviz.pipeline.export import read_export_zip
 
     data = tmp_path / "set"
     data.mkdir()

@@ -1,23 +1,35 @@
 """``pnlviz calibrate``: a camera for every frame of a dataset, from its annotations or from
-PnLCalib-format detections, written as a flat zip of SoccerNet camera JSON at 960x540 that the
-official evaluator accepts."""
+PnLCalib-format detections (or both, ``--source``), with an edits folder's corrections
+(``--edits``), written as a flat zip of SoccerNet camera JSON at 960x540 that the official
+evaluator accepts. The frames are read as the app reads them (:class:`pnlviz.pipeline.FrameReader`)
+and run through :mod:`pnlviz.commands.batch`."""
 
 from __future__ import annotations
 
+import contextlib
 import json
-import os
 import sys
-import time
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
+from pnlviz.commands.batch import BatchJob
 from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
 
-#: how the summary names each failure code
-FAILURE_LABELS = {"too_few_keypoints": "too few keypoints", "degenerate": "degenerate geometry",
-                  "no_inliers": "no keypoint agrees with the camera", "residual": "residual above the limit",
-                  "no_input": "nothing to calibrate from", "internal": "internal error",
-                  "bad_input": "unreadable input", "bad_output": "not written"}
+#: how the summary names the engine's failure codes, in the order of
+#: :data:`pnlviz.calib.calibrate.FAILURE_CODES` (see :func:`failure_words`)
+_ENGINE_WORDS = ("too few keypoints", "degenerate geometry", "no keypoint agrees with the camera",
+                 "residual above the limit")
+
+
+def failure_words() -> dict[str, str]:
+    """How the summary names each failure code: the engine's (:data:`pnlviz.calib.calibrate.FAILURE_CODES`,
+    then :func:`pnlviz.calib.frame.calibrate_frame`'s "no_input" and "internal") and this
+    command's own ("bad_input": unreadable files, "bad_output": a camera not written)."""
+    from pnlviz.calib.calibrate import FAILURE_CODES
+
+    return {**dict(zip(FAILURE_CODES, _ENGINE_WORDS)), "no_input": "nothing to calibrate from",
+            "internal": "internal error", "bad_input": "unreadable input", "bad_output": "not written"}
 
 
 def add_calibrate_parser(sub) -> None:
@@ -34,6 +46,12 @@ def add_calibrate_parser(sub) -> None:
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip (default: use the annotations); "
                                                    "the calibration settings recorded beside it by pnlviz detect "
                                                    "(preds.json) apply")
+    p.add_argument("--source", choices=("annotation", "detections", "both"), default=None,
+                   help="what the frames are calibrated from: their annotations, their --detections, or both merged "
+                        "(default: detections when --detections is given, else annotation); a frame without the "
+                        "annotation uses its detections")
+    p.add_argument("--edits", type=Path, help="an edits folder of the app (pnlviz serve): its keypoint and annotation "
+                                              "corrections apply (read only; default: none)")
     p.add_argument("--out", required=True, type=Path, help="output camera zip")
     p.add_argument("--no-pnl", action="store_true", help="skip the PnL refinement (and the focal/k1 refinement)")
     p.add_argument("--alpha", type=float, default=DEFAULT_ALPHA,
@@ -51,30 +69,36 @@ def add_calibrate_parser(sub) -> None:
                         "left beside it) are kept, only the missing ones are calibrated")
     p.add_argument("--workers", type=int, default=1, help="worker processes (0: all cores)")
     p.add_argument("--report", type=Path, help="also write one JSON line per frame with the evidence")
-    from pnlviz.commands.cluster import add_cluster_args
+    from pnlviz.commands.batch import add_cluster_args
 
     add_cluster_args(p)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_calibrate)
 
 
+def source_of(args) -> str:
+    """``--source``, else detections when there are ``--detections``, else the annotations."""
+    return args.source or ("detections" if args.detections is not None else "annotation")
+
+
 def frame_settings(args, detection_settings: dict | None = None):
-    """The engine's settings: the detector's (recorded beside its detections in ``preds.json``)
-    for frames calibrated from detections, then the command-line flags."""
+    """The engine's settings: the source, the detector's settings (recorded beside its detections
+    in ``preds.json``) for frames calibrated from detections, then the command-line flags."""
     from pnlviz.calib.frame import FrameSettings
 
-    return FrameSettings(pnl=not args.no_pnl, alpha=args.alpha, source="annotation",
+    return FrameSettings(pnl=not args.no_pnl, alpha=args.alpha, source=source_of(args),
                          detection_settings=dict(detection_settings or {}),
                          overrides={"refine_k1": False} if args.no_k1 else {})
 
 
-def calibrate_stem(ds, stem: str, prediction, size, settings) -> tuple[str, dict | None, dict]:
-    """One frame: read its inputs, run the engine's one path (:func:`pnlviz.calib.frame.calibrate_frame`):
-    (stem, camera dict at 960x540 or None, report). Never raises on bad input."""
+def calibrate_stem(reader, stem: str, settings) -> tuple[str, dict | None, dict]:
+    """One frame: read its inputs (:func:`frame_inputs`), run the engine's one path
+    (:func:`pnlviz.calib.frame.calibrate_frame`): (stem, camera dict at 960x540 or None, report).
+    Never raises on bad input."""
     from pnlviz.calib.frame import calibrate_frame
 
     report: dict = {"stem": stem}
-    inputs, problem = read_frame_inputs(ds, stem, prediction, size)
+    inputs, problem = frame_inputs(reader, stem)
     if inputs is None:
         report.update(problem)
         return stem, None, report
@@ -97,23 +121,31 @@ def calibrate_stem(ds, stem: str, prediction, size, settings) -> tuple[str, dict
     return stem, res.camera.scaled(*EVAL_SIZE).to_soccernet(), report
 
 
-def read_frame_inputs(ds, stem: str, prediction, size) -> tuple[object | None, dict | None]:
-    """The :class:`pnlviz.calib.frame.FrameInputs` of one frame (its image's size, else ``size``;
-    its annotation unless it has detections), or None with the report's failure fields."""
-    from pnlviz.calib.frame import FrameInputs
-    from pnlviz.data import DataError
+def frame_inputs(reader, stem: str) -> tuple[object | None, dict | None]:
+    """The :class:`pnlviz.calib.frame.FrameInputs` of one frame as :class:`pnlviz.pipeline.FrameReader`
+    reads it, or None with the report's failure fields: a frame whose files (its image included)
+    cannot be read is skipped, one with nothing to calibrate from fails."""
+    read = reader.read(stem)
+    problem = read.image_error or read.error
+    if problem is not None:
+        return None, {"failure": f"skipped: {problem}", "failure_code": "bad_input"}
+    inputs = read.inputs
+    if inputs.annotation is None and inputs.detections is None and not inputs.keypoint_edits:
+        return None, {"failure": "no annotation" if reader.predictions is None else "no detections for this frame",
+                      "failure_code": "no_input"}
+    return inputs, None
 
-    try:
-        size = ds.image_size(stem) or size if stem in ds else size
-        ann = ds.annotation(stem) if prediction is None and stem in ds else None
-    except DataError as exc:
-        return None, {"failure": f"skipped: {exc}", "failure_code": "bad_input"}
-    if prediction is None and ann is None:
-        return None, {"failure": "no annotation", "failure_code": "no_input"}
-    return FrameInputs(size, ann, prediction), None
+
+def frame_reader(ds, predictions, size, source: str, edits):
+    """How the command reads frames: the annotations only when the source uses them, no
+    reference cameras, the corrections of ``edits`` (an edits folder opened read-only, or None)."""
+    from pnlviz.pipeline import FrameReader
+
+    return FrameReader(ds, predictions=predictions, edits=edits, size=size, annotations=source != "detections",
+                       reference_cameras=False)
 
 
-def temporal_pass(ds, predictions, size, settings, stems: list[str], results: dict, progress: bool = True) -> dict:
+def temporal_pass(reader, settings, stems: list[str], results: dict, progress: bool = True) -> dict:
     """``--temporal``: per clip (:func:`pnlviz.data.layout.clips`), the per-frame cameras in
     ``results`` (``{stem: (camera dict at 960x540 | None, report)}``) replaced by the broadcast
     model of their shot (:func:`pnlviz.calib.temporal.calibrate_clip`); reports gain the clip, the
@@ -123,24 +155,17 @@ def temporal_pass(ds, predictions, size, settings, stems: list[str], results: di
     from tqdm import tqdm
 
     from pnlviz.calib.temporal import calibrate_clip_frames, image_changes
-    from pnlviz.data import DataError
     from pnlviz.data.layout import clips
     from pnlviz.field import load_field_model
     from pnlviz.geometry.camera import Camera
 
-    def image_or_none(stem):
-        try:
-            return ds.image(stem)
-        except DataError:
-            return None
-
+    ds = reader.ds
     model = load_field_model()
     out = dict(results)
     groups = clips(stems)
     bar = tqdm(total=len(stems), desc="temporal", unit="frame", disable=not progress or None)
     for clip, members in groups.items():
-        inputs = [read_frame_inputs(ds, s, None if predictions is None else predictions.get(s), size)[0]
-                  for s in members]
+        inputs = [frame_inputs(reader, s)[0] for s in members]
         sizes = {tuple(i.size) for i in inputs if i is not None}
         if len(sizes) != 1:  # nothing to fit, or frames of different sizes: left per-frame
             bar.update(len(members))
@@ -152,7 +177,7 @@ def temporal_pass(ds, predictions, size, settings, stems: list[str], results: di
             cams.append(Camera.from_soccernet(d, *EVAL_SIZE).scaled(W, H) if d is not None else None)
         changes = None
         if all(s in ds and ds.frame(s).has_image for s in members):
-            changes = image_changes(image_or_none(s) for s in members)  # two frames in memory at a time
+            changes = image_changes(_image_or_none(ds, s) for s in members)  # two frames in memory at a time
         res = calibrate_clip_frames(inputs, settings, cameras=cams, changes=changes, model=model).result
         for t, s in enumerate(members):
             cam_dict, report = results.get(s, (None, {"stem": s}))
@@ -175,6 +200,16 @@ def temporal_pass(ds, predictions, size, settings, stems: list[str], results: di
     return out
 
 
+def _image_or_none(ds, stem: str):
+    """The frame's pixels, None when they cannot be read (no cut is found there)."""
+    from pnlviz.data import DataError
+
+    try:
+        return ds.image(stem)
+    except DataError:
+        return None
+
+
 class _NoDataset:
     """What ``--detections`` alone calibrates against: no frame known (no image sizes, no
     annotations), so every frame of the prediction zip is calibrated at ``--size``."""
@@ -185,33 +220,30 @@ class _NoDataset:
         return False
 
 
-class _Worker:
-    """Picklable per-frame job for process pools (the dataset re-opens lazily in each worker)."""
+@dataclass
+class CalibrateJob(BatchJob):
+    """The frames' calibration on any worker: ``ds`` (re-opened lazily where it runs), the
+    detections, the fallback size, the engine's settings, the edits folder (None: none); each
+    worker reads the frames with one :func:`frame_reader` built for the run."""
 
-    def __init__(self, ds, predictions, size, settings):
-        self.ds, self.predictions, self.size, self.settings = ds, predictions, size, settings
+    ds: object
+    predictions: object
+    size: tuple[int, int]
+    settings: object
+    edits: Path | None = None
 
-    def __call__(self, stem):
-        pred = None if self.predictions is None else self.predictions.get(stem)
-        if self.predictions is not None and pred is None:
-            return stem, None, {"stem": stem, "failure": "no detections for this frame", "failure_code": "no_input"}
-        return calibrate_stem(self.ds, stem, pred, self.size, self.settings)
+    def open_state(self):
+        from pnlviz.data.edits import EditsStore
 
+        edits = EditsStore(self.edits, writable=False) if self.edits is not None else None
+        return frame_reader(self.ds, self.predictions, self.size, self.settings.source, edits)
 
-def _calibrate_chunk(job: "_Worker", stems: list[str]) -> list:
-    """One cluster task: the frames ``stems`` (the worker opens the dataset where it is)."""
-    return [job(stem) for stem in stems]
+    def run_chunk(self, reader, stems: list[str]) -> list:
+        return [calibrate_stem(reader, stem, self.settings) for stem in stems]
 
 
 def _failed_on_cluster(stem: str, message: str) -> tuple:
     return stem, None, {"stem": stem, "failure": message, "failure_code": "internal"}
-
-
-def _ignore_sigint() -> None:
-    """Pool workers leave Ctrl+C to the main process, which keeps what was computed."""
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _check_outputs(args) -> None:
@@ -220,20 +252,31 @@ def _check_outputs(args) -> None:
 
     inputs = [args.detections, predictions_info_path(args.detections)] if args.detections else []
     inputs += [args.video] if getattr(args, "video", None) is not None else []
-    datasets = [args.data] if args.data is not None else []
+    datasets = [d for d in (args.data, args.edits) if d is not None]
     check_output(args.out, inputs=inputs, datasets=datasets)
     if args.report:
         check_output(args.report, inputs=[*inputs, args.out], datasets=datasets, what="--report")
 
 
-def _frames(ds, predictions) -> list[str]:
-    """The frames to calibrate: annotated frames, or those with detections (unknown ones use --size)."""
+def _frames(ds, predictions, source: str, edits) -> list[str]:
+    """The frames to calibrate, in dataset order: those with what the source calibrates from
+    (annotated frames unless the source is the detections; frames with detections, and those
+    the dataset does not have, at --size), and with ``edits`` those with corrected keypoints (or
+    a corrected annotation, when the source uses annotations)."""
     from pnlviz.data import sort_stems
 
+    use_ann = source != "detections"
+    edited = set()
+    for s in edits.stems() if edits is not None else ():
+        rec = edits.get(s)
+        if rec.get("keypoints") or use_ann and rec.get("annotation") is not None:
+            edited.add(s)
+    stems = [s for s in ds.stems if use_ann and ds.frame(s).has_annotation
+             or predictions is not None and s in predictions or s in edited]
     if predictions is None:
-        return [s for s in ds.stems if ds.frame(s).has_annotation]
+        return stems
     known = set(ds.stems)
-    return [s for s in ds.stems if s in predictions] + [s for s in sort_stems(predictions) if s not in known]
+    return stems + [s for s in sort_stems(predictions) if s not in known]
 
 
 def _detection_settings(args):
@@ -247,23 +290,26 @@ def _detection_settings(args):
     return recorded, frame_settings(args, recorded)
 
 
-def run_calibrate(args) -> int:
-    import contextlib
-
-    from tqdm import tqdm
-
-    from pnlviz.commands.common import open_input_dataset, previous_run, print_skipped
-    from pnlviz.data import DataError, LineStream, ZipStream, predictions_info_path, read_predictions
-    from pnlviz.data.cameras import camera_member, camera_zip_order
-
+def _args_problem(args) -> str | None:
+    """What is wrong with the options together, in one line (None: nothing)."""
     if args.data is None and args.detections is None:
-        print("error: give --data (a dataset), --detections (a prediction zip), or both", file=sys.stderr)
-        return 2
+        return "give --data (a dataset), --detections (a prediction zip), or both"
     if args.video is not None and (args.data is not None or args.detections is None):
-        print("error: --video goes with --detections (made by pnlviz detect --video), instead of --data",
-              file=sys.stderr)
-        return 2
-    _check_outputs(args)
+        return "--video goes with --detections (made by pnlviz detect --video), instead of --data"
+    if args.source == "detections" and args.detections is None:
+        return "--source detections needs --detections"
+    if args.edits is not None and not args.edits.is_dir():
+        return f"--edits {args.edits}: no such folder"
+    return None
+
+
+def _open_inputs(args):
+    """(the frames' dataset, the detections, the edits folder read-only or None), each problem
+    with a file said in one line."""
+    from pnlviz.commands.common import open_input_dataset, print_skipped
+    from pnlviz.data import read_predictions
+    from pnlviz.data.edits import EditsStore
+
     if args.video is not None:
         from pnlviz.data.video import VideoDataset
 
@@ -271,7 +317,23 @@ def run_calibrate(args) -> int:
     else:
         ds = open_input_dataset(args.data) if args.data is not None else _NoDataset()
     predictions = read_predictions(args.detections, on_error=lambda e: print_skipped([e])) if args.detections else None
-    stems = _frames(ds, predictions)
+    edits = EditsStore(args.edits, writable=False) if args.edits is not None else None
+    print_skipped(edits.warnings if edits is not None else [], prefix="warning: ")
+    return ds, predictions, edits
+
+
+def run_calibrate(args) -> int:
+    from pnlviz.data import DataError, predictions_info_path
+    from pnlviz.data.cameras import camera_member_name
+
+    problem = _args_problem(args)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
+    _check_outputs(args)
+    ds, predictions, edits = _open_inputs(args)
+    source = source_of(args)
+    stems = _frames(ds, predictions, source, edits)
     if not stems:
         print(f"{args.data or args.detections}: no frame to calibrate", file=sys.stderr)
         return 1
@@ -291,75 +353,79 @@ def run_calibrate(args) -> int:
         print("error: --resume does not go with --temporal (a shot is fitted from all its frames at once)",
               file=sys.stderr)
         return 2
-    done = previous_run(args.out, args.resume)
-    kept = {f"camera_{s}.json": done[f"camera_{s}.json"] for s in stems if f"camera_{s}.json" in done}
-    todo = [s for s in stems if f"camera_{s}.json" not in kept]
-    if args.resume:
-        print(f"resuming: {len(kept)} of {len(stems)} frames already in {args.out.name}, {len(todo)} to calibrate")
-    job = _Worker(ds, predictions, args.size, settings)
-    workers = (os.cpu_count() or 1) if args.workers == 0 else max(1, args.workers)
+    from pnlviz.commands.batch import resume_zip
+
+    kept, todo = resume_zip(args.out, args.resume, stems, camera_member_name, "calibrate")
+    edits_path = None if args.edits is None else args.edits.resolve()
+    job = CalibrateJob(ds, predictions, tuple(args.size), settings, edits_path)
+    reader = frame_reader(ds, predictions, args.size, source, edits)
+    return _calibrate_all(args, job, reader, stems, kept, todo)
+
+
+def _calibrate_all(args, job: CalibrateJob, reader, stems: list[str], kept: dict, todo: list[str]) -> int:
+    """Calibrate the frames ``todo``, write their cameras (and reports) as they come, then the
+    summary; ``kept``: the cameras an interrupted run finished."""
+    from pnlviz.commands.batch import interrupted, journaled_zip, pool_size, run_batch
+    from pnlviz.data import DataError, LineStream
+    from pnlviz.data.cameras import camera_member, camera_zip_order
+
     order = {s: i for i, s in enumerate(stems)}
     failures: list[tuple[str, str]] = []  # (code, message) of the frames without a camera
-    interrupted = False
-    t0 = time.perf_counter()
-    bar = tqdm(total=len(todo), desc="calibrate", unit="frame", disable=args.no_progress or None)
+    progress = not args.no_progress
     with contextlib.ExitStack() as stack:
-        cams = stack.enter_context(ZipStream(args.out, key=camera_zip_order, journal=True))
-        for name, text in kept.items():  # what the interrupted run finished
-            cams.add(name, text)
+        cams = journaled_zip(stack, args.out, camera_zip_order, kept)
         reports = stack.enter_context(LineStream(args.report)) if args.report else None
-        pool = None
-        from pnlviz.commands.cluster import cluster_client, map_on_cluster
 
-        client = stack.enter_context(cluster_client(args))
-        if client is not None:
-            workers = len(client.scheduler_info().get("workers", {}))
-            results = map_on_cluster(client, _calibrate_chunk, job, todo, args.chunk, _failed_on_cluster)
-        elif workers == 1:
-            results = map(job, todo)
-        else:
-            import multiprocessing as mp
+        def write(result) -> None:
+            stem, cam, report = result
+            if cam is not None:
+                try:  # written at once: an interrupted or failing batch keeps it
+                    cams.add(*camera_member(stem, cam, args.out))
+                except DataError as exc:
+                    cam = None
+                    report.update(failure=f"skipped: not written: {exc}", failure_code="bad_output")
+            if cam is None:
+                failures.append((report.get("failure_code") or "failed", report.get("failure") or ""))
+            if reports is not None:
+                reports.add(json.dumps(report), key=order[stem])
 
-            pool = stack.enter_context(mp.get_context("spawn").Pool(workers, initializer=_ignore_sigint))
-            results = pool.imap_unordered(job, todo, chunksize=8)
-        try:
-            if args.temporal:  # every frame first, then the clips' shots, then written
-                per_frame = {}
-                for stem, cam, report in results:
-                    per_frame[stem] = (cam, report)
-                    bar.update()
-                bar.close()
-                fitted = temporal_pass(ds, predictions, args.size, settings, stems, per_frame,
-                                       progress=not args.no_progress)
-                results = ((s, *fitted[s]) for s in stems)
-                bar = tqdm(total=len(stems), desc="write", unit="frame", disable=args.no_progress or None)
-            for stem, cam, report in results:
-                if cam is not None:
-                    try:  # written at once: an interrupted or failing batch keeps it
-                        cams.add(*camera_member(stem, cam, args.out))
-                    except DataError as exc:
-                        cam = None
-                        report.update(failure=f"skipped: not written: {exc}", failure_code="bad_output")
-                if cam is None:
-                    failures.append((report.get("failure_code") or "failed", report.get("failure") or ""))
-                if reports is not None:
-                    reports.add(json.dumps(report), key=order[stem])
-                bar.update()
-        except KeyboardInterrupt:
-            interrupted = True
-        bar.close()
-    elapsed = time.perf_counter() - t0
-    if interrupted:
-        print(f"interrupted: kept {len(cams)} of {len(stems)} frames in {args.out}", file=sys.stderr)
-        return 130
-    print(f"calibrated {len(cams)}/{len(stems)} frames in {elapsed:.1f} s "
-          f"({1e3 * elapsed / max(1, len(todo)):.1f} ms/frame with {workers} worker(s)"
-          + (" on the dask cluster" if args.dask is not None or args.scheduler is not None else "") + f") -> {args.out}")
+        per_frame: dict = {}
+        collect = (lambda r: per_frame.__setitem__(r[0], r[1:])) if args.temporal else write
+        run = run_batch(job, todo, collect, args, desc="calibrate", processes=pool_size(args.workers),
+                        local_state=reader, failed=_failed_on_cluster, progress=progress)
+        if args.temporal and not run.interrupted:  # every frame first, then the clips' shots, then written
+            run.interrupted = _write_temporal(reader, job.settings, stems, per_frame, write, progress)
+    if run.interrupted:
+        return interrupted(len(cams), len(stems), args.out)
+    _summary(args, run, len(cams), len(stems), len(todo), failures)
+    return 0 if len(cams) else 1
+
+
+def _write_temporal(reader, settings, stems: list[str], per_frame: dict, write, progress: bool) -> bool:
+    """``--temporal``: the shots of the clips fitted (:func:`temporal_pass`), then every frame
+    written in order; True when Ctrl+C stopped it."""
+    from tqdm import tqdm
+
+    try:
+        fitted = temporal_pass(reader, settings, stems, per_frame, progress=progress)
+        for s in tqdm(stems, desc="write", unit="frame", disable=not progress or None):
+            write((s, *fitted[s]))
+    except KeyboardInterrupt:
+        return True
+    return False
+
+
+def _summary(args, run, n_cams: int, n_stems: int, n_todo: int, failures: list[tuple[str, str]]) -> None:
+    """What the run did: cameras written, time per frame, the failures counted by code."""
+    from pnlviz.commands.common import print_skipped
+
+    print(f"calibrated {n_cams}/{n_stems} frames in {run.elapsed:.1f} s "
+          f"({1e3 * run.elapsed / max(1, n_todo):.1f} ms/frame with {run.workers} worker(s)"
+          + (" on the dask cluster" if run.cluster else "") + f") -> {args.out}")
+    words = failure_words()
     for code, n in Counter(code for code, _ in failures).most_common():
         example = next(message for c, message in failures if c == code)
-        print(f"  {n:5d} not calibrated: {FAILURE_LABELS.get(code, code)}" + (f" (e.g. {example})" if n > 1 else f" ({example})"))
+        print(f"  {n:5d} not calibrated: {words.get(code, code)}" + (f" (e.g. {example})" if n > 1 else f" ({example})"))
     print_skipped([m for c, m in failures if c in ("bad_input", "bad_output")], prefix="  ")
-    if not len(cams):
+    if not n_cams:
         print(f"error: no frame calibrated: {args.out} holds no camera", file=sys.stderr)
-        return 1
-    return 0

@@ -1,5 +1,5 @@
-"""What every command shares: the WxH option parser, and how batch commands open their dataset
-and report the files they skip (one line each)."""
+"""What every command shares: the WxH option parser, the data options of the app and export, and
+how batch commands open their dataset and report the files they skip (one line each)."""
 
 from __future__ import annotations
 
@@ -47,24 +47,3 @@ def open_input_dataset(path):
     print_skipped(ds.rejected)
     ds.require_frames()
     return ds
-
-
-def previous_run(out, resume: bool) -> dict:
-    """``--resume``: the members an earlier run of this batch wrote into ``out`` (its zip and its
-    journal, see :func:`pnlviz.data.zipwriter.resume_members`), said in one line; the temporary
-    files a killed run left beside ``out`` are removed. Without ``--resume``: {} (the run starts
-    over), with a note when an interrupted run's journal is there."""
-    from pathlib import Path
-
-    from pnlviz.data.zipwriter import journal_path, resume_members
-
-    out = Path(out)
-    if not resume:
-        if journal_path(out).is_file():
-            print(f"note: an interrupted run left its progress in {journal_path(out).name}; starting over "
-                  f"(--resume continues it)", file=sys.stderr)
-        return {}
-    done = resume_members(out)
-    for stale in out.parent.glob(f".{out.name}.*.tmp"):
-        stale.unlink(missing_ok=True)
-    return done

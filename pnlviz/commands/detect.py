@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import contextlib
 import sys
-import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
+
+from pnlviz.commands.batch import BatchJob, on_cluster
 
 
 def add_detect_parser(sub) -> None:
@@ -51,7 +52,7 @@ def add_detect_parser(sub) -> None:
                    help="continue an interrupted run: frames already in --out (or in the progress a killed run "
                         "left beside it) are kept, only the missing ones are detected")
     p.add_argument("--no-progress", action="store_true")
-    from pnlviz.commands.cluster import add_cluster_args
+    from pnlviz.commands.batch import add_cluster_args
 
     add_cluster_args(p)
     p.set_defaults(func=run_detect)
@@ -72,10 +73,6 @@ def _check_outputs(args) -> None:
     check_output(predictions_info_path(args.out), inputs=inputs, datasets=datasets, what="the sidecar of --out")
 
 
-def _on_cluster(args) -> bool:
-    return getattr(args, "dask", None) is not None or getattr(args, "scheduler", None) is not None
-
-
 def _detector_kwargs(args) -> dict:
     """What :meth:`pnlviz.detect.run.Detector.from_weights` is called with (here and on cluster
     workers); ``device`` as asked: each process resolves it where the networks run."""
@@ -94,12 +91,12 @@ def _load_detector(args):
 
     kw = _detector_kwargs(args)
     weights_kp, weights_lines = kw.pop("weights_kp"), kw.pop("weights_lines")
-    if _on_cluster(args) and (weights_kp is not None or weights_lines is not None):
+    if on_cluster(args) and (weights_kp is not None or weights_lines is not None):
         kw.pop("light")
         kw["device"] = "cpu"
         kw["input_size"] = kw["input_size"] or DEFAULT_INPUT_SIZE
         return Detector(None, None, **kw)
-    kw["device"] = "cpu" if _on_cluster(args) else resolve_device(kw["device"])
+    kw["device"] = "cpu" if on_cluster(args) else resolve_device(kw["device"])
     return Detector.from_weights(weights_kp, weights_lines, **kw)
 
 
@@ -116,19 +113,6 @@ def _detect_here(ds, det, stems: list[str], step: int):
             except DataError as exc:
                 yield stem, None, str(exc)
         yield from ((stem, p, None) for stem, p in zip(batch, det.detect(images) if images else []))
-
-
-@dataclass
-class _DetectJob:
-    """What a cluster worker needs to detect frames: where the data is, how to build the detector."""
-
-    source: str
-    video: bool
-    detector: dict
-    batch: int
-
-
-_WORKER_DETECTORS: dict = {}  # on a cluster worker: the detector, built once per process
 
 
 def _detector_key(kw: dict) -> str:
@@ -151,30 +135,32 @@ def _detector_key(kw: dict) -> str:
     return repr((sorted((k, str(v)) for k, v in kw.items()), stats))
 
 
-def _detect_chunk(job: _DetectJob, stems: list[str]) -> list:
-    """One cluster task: the frames ``stems`` read where they are and detected on this worker."""
-    import torch
+@dataclass
+class DetectJob(BatchJob):
+    """The frames' detection on any worker: the dataset (or video, re-opened lazily where it runs),
+    how to build the detector (:func:`_detector_kwargs`), frames per forward pass. A worker
+    builds the detector once and keeps it while its settings and weight files stay the same
+    (:func:`_detector_key`), from one run to the next."""
 
-    from pnlviz.data import open_dataset
-    from pnlviz.detect.run import Detector, resolve_device
+    ds: object
+    detector: dict
+    batch: int
 
-    key = _detector_key(job.detector)
-    if key not in _WORKER_DETECTORS:
+    def state_key(self) -> str:
+        return _detector_key(self.detector)
+
+    def open_state(self):
+        import torch
+
+        from pnlviz.detect.run import Detector, resolve_device
+
         torch.set_num_threads(1)  # one thread per worker process: the cluster's processes are its parallelism
-        kw = dict(job.detector)
+        kw = dict(self.detector)
         kw["device"] = resolve_device(kw["device"])  # this worker's GPU, or a clear error from it
-        _WORKER_DETECTORS.clear()
-        _WORKER_DETECTORS[key] = Detector.from_weights(kw.pop("weights_kp"), kw.pop("weights_lines"), **kw)
-    if job.video:
-        from pnlviz.data.video import VideoDataset
+        return Detector.from_weights(kw.pop("weights_kp"), kw.pop("weights_lines"), **kw)
 
-        ds = VideoDataset(job.source)
-    else:
-        ds = open_dataset(job.source)
-    try:
-        return list(_detect_here(ds, _WORKER_DETECTORS[key], stems, job.batch))
-    finally:
-        ds.close()
+    def run_chunk(self, det, stems: list[str]) -> list:
+        return list(_detect_here(self.ds, det, stems, self.batch))
 
 
 def _sidecar(args, det, frames: int) -> dict:
@@ -190,7 +176,7 @@ def _sidecar(args, det, frames: int) -> dict:
     return {
         "detector": kind,
         "weights": named,
-        "input_size": list(det.input_size), "device": args.device if _on_cluster(args) else det.device,
+        "input_size": list(det.input_size), "device": args.device if on_cluster(args) else det.device,
         "precision": "float16" if args.half else "float32",
         "kp_threshold": det.kp_threshold,
         "line_threshold": det.line_threshold, "peak_refine": det.refine,
@@ -199,17 +185,27 @@ def _sidecar(args, det, frames: int) -> dict:
     }
 
 
-def run_detect(args) -> int:
+def _threads(args) -> int:
+    """Torch's CPU threads in this process: ``--threads``, else chosen from the idle cores (said)."""
     import os
 
     import torch
-    from tqdm import tqdm
 
-    from pnlviz.commands.common import open_input_dataset, previous_run, print_skipped
-    from pnlviz.data import DataError, ZipStream, write_predictions_info
-    from pnlviz.data.predictions import prediction_member, prediction_zip_order
-    from pnlviz.detect.checkpoint import CheckpointError
     from pnlviz.detect.default import default_threads, machine_load
+
+    threads = args.threads or default_threads()
+    torch.set_num_threads(threads)
+    if not args.threads:
+        load = machine_load()
+        print(f"torch threads: {threads} (chosen from {os.cpu_count()} cores"
+              + (f", load {load:.1f}" if load is not None else "") + "; --threads N to set)")
+    return threads
+
+
+def run_detect(args) -> int:
+    from pnlviz.commands.batch import resume_zip
+    from pnlviz.commands.common import open_input_dataset
+    from pnlviz.detect.checkpoint import CheckpointError
     from pnlviz.detect.run import NoModelError
 
     if args.threads < 0:
@@ -228,59 +224,45 @@ def run_detect(args) -> int:
     if not stems:
         print(f"{args.data or args.video}: no images to detect on", file=sys.stderr)
         return 1
-    done = previous_run(args.out, args.resume)
-    kept = {f"{s}.json": done[f"{s}.json"] for s in stems if f"{s}.json" in done}
-    all_stems, stems = stems, [s for s in stems if f"{s}.json" not in kept]
-    if args.resume:
-        print(f"resuming: {len(kept)} of {len(all_stems)} frames already in {args.out.name}, {len(stems)} to detect")
-    threads = args.threads or default_threads()
-    torch.set_num_threads(threads)
-    if not args.threads:
-        load = machine_load()
-        print(f"torch threads: {threads} (chosen from {os.cpu_count()} cores"
-              + (f", load {load:.1f}" if load is not None else "") + "; --threads N to set)")
+    kept, todo = resume_zip(args.out, args.resume, stems, lambda s: f"{s}.json", "detect")
+    _threads(args)
     try:
         det = _load_detector(args)
     except (NoModelError, CheckpointError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    skipped: list[str] = []
-    interrupted = False
-    step = max(1, args.batch)
-    t0 = time.perf_counter()
-    bar = tqdm(total=len(stems), desc="detect", unit="frame", disable=args.no_progress or None)
-    from pnlviz.commands.cluster import cluster_client, map_on_cluster
+    return _detect_all(args, DetectJob(ds, _detector_kwargs(args), max(1, args.batch)), det, stems, kept, todo)
 
+
+def _detect_all(args, job: DetectJob, det, stems: list[str], kept: dict, todo: list[str]) -> int:
+    """Detect the frames ``todo`` (here with ``det``, or on the cluster), write them as they come,
+    the sidecar, then the summary; ``kept``: the frames an interrupted run finished."""
+    from pnlviz.commands.batch import interrupted, journaled_zip, run_batch
+    from pnlviz.commands.common import print_skipped
+    from pnlviz.data import DataError, write_predictions_info
+    from pnlviz.data.predictions import prediction_member, prediction_zip_order
+
+    skipped: list[str] = []
     with contextlib.ExitStack() as stack:
-        preds = stack.enter_context(ZipStream(args.out, key=prediction_zip_order, journal=True))
-        for name, text in kept.items():  # what the interrupted run finished
-            preds.add(name, text)
-        client = stack.enter_context(cluster_client(args))
-        if client is not None:
-            job = _DetectJob(str(args.video or args.data), args.video is not None, _detector_kwargs(args), step)
-            results = map_on_cluster(client, _detect_chunk, job, stems, args.chunk, lambda s, m: (s, None, m))
-        else:
-            results = _detect_here(ds, det, stems, step)
-        try:
-            for stem, p, problem in results:
-                if p is not None:
-                    try:  # written at once: an interrupted or failing batch keeps it
-                        preds.add(*prediction_member(stem, p, args.out))
-                    except DataError as exc:
-                        problem = str(exc)
-                if problem is not None:
-                    skipped.append(problem)
-                bar.update()
-        except KeyboardInterrupt:
-            interrupted = True
-        bar.close()
-    dt = time.perf_counter() - t0
+        preds = journaled_zip(stack, args.out, prediction_zip_order, kept)
+
+        def write(result) -> None:
+            stem, p, problem = result
+            if p is not None:
+                try:  # written at once: an interrupted or failing batch keeps it
+                    preds.add(*prediction_member(stem, p, args.out))
+                except DataError as exc:
+                    problem = str(exc)
+            if problem is not None:
+                skipped.append(problem)
+
+        run = run_batch(job, todo, write, args, desc="detect", local_state=det, chunk=job.batch,
+                        failed=lambda s, m: (s, None, m), progress=not args.no_progress)
     write_predictions_info(args.out, _sidecar(args, det, len(preds)))
-    if interrupted:
-        print(f"interrupted: kept {len(preds)} of {len(all_stems)} frames in {args.out}", file=sys.stderr)
-        return 130
-    print(f"detected {len(preds)}/{len(all_stems)} frames in {dt:.1f} s ({1e3 * dt / max(1, len(stems)):.0f} ms/frame) "
-          f"-> {args.out}")
+    if run.interrupted:
+        return interrupted(len(preds), len(stems), args.out)
+    print(f"detected {len(preds)}/{len(stems)} frames in {run.elapsed:.1f} s "
+          f"({1e3 * run.elapsed / max(1, len(todo)):.0f} ms/frame) -> {args.out}")
     print_skipped(skipped, prefix="  skipped: ")
     if not len(preds):
         print(f"error: no frame detected: {args.out} holds no detection", file=sys.stderr)

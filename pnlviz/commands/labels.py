@@ -10,40 +10,35 @@ import argparse
 import os
 import sys
 from collections import Counter
-from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
+from pnlviz.commands.batch import BatchJob
 from pnlviz.commands.common import parse_size
 from pnlviz.conventions import EVAL_SIZE
 
 DEFAULT_SIZE = EVAL_SIZE
 
+
 # --------------------------------------------------------------------------- per-frame work
-_STATE: dict = {}
-
-
-def _init_worker(dataset, out_dir: str, size: tuple[int, int], params) -> None:
-    _STATE.update(dataset=dataset, out_dir=out_dir, size=size, params=params)
-
-
-def _label_one(stem: str) -> tuple[str, str, object]:
-    """``(stem, status, payload)``: ``("ok", counts by set)``, ``("none", None)`` for a frame without
-    annotation, ``("skipped", message)`` for a bad input file, ``("failed", message)`` otherwise."""
+def label_frame(ds, stem: str, out_dir: str, size: tuple[int, int], params) -> tuple[str, str, object]:
+    """One frame's labels written to ``out_dir/<stem>.json``: ``(stem, status, payload)``:
+    ``("ok", counts by set)``, ``("none", None)`` for a frame without annotation, ``("skipped",
+    message)`` for a bad input file, ``("failed", message)`` otherwise."""
     from pnlviz.data.errors import DataError
     from pnlviz.labels.extremities import line_extremities
     from pnlviz.labels.keypoints import keypoints_from_annotation
     from pnlviz.labels.writer import write_labels
 
-    ds, params = _STATE["dataset"], _STATE["params"]
     try:
         ann = ds.annotation(stem)
         if ann is None:
             return stem, "none", None
-        size = ds.image_size(stem) if ds.frame(stem).has_image else None
-        width, height = size or _STATE["size"]
+        image_size = ds.image_size(stem) if ds.frame(stem).has_image else None
+        width, height = image_size or size
         labels = keypoints_from_annotation(ann, width, height, params)
         ext = line_extremities(ann, width, height, mirror=labels.mirrored)
-        write_labels(Path(_STATE["out_dir"]) / f"{stem}.json", labels, ext)
+        write_labels(Path(out_dir) / f"{stem}.json", labels, ext)
         return stem, "ok", (labels.count_by_set(), labels.count_by_set(visible_only=True), len(labels.rejected))
     except DataError as exc:
         return stem, "skipped", str(exc)
@@ -53,12 +48,64 @@ def _label_one(stem: str) -> tuple[str, str, object]:
         return stem, "failed", f"{stem}: labels failed: {type(exc).__name__}: {exc}"
 
 
-def _label_chunk(spec: tuple, stems: list[str]) -> list:
-    """One cluster task: ``spec`` = (dataset, out folder, size, params); the worker writes the label
-    files into the out folder itself (which it must reach: a shared filesystem) and returns only
-    the status of each frame."""
-    _init_worker(*spec)
-    return [_label_one(stem) for stem in stems]
+@dataclass
+class LabelsJob(BatchJob):
+    """The frames' labels on any worker: the dataset (re-opened lazily where it runs), the output
+    folder (which a cluster's workers write into themselves: a shared filesystem), the size of
+    frames without an image, the label settings. Only each frame's status comes back."""
+
+    ds: object
+    out_dir: str
+    size: tuple[int, int]
+    params: object
+
+    def run_chunk(self, state, stems: list[str]) -> list:
+        return [label_frame(self.ds, stem, self.out_dir, self.size, self.params) for stem in stems]
+
+
+class _Tally:
+    """What the run did, frame by frame (:meth:`add`), and its summary (:meth:`print`)."""
+
+    def __init__(self):
+        self.totals: Counter[str] = Counter()
+        self.visible: Counter[str] = Counter()
+        self.n_ok = self.n_none = self.n_rejected = 0
+        self.skipped: list[str] = []
+        self.failed: list[str] = []
+
+    def add(self, result) -> None:
+        from tqdm import tqdm
+
+        stem, status, payload = result
+        if status == "ok":
+            self.n_ok += 1
+            self.totals.update(payload[0])
+            self.visible.update(payload[1])
+            self.n_rejected += payload[2]
+        elif status == "none":
+            self.n_none += 1
+        elif status == "skipped":
+            self.skipped.append(payload)
+            tqdm.write(f"skipped: {payload}", file=sys.stderr)
+        else:
+            self.failed.append(payload)
+            tqdm.write(f"failed: {payload}", file=sys.stderr)
+
+    def print(self, data, n_stems: int, out_dir: Path) -> None:
+        from pnlviz.labels.types import SETS
+
+        print(f"{data}: {n_stems} frames, {self.n_ok} labelled -> {out_dir}"
+              + (f", {self.n_none} without annotation" if self.n_none else "")
+              + f", {len(self.skipped)} skipped" + (f", {len(self.failed)} failed" if self.failed else ""))
+        if self.n_ok:
+            n, totals, visible = self.n_ok, self.totals, self.visible
+            per_set = "  ".join(f"{s} {totals[s] / n:.2f} ({visible[s] / n:.2f})" for s in SETS)
+            print(f"keypoints per frame, all (visible): {per_set}  total {sum(totals.values()) / n:.2f} "
+                  f"({sum(visible.values()) / n:.2f}); rejected candidates {self.n_rejected / n:.2f}")
+        if self.skipped:
+            print(f"{len(self.skipped)} bad frame(s) skipped:", file=sys.stderr)
+            for line in self.skipped:
+                print(f"  {line}", file=sys.stderr)
 
 
 # ------------------------------------------------------------------------------- argparse
@@ -81,25 +128,30 @@ def add_labels_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=1, help="worker processes (default 1; 0 = all cores)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run: frames whose label file is already in --out are kept")
-    from pnlviz.commands.cluster import add_cluster_args
+    from pnlviz.commands.batch import add_cluster_args
 
     add_cluster_args(p)
     p.set_defaults(func=run_labels)
     return p
 
 
-def run_labels(args) -> int:
-    from tqdm import tqdm
+def _check_out(out_dir: Path, data) -> None:
+    from pnlviz.data import OutputError, check_output
 
+    check_output(out_dir, datasets=[data])
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputError(f"--out {out_dir}", "is a file: expected a folder for the label files")
+
+
+def run_labels(args) -> int:
+    from pnlviz.commands.batch import interrupted, pool_size, run_batch
     from pnlviz.commands.common import open_input_dataset
-    from pnlviz.data import DataError, OutputError, check_output
-    from pnlviz.labels.types import SETS, LabelParams
+    from pnlviz.data import DataError, OutputError
+    from pnlviz.labels.types import LabelParams
 
     out_dir = Path(args.out)
     try:
-        check_output(out_dir, datasets=[args.data])
-        if out_dir.exists() and not out_dir.is_dir():
-            raise OutputError(f"--out {out_dir}", "is a file: expected a folder for the label files")
+        _check_out(out_dir, args.data)
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -110,72 +162,17 @@ def run_labels(args) -> int:
     params = LabelParams(kp3_all=bool(getattr(args, "kp3_all", False)),
                          lr_disambiguation=bool(getattr(args, "lr", False)))
     size = tuple(getattr(args, "size", None) or DEFAULT_SIZE)
-    workers = int(getattr(args, "workers", 1) or 0) or (os.cpu_count() or 1)
-    stems = list(ds.stems)
+    stems, kept = list(ds.stems), 0
     if getattr(args, "resume", False):  # label files are written whole (atomically): one there is done
         done = {p.stem for p in out_dir.glob("*.json")}
-        kept = [s for s in stems if s in done]
+        kept = sum(s in done for s in stems)
         stems = [s for s in stems if s not in done]
-        print(f"resuming: {len(kept)} frames already labelled in {out_dir}, {len(stems)} to go")
-
-    totals: Counter[str] = Counter()
-    visible: Counter[str] = Counter()
-    n_ok = n_none = n_rejected = 0
-    skipped: list[str] = []
-    failed: list[str] = []
-    bar = tqdm(total=len(stems), desc="labels", unit="frame", disable=None)
-
-    def handle(result) -> None:
-        nonlocal n_ok, n_none, n_rejected
-        stem, status, payload = result
-        if status == "ok":
-            n_ok += 1
-            totals.update(payload[0])
-            visible.update(payload[1])
-            n_rejected += payload[2]
-        elif status == "none":
-            n_none += 1
-        elif status == "skipped":
-            skipped.append(payload)
-            tqdm.write(f"skipped: {payload}", file=sys.stderr)
-        else:
-            failed.append(payload)
-            tqdm.write(f"failed: {payload}", file=sys.stderr)
-        bar.update(1)
-
-    from pnlviz.commands.cluster import cluster_client, map_on_cluster
-
-    try:
-        if getattr(args, "dask", None) is not None or getattr(args, "scheduler", None) is not None:
-            with cluster_client(args) as client:
-                spec = (ds, os.fspath(out_dir.resolve()), size, params)
-                for result in map_on_cluster(client, _label_chunk, spec, stems, args.chunk,
-                                             lambda s, m: (s, "failed", f"{s}: {m}")):
-                    handle(result)
-        elif workers <= 1 or len(stems) < 2:
-            _init_worker(ds, os.fspath(out_dir), size, params)
-            for stem in stems:
-                handle(_label_one(stem))
-        else:
-            ds.close()  # reopened in each worker
-            with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                                     initargs=(ds, os.fspath(out_dir), size, params)) as pool:
-                chunk = max(1, min(32, len(stems) // (4 * workers) or 1))
-                for result in pool.map(_label_one, stems, chunksize=chunk):
-                    handle(result)
-    finally:
-        bar.close()
-        _STATE.clear()
-
-    print(f"{args.data}: {len(stems)} frames, {n_ok} labelled -> {out_dir}"
-          + (f", {n_none} without annotation" if n_none else "")
-          + f", {len(skipped)} skipped" + (f", {len(failed)} failed" if failed else ""))
-    if n_ok:
-        per_set = "  ".join(f"{s} {totals[s] / n_ok:.2f} ({visible[s] / n_ok:.2f})" for s in SETS)
-        print(f"keypoints per frame, all (visible): {per_set}  total {sum(totals.values()) / n_ok:.2f} "
-              f"({sum(visible.values()) / n_ok:.2f}); rejected candidates {n_rejected / n_ok:.2f}")
-    if skipped:
-        print(f"{len(skipped)} bad frame(s) skipped:", file=sys.stderr)
-        for line in skipped:
-            print(f"  {line}", file=sys.stderr)
-    return 1 if failed or not n_ok else 0
+        print(f"resuming: {kept} frames already labelled in {out_dir}, {len(stems)} to go")
+    tally = _Tally()
+    job = LabelsJob(ds, os.fspath(out_dir.resolve()), size, params)
+    run = run_batch(job, stems, tally.add, args, desc="labels", processes=pool_size(getattr(args, "workers", 1)),
+                    failed=lambda s, m: (s, "failed", f"{s}: {m}"))
+    if run.interrupted:
+        return interrupted(kept + tally.n_ok, kept + len(stems), out_dir)
+    tally.print(args.data, len(stems), out_dir)
+    return 1 if tally.failed or not tally.n_ok else 0

@@ -48,10 +48,10 @@ def _detector(args):
 
 def run_serve(args) -> int:
     from pnlviz import EXAMPLES_DIR
-    from pnlviz.app.edits import EditsFolderError
     from pnlviz.app.guard import is_loopback
     from pnlviz.app.server import PnlvizApp
     from pnlviz.app.state import AppState
+    from pnlviz.data.edits import EditsFolderError
     from pnlviz.detect.worker import DetectorLoadError, DetectorProcessError
 
     data = args.data or EXAMPLES_DIR / "sample"

@@ -14,25 +14,33 @@ Layout::
 Every record is validated when it is read and before it is written (the same rules), so what is
 on disk is always something the app can use. Writes are atomic (a crash leaves the old file or
 the new one) and every read-modify-write of a frame runs under that frame's lock, so concurrent
-edits from several browser tabs are applied one after the other, none lost.
+edits from several browser tabs are applied one after the other, none lost. A user action is
+one undo step kept in the record (:meth:`EditsStore.act`, :meth:`EditsStore.step`), so the
+history outlives the server.
+
+The checks of an edit before it is made (an id of the catalogue, a position on or near the frame)
+are pure functions here too (:func:`check_keypoint_id`, :func:`check_position`): whoever edits
+(the app, a script) refuses the same things with the same :class:`EditError`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import hashlib
 import json
 import math
 import os
 import socket
 import threading
 import time
-from collections.abc import Collection, Iterator, Mapping
+from collections.abc import Callable, Collection, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from pnlviz.data import DataError, atomic_write_text
-from pnlviz.data.annotations import parse_annotation
+from pnlviz.data.annotations import annotation_to_json, parse_annotation
+from pnlviz.data.atomic import atomic_write_text
+from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
@@ -44,10 +52,29 @@ UNDOABLE = ("annotation", "keypoints", "review")
 HISTORY_LIMIT = 100
 #: keypoint coordinates are pixels: anything larger is not a position in a frame
 MAX_COORDINATE = 1e6
+#: how far outside the frame a point may be placed, as a fraction of its size (as the
+#: annotations' coordinate range allows: -0.5..1.5)
+PLACEMENT_MARGIN = 0.5
 
 
 class EditsFolderError(RuntimeError):
     """The edits folder cannot be used: not writable, or in use by another process."""
+
+
+class EditError(ValueError):
+    """An edit that cannot be applied (unknown frame or id, a position off the frame, ...)."""
+
+
+def default_edits_dir(data: Path) -> Path:
+    """``<data>.edits`` beside a folder or zip: never inside or over the source. When that folder
+    cannot be written (read-only data), ``~/.pnlviz/edits/<name>-<hash of the path>``."""
+    data = Path(data).resolve()
+    name = data.name[:-4] if data.suffix == ".zip" else data.name
+    beside = data.parent / f"{name}.edits"
+    if beside.is_dir() and os.access(beside, os.W_OK) or not beside.exists() and os.access(data.parent, os.W_OK):
+        return beside
+    digest = hashlib.sha1(str(data).encode()).hexdigest()[:10]
+    return Path.home() / ".pnlviz" / "edits" / f"{name}-{digest}"
 
 
 @functools.cache
@@ -72,6 +99,51 @@ def validate_keypoint(kid: Any, value: Any, source: str) -> tuple[str, list[floa
     if any(v is None or not math.isfinite(v) or abs(v) > MAX_COORDINATE for v in xy):
         raise DataError(source, f"keypoint {text}: [x, y] must be two finite pixel coordinates, got {value!r:.60}")
     return str(int(text)), xy
+
+
+def check_keypoint_id(kid: Any) -> int:
+    """The id of a keypoint to edit, as a whole number of the catalogue; EditError otherwise."""
+    try:
+        kid = int(kid)
+    except (TypeError, ValueError):
+        raise EditError(f"keypoint id must be a whole number, got {str(kid)[:20]!r}") from None
+    if kid not in keypoint_ids():
+        raise EditError(f"keypoint id {kid} is not in the catalogue (1..73)")
+    return kid
+
+
+def check_position(x: Any, y: Any, size: tuple[int, int], stem: str) -> tuple[float, float]:
+    """A pixel position to put a point at on frame ``stem`` of ``size`` (W, H): two finite numbers
+    within :data:`PLACEMENT_MARGIN` of the frame; EditError otherwise."""
+    W, H = size
+    try:
+        x, y = float(x), float(y)
+    except (TypeError, ValueError):
+        raise EditError(f"a position must be two numbers, got {x!r}, {y!r}") from None
+    m = PLACEMENT_MARGIN
+    if not (math.isfinite(x) and math.isfinite(y) and -m * W <= x <= (1 + m) * W and -m * H <= y <= (1 + m) * H):
+        raise EditError(f"position ({x:.6g}, {y:.6g}) is off the {W}x{H} frame of {stem} "
+                        "by more than half its size")
+    return x, y
+
+
+def set_keypoint(rec: dict, kid: int, xy: tuple[float, float] | None) -> None:
+    """In a record: keypoint ``kid`` at pixel ``xy``, or not visible (None)."""
+    rec["keypoints"] = {**(rec.get("keypoints") or {}), str(kid): None if xy is None else list(xy)}
+
+
+def move_line_point(rec: dict, source: Callable[[], Mapping | None], stem: str, name: str, index: int,
+                    xy: tuple[float, float], size: tuple[int, int]) -> None:
+    """In a record: point ``index`` of annotated class ``name`` at pixel ``xy`` of a frame of
+    ``size``, in the edited annotation (made from ``source()``, the frame's own annotation, at the
+    first change); EditError when the annotation has no such point."""
+    edited = rec.get("annotation")
+    ann = parse_annotation(edited) if edited is not None else source()
+    if not ann or name not in ann or not (0 <= int(index) < len(ann[name])):
+        raise EditError(f"{stem} has no point {index} on {str(name)[:40]!r}")
+    W, H = size
+    ann[name][int(index)] = [xy[0] / (W - 1), xy[1] / (H - 1)]
+    rec["annotation"] = annotation_to_json(ann)
 
 
 def validate_record(obj: Any, source: str, checked_before: Collection[int] = ()) -> dict:
@@ -124,6 +196,10 @@ def validate_history(obj: Any, source: str, checked_before: Collection[int] = ()
             checked.append({k: values.get(k) for k in step})
         out[side] = checked
     return out
+
+
+class _Unchanged(Exception):
+    """Raised inside an edit transaction that changes nothing: no write, no undo step."""
 
 
 def _record_text(rec: dict) -> str:
@@ -297,3 +373,46 @@ class EditsStore:
         with self.edit(stem) as rec:
             rec.update(changes)
         return self.get(stem)
+
+    def act(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True) -> bool:
+        """One user action on one frame: ``change(record)`` under the frame's lock (``corrected``:
+        the frame becomes "corrected"), one undo step kept in the record, written at once. False
+        when nothing changed (no write, no step); an OSError of the write reaches the caller and
+        nothing changes."""
+        try:
+            with self.edit(stem) as rec:
+                before = {k: rec.get(k) for k in UNDOABLE}
+                change(rec)
+                if corrected:
+                    rec["review"] = "corrected"
+                step = {k: before[k] for k in UNDOABLE if rec.get(k) != before[k]}
+                if not step:
+                    raise _Unchanged
+                history = rec.get("history") or {}
+                rec["history"] = {"undo": (history.get("undo", []) + [step])[-HISTORY_LIMIT:], "redo": []}
+        except _Unchanged:
+            return False
+        return True
+
+    def step(self, stem: str, back: bool = True) -> bool:
+        """Take back the frame's last action (``back``), or do again the last one taken back;
+        False when there is none."""
+        source, target = ("undo", "redo") if back else ("redo", "undo")
+        try:
+            with self.edit(stem) as rec:
+                history = rec.get("history") or {}
+                steps = list(history.get(source, []))
+                if not steps:
+                    raise _Unchanged
+                step = steps.pop()
+                undone = {k: rec.get(k) for k in step}
+                rec.update(step)
+                rec["history"] = {source: steps, target: (list(history.get(target, [])) + [undone])[-HISTORY_LIMIT:]}
+        except _Unchanged:
+            return False
+        return True
+
+    def history(self, stem: str) -> tuple[int, int]:
+        """(undo steps, redo steps) the frame has."""
+        h = (self._cache.get(stem) or {}).get("history") or {}
+        return len(h.get("undo", [])), len(h.get("redo", []))

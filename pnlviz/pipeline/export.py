@@ -1,0 +1,208 @@
+"""Export corrected training labels of a dataset and its edits folder: what ``pnlviz export``
+writes (locally or on a cluster's workers) and the app's export button downloads, from a
+:class:`pnlviz.pipeline.reader.FrameReader` and calibration settings.
+
+Layout (a folder or a zip):
+
+* ``annotations/<stem>.json``: SoccerNet line annotation, with the corrected line points;
+* ``keypoints/<stem>.json``: keypoint labels, ``{"image_size": [W, H], "keypoints": {"id": {"x",
+  "y", "visible", "set"}}}`` in pixels, corrected keypoints included (hidden ones left out);
+* ``cameras/camera_<stem>.json``: the calibrated camera at 960x540 (SoccerNet format);
+* ``coco_keypoints.json``: COCO keypoints, one "pitch" instance per frame with the 73 keypoints
+  (v = 2 inside the image, 1 labelled outside it, 0 absent);
+* ``manifest.json``: what each exported frame carries and what was changed (names, not paths:
+  the export does not say where the server's files live).
+
+Only accepted and corrected frames are exported unless ``include_all``. A frame whose files
+cannot be read is listed in the manifest with its error and gets no label files (an empty label
+file would say "no keypoints", which is not what is known).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import zipfile
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pnlviz.conventions import EVAL_SIZE
+from pnlviz.data import atomic_write_bytes
+from pnlviz.data.annotations import annotation_to_json
+from pnlviz.data.jsonio import dumps
+from pnlviz.data.zipwriter import ZipStream
+from pnlviz.field.model import FieldModel
+from pnlviz.pipeline.reader import FrameReader, Settings
+from pnlviz.pipeline.view import FrameView, frame_view
+
+N_KEYPOINTS = 73
+
+
+@dataclass
+class FrameExport:
+    """One frame's part of an export: its manifest entry, its label files and its COCO records
+    (None when it exports no labels). What a cluster worker sends back for the frame."""
+
+    stem: str
+    entry: dict
+    files: dict[str, bytes] = field(default_factory=dict)
+    coco_image: dict | None = None
+    coco_annotation: dict | None = None
+
+
+#: the frame's view, when the caller has it computed already (the app's views on screen)
+ViewOf = Callable[[str], FrameView]
+
+
+def export_stems(reader: FrameReader, include_all: bool = False) -> list[str]:
+    """The frames an export holds, in dataset order: the accepted and corrected ones, or all."""
+    if include_all:
+        return list(reader.stems)
+    return [s for s in reader.stems if reader.edits.review(s) in ("accepted", "corrected")]
+
+
+def edits_entry(reader: FrameReader, stem: str) -> dict:
+    """What the manifest says of a frame's edits: its review status and what was changed."""
+    rec = reader.edits.get(stem)
+    return {"review": rec.get("review"), "annotation_edited": rec.get("annotation") is not None,
+            "keypoints_edited": sorted(int(k) for k in (rec.get("keypoints") or {}))}
+
+
+def failed_frame(reader: FrameReader, stem: str, message: str) -> FrameExport:
+    """The export of a frame whose computation failed elsewhere (a cluster task): what the edits
+    say of it, the error, no labels."""
+    return FrameExport(stem, {**edits_entry(reader, stem), "calibrated": False, "error": f"{stem}: {message}",
+                              "exported": False})
+
+
+def export_frame(reader: FrameReader, stem: str, settings: Settings | None = None, model: FieldModel | None = None,
+                 view: FrameView | None = None) -> FrameExport:
+    """The frame's export, calibrated with ``settings`` (default: the reader's); ``view``: the
+    frame's view under those settings when the caller has it already."""
+    view = view or frame_view(reader, stem, settings or reader.default_settings(), model)
+    W, H = view.size
+    entry = {**edits_entry(reader, stem), "calibrated": bool(view.result is not None and view.result.ok),
+             "error": view.error}
+    if view.annotation is None and view.observations is None and view.error:  # unreadable: no labels
+        entry["exported"] = False
+        return FrameExport(stem, entry)
+    entry["exported"] = True
+    files = {}
+    if view.annotation is not None:
+        files[f"annotations/{stem}.json"] = dumps(annotation_to_json(view.annotation)).encode()
+    kps = {}
+    obs = view.observations
+    if obs is not None:
+        for kid, (x, y), s in zip(obs.kp_ids, obs.kp_xy, obs.kp_sets):
+            inside = bool(0 <= x < W and 0 <= y < H)
+            kps[str(int(kid))] = {"x": float(x), "y": float(y), "visible": inside, "set": str(s)}
+    files[f"keypoints/{stem}.json"] = dumps({"image_size": [W, H], "keypoints": kps}).encode()
+    if entry["calibrated"]:
+        files[f"cameras/camera_{stem}.json"] = dumps(view.result.camera.scaled(*EVAL_SIZE).to_soccernet()).encode()
+    flat = [0.0] * (3 * N_KEYPOINTS)
+    for key, k in kps.items():
+        i = int(key) - 1
+        flat[3 * i:3 * i + 3] = [k["x"], k["y"], 2 if k["visible"] else 1]
+    image_id = reader.index_of(stem) + 1  # the frame's place in the dataset: the same whatever is exported
+    frame = reader.ds.frame(stem)
+    image = {"id": image_id, "file_name": Path(frame.image_path).name if frame.has_image else None,
+             "stem": stem, "width": W, "height": H}
+    annotation = {"id": image_id, "image_id": image_id, "category_id": 1, "keypoints": flat,
+                  "num_keypoints": sum(1 for k in kps.values() if k["visible"])}
+    return FrameExport(stem, entry, files, image, annotation)
+
+
+class ExportWriter:
+    """Collects :class:`FrameExport` parts (in any order) and writes the export: the label files
+    as they come, ``coco_keypoints.json`` and ``manifest.json`` (in dataset order) at the end.
+
+    ``out``: a folder, a ``.zip`` (written beside and moved in place at :meth:`close`: a failed
+    export leaves no zip), or None (:meth:`close` returns the files, for the app's download).
+    """
+
+    def __init__(self, reader: FrameReader, out: Path | None, include_all: bool = False):
+        self.out = None if out is None else Path(out)
+        self._order = {s: i for i, s in enumerate(reader.stems)}
+        self.manifest = {"source": reader.data.resolve().name, "edits": reader.edits.root.name,
+                         "exported": time.strftime("%Y-%m-%dT%H:%M:%S"), "include_all": include_all, "frames": {}}
+        self._parts: list[tuple[int, str, dict, dict | None, dict | None]] = []
+        self.files: dict[str, bytes] = {}
+        self._zip = None
+        if self.out is not None and self.out.suffix == ".zip":
+            self._zip = ZipStream(self.out, key=str, keep_partial=False)
+
+    def add(self, part: FrameExport) -> None:
+        for name, data in part.files.items():
+            self._write(name, data)
+        self._parts.append((self._order[part.stem], part.stem, part.entry, part.coco_image, part.coco_annotation))
+
+    def _write(self, name: str, data: bytes) -> None:
+        if self._zip is not None:
+            self._zip.add(name, data)
+        elif self.out is not None:
+            atomic_write_bytes(self.out / name, data)
+        else:
+            self.files[name] = data
+
+    def close(self) -> dict[str, bytes]:
+        """Write the COCO file and the manifest and finish the output; the files (for ``out=None``)."""
+        coco = {"images": [], "annotations": [],
+                "categories": [{"id": 1, "name": "pitch", "keypoints": [str(i) for i in range(1, N_KEYPOINTS + 1)],
+                                "skeleton": []}]}
+        for _, stem, entry, image, annotation in sorted(self._parts, key=lambda p: p[0]):
+            self.manifest["frames"][stem] = entry
+            if image is not None:
+                coco["images"].append(image)
+                coco["annotations"].append(annotation)
+        self._write("coco_keypoints.json", dumps(coco).encode())
+        self._write("manifest.json", dumps(self.manifest, indent=1).encode())
+        if self._zip is not None:
+            self._zip.close()
+        return self.files
+
+    def discard(self) -> None:
+        """Give up (an error or Ctrl+C): a zip output is not written."""
+        if self._zip is not None:
+            self._zip.discard()
+
+    def __enter__(self) -> ExportWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:
+            self.discard()
+
+
+def export_files(reader: FrameReader, include_all: bool = False, settings: Settings | None = None,
+                 model: FieldModel | None = None, view_of: ViewOf | None = None) -> dict[str, bytes]:
+    """``{relative path: content}`` of the export (see the module docstring); the frames are
+    calibrated with ``settings`` (default: the reader's), or their views come from ``view_of``."""
+    with ExportWriter(reader, None, include_all) as writer:
+        for stem in export_stems(reader, include_all):
+            writer.add(export_frame(reader, stem, settings, model, view_of(stem) if view_of else None))
+        return writer.close()
+
+
+def read_export_zip(path: Path) -> tuple[dict[str, bytes], dict]:
+    """An export zip read back: (its members but the manifest, the manifest without its date),
+    the whole of what two exports of the same labels agree on."""
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    manifest = json.loads(members.pop("manifest.json"))
+    manifest.pop("exported")
+    return members, manifest
+
+
+def write_export(reader: FrameReader, out: Path, include_all: bool = False, settings: Settings | None = None,
+                 parts: Iterable[FrameExport] | None = None) -> dict[str, dict]:
+    """Write the export to a folder, or to a zip when ``out`` ends in .zip; ``parts``: the frames'
+    exports when computed elsewhere (a cluster), else computed here with ``settings``. Returns the
+    manifest's frames (stem -> entry; ``entry["exported"]`` False for unreadable frames)."""
+    if parts is None:
+        parts = (export_frame(reader, stem, settings) for stem in export_stems(reader, include_all))
+    with ExportWriter(reader, out, include_all) as writer:
+        for part in parts:
+            writer.add(part)
+        writer.close()
+    return writer.manifest["frames"]

@@ -1,0 +1,72 @@
+"""A frame's computed view: its inputs read (:class:`pnlviz.pipeline.reader.FrameReader`), the
+engine's one path per frame (:func:`pnlviz.calib.frame.calibrate_frame`), and the camera's score
+against the frame's annotation (JaC@5/10/20). What the app shows of a frame and what export writes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pnlviz.calib.calibrate import CalibrationResult
+from pnlviz.calib.frame import calibrate_frame
+from pnlviz.calib.observations import Observations
+from pnlviz.conventions import EVAL_SIZE
+from pnlviz.field.model import FieldModel
+from pnlviz.geometry.camera import Camera
+from pnlviz.pipeline.reader import FrameReader, Settings
+
+__all__ = ["FrameView", "frame_view"]
+
+
+@dataclass
+class FrameView:
+    """Everything the app shows for one frame under one setting."""
+
+    stem: str
+    index: int
+    has_image: bool  # the pixels are not kept here (23k cached views must fit in memory): AppState.image()
+    size: tuple[int, int]  # (W, H) of the image or of the --size fallback
+    annotation: dict[str, np.ndarray] | None
+    observations: Observations | None
+    result: CalibrationResult | None
+    jac: dict[int, float] = field(default_factory=dict)  # JaC@5/10/20 against the annotation
+    error: str | None = None  # a problem reading the frame
+    ms: float = 0.0
+    reference_camera: Camera | None = None  # a known camera (e.g. synthetic ground truth), scaled to the frame
+    detections: object | None = None  # the frame's PnLCalib detections (pnlviz.data.Predictions), if any
+    origin: str | None = None  # where the observations came from: annotation, detections, both or edits
+    settings: Settings = Settings()
+
+    @property
+    def camera(self) -> Camera | None:
+        """The camera to show the frame with: the calibration's, else the known one."""
+        if self.result is not None and self.result.ok:
+            return self.result.camera
+        return self.reference_camera
+
+
+def frame_view(reader: FrameReader, stem: str, settings: Settings, model: FieldModel | None = None,
+               keypoint_edits: Mapping | None = None) -> FrameView:
+    """The frame ``stem`` (one the reader's dataset has) read, calibrated under ``settings`` and
+    scored; with ``keypoint_edits``, as it would be with these instead of its saved ones. Never
+    raises on bad data."""
+    from pnlviz.metrics.soccernet import evaluate_frame
+
+    idx = reader.index_of(stem)
+    read = reader.read(stem, keypoint_edits)
+    if read.inputs is None:
+        return FrameView(stem, idx, False, reader.size, None, None, None, error=read.error, settings=settings)
+    fc = calibrate_frame(read.inputs, reader.frame_settings(settings), model)
+    # nothing to calibrate from is not an error of the frame: the card asks for keypoints
+    engine_error = fc.failure.message if fc.failure is not None and fc.failure.code == "internal" else None
+    ann = read.inputs.annotation
+    jac = {}
+    if fc.ok and ann:
+        fr = evaluate_frame(fc.result.camera.scaled(*EVAL_SIZE), ann)
+        jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
+    return FrameView(stem, idx, read.has_image, read.inputs.size, ann, fc.observations, fc.result, jac,
+                     error=read.image_error or engine_error, ms=fc.ms, reference_camera=read.reference_camera,
+                     detections=read.inputs.detections, origin=fc.origin, settings=settings)
