@@ -1,5 +1,6 @@
 """The shape of the code (docs/architecture.md): no import cycle, rooms import only the rooms they
-may, no engine function over 60 lines, no block of more than 10 lines written twice."""
+may, no module over 500 lines, no class over 30 methods, no function over 60 lines, no block of
+more than 10 lines written twice: anywhere in pnlviz/."""
 
 import ast
 import io
@@ -37,9 +38,8 @@ ALLOWED = {
     "pnlviz.cli": {"pnlviz.commands"},
     "pnlviz.__main__": {"pnlviz.commands"},
 }
-#: rooms whose functions are the engine (the app's GUI and the commands' argument handling aside)
-ENGINE = ("field", "geometry", "data", "labels", "metrics", "calib", "synth", "detect", "pipeline", "viz.py",
-          "conventions.py")
+MAX_MODULE_LINES = 500
+MAX_CLASS_METHODS = 30
 MAX_FUNCTION_LINES = 60
 MAX_REPEATED_LINES = 10
 
@@ -77,21 +77,52 @@ def test_rooms_import_only_what_they_may():
     assert extra == {}
 
 
-def _engine_files():
-    for name in ENGINE:
-        path = REPO / "pnlviz" / name
-        yield from (sorted(path.rglob("*.py")) if path.is_dir() else [path])
+def _modules() -> list[Path]:
+    return sorted((REPO / "pnlviz").rglob("*.py"))
 
 
-def test_no_engine_function_over_60_lines():
-    long = []
-    for path in _engine_files():
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                n = node.end_lineno - node.lineno + 1
-                if n > MAX_FUNCTION_LINES:
-                    long.append(f"{path.relative_to(REPO)}:{node.lineno} {node.name} ({n} lines)")
-    assert long == []
+def _functions(tree: ast.AST):
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            yield node
+
+
+def too_big(paths: list[Path], root: Path) -> list[str]:
+    """Modules over :data:`MAX_MODULE_LINES` lines, classes with more than :data:`MAX_CLASS_METHODS`
+    methods (every def in the class body) and functions over :data:`MAX_FUNCTION_LINES` lines
+    (a nested function counts on its own and within its parent)."""
+    found = []
+    for path in paths:
+        name, text = path.relative_to(root), path.read_text()
+        if len(text.splitlines()) > MAX_MODULE_LINES:
+            found.append(f"{name}: {len(text.splitlines())} lines")
+        tree = ast.parse(text)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ClassDef):
+                n = sum(isinstance(b, (ast.FunctionDef, ast.AsyncFunctionDef)) for b in node.body)
+                if n > MAX_CLASS_METHODS:
+                    found.append(f"{name}:{node.lineno} class {node.name} ({n} methods)")
+        for node in _functions(tree):
+            n = node.end_lineno - node.lineno + 1
+            if n > MAX_FUNCTION_LINES:
+                found.append(f"{name}:{node.lineno} {node.name} ({n} lines)")
+    return found
+
+
+def test_the_size_check_finds_each_kind(tmp_path):
+    body = "".join(f"    x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES - 1))  # with its def: 60 lines
+    methods = "".join(f"    def m{i}(self):\n        return {i}\n" for i in range(MAX_CLASS_METHODS + 1))
+    (tmp_path / "long.py").write_text(f"def f():\n{body}    return x0\n")
+    (tmp_path / "wide.py").write_text(f"class C:\n{methods}")
+    (tmp_path / "big.py").write_text("x = 1\n" * (MAX_MODULE_LINES + 1))
+    (tmp_path / "ok.py").write_text(f"def g():\n{body}")
+    found = too_big(sorted(tmp_path.glob("*.py")), tmp_path)
+    assert sorted(f.split(":")[0] for f in found) == ["big.py", "long.py", "wide.py"], found
+
+
+def test_no_module_class_or_function_too_big():
+    """Anywhere in pnlviz/, the app and the commands included."""
+    assert too_big(_modules(), REPO) == []
 
 
 def _shapes(path: Path) -> list[tuple[int, str]]:
@@ -152,4 +183,4 @@ def test_the_repeated_block_check_finds_a_renamed_copy(tmp_path):
 def test_no_block_of_more_than_10_lines_written_twice():
     """Runs of 11 code lines with the same shape (the same lines, or the same with other names,
     numbers and strings), anywhere in pnlviz/."""
-    assert repeated_blocks(sorted((REPO / "pnlviz").rglob("*.py")), REPO) == []
+    assert repeated_blocks(_modules(), REPO) == []

@@ -237,7 +237,7 @@ def test_opencv_text_never_sees_surrogates():
 
 def test_prediction_and_camera_folders_reject_names_that_are_not_utf8(tmp_path):
     from pnlviz.data import Predictions, write_predictions
-    from pnlviz.metrics.soccernet import read_cameras
+    from pnlviz.data.cameras import read_cameras
 
     z = tmp_path / "p.zip"
     write_predictions(z, {"1": Predictions(keypoints={1: (0.5, 0.5, 0.9)})})

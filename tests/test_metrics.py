@@ -25,8 +25,9 @@ from pnlviz.metrics.homography import (
     clip_polygon_to_box, evaluate_homographies, evaluate_homography, homography_from_camera, iou_whole,
     visible_field_pixels,
 )
+from pnlviz.data.cameras import read_cameras
 from pnlviz.metrics.soccernet import (
-    evaluate_dataset, evaluate_frame, point_to_polyline_distance, read_cameras,
+    evaluate_dataset, evaluate_frame, point_to_polyline_distance,
 )
 
 MODEL = load_field_model()

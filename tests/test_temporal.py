@@ -152,7 +152,7 @@ def test_calibrate_temporal_on_a_prediction_zip(tmp_path, capsys):
     the cameras jitter less than per-frame ones."""
     from pnlviz.cli import main
     from pnlviz.data import write_predictions
-    from pnlviz.metrics.soccernet import read_cameras
+    from pnlviz.data.cameras import read_cameras
     from pnlviz.data.predictions import Predictions
     from pnlviz.metrics.temporal import jitter
 
@@ -200,7 +200,7 @@ def test_a_video_file_goes_through_detect_and_calibrate(tmp_path, capsys):
     from pnlviz.cli import main
     from pnlviz.data import read_predictions
     from pnlviz.data.video import VideoDataset
-    from pnlviz.metrics.soccernet import read_cameras
+    from pnlviz.data.cameras import read_cameras
     from pnlviz.synth.clip import clip_frame, plan_clip
 
     plan = plan_clip(8, 12, (480, 270), cuts=0)

@@ -173,7 +173,7 @@ def run_eval(args) -> int:
     progress = not args.no_progress
     cameras = None
     if args.pred is not None:
-        from pnlviz.metrics.soccernet import read_cameras
+        from pnlviz.data.cameras import read_cameras
 
         cameras, _ = read_cameras(args.pred, on_error=_report)
     if args.gt is not None:

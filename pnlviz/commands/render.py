@@ -33,7 +33,7 @@ def run_render(args) -> int:
     from pnlviz.commands.common import open_input_dataset, print_skipped
     from pnlviz.data import check_output
     from pnlviz.data.layout import clips
-    from pnlviz.metrics.soccernet import read_cameras
+    from pnlviz.data.cameras import read_cameras
 
     if args.out.suffix.lower() not in (".mp4", ".m4v", ".mov"):
         print(f"error: --out {args.out} must end in .mp4", file=sys.stderr)

@@ -13,7 +13,7 @@ import importlib
 
 _EXPORTS = {
     "soccernet": ("DEFAULT_THRESHOLDS", "FrameResult", "Matching", "Summary", "ThresholdScore", "evaluate_dataset",
-                  "evaluate_frame", "point_to_polyline_distance", "read_cameras"),
+                  "evaluate_frame", "point_to_polyline_distance"),
     "homography": ("HomographyFrameResult", "HomographySummary", "evaluate_homographies", "evaluate_homography",
                    "homography_from_camera", "iou_part", "iou_whole", "projection_error", "reprojection_error"),
 }

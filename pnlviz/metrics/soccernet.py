@@ -44,25 +44,21 @@ import math
 import os
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pnlviz.conventions import EVAL_HEIGHT, EVAL_WIDTH
 from pnlviz.data import DataError, open_dataset
-from pnlviz.data.cameras import camera_stem, parse_camera_bytes
+from pnlviz.data.cameras import read_cameras
 from pnlviz.data.dataset import Dataset
-from pnlviz.data.errors import member_source
-from pnlviz.data.layout import is_junk, sort_stems, split_member
-from pnlviz.data.reading import bad_name_error, is_utf8, open_zip, read_file, read_zip_member
 from pnlviz.field.names import MIRROR
 from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.polylines import visible_pitch
 
 __all__ = [
     "EVAL_WIDTH", "EVAL_HEIGHT", "DEFAULT_THRESHOLDS", "point_to_polyline_distance", "Matching",
-    "ThresholdScore", "FrameResult", "Summary", "evaluate_frame", "evaluate_dataset", "read_cameras",
+    "ThresholdScore", "FrameResult", "Summary", "evaluate_frame", "evaluate_dataset",
 ]
 
 DEFAULT_THRESHOLDS: tuple[float, ...] = (5.0, 10.0, 20.0)
@@ -382,69 +378,6 @@ class Summary:
         if 5.0 in self.thresholds:
             lines.append(f"final score FS = CR x JaC@5 {self.final_score:.4f}")
         return "\n".join(lines)
-
-
-def _camera_files(path: Path, zf, problems: list[str]) -> dict[str, list[tuple[str, str]]]:
-    """``{folder prefix: [(stem, member or file path)]}`` of the cameras of a zip or a folder."""
-    found: dict[str, list[tuple[str, str]]] = {}
-    if zf is None:
-        for p in sorted(path.iterdir()):
-            stem = camera_stem(p.name)
-            if stem is None or not p.is_file():
-                continue
-            if is_utf8(stem):
-                found.setdefault("", []).append((stem, os.fspath(p)))
-            else:
-                problems.append(str(bad_name_error(os.fspath(p))))
-        return found
-    for name in zf.namelist():
-        if is_junk(name):
-            continue
-        prefix, base = split_member(name)
-        stem = camera_stem(base)
-        if stem is not None:
-            found.setdefault(prefix, []).append((stem, name))
-    return found
-
-
-def read_cameras(path: str | os.PathLike, on_error: Callable[[str], Any] | None = None) -> tuple[dict[str, dict], list[str]]:
-    """Read a zip (or folder) of ``camera_<stem>.json`` leniently -> ``({stem: dict}, problems)``.
-
-    Unlike :func:`pnlviz.data.read_camera_zip`, a camera that cannot be read or validated (or
-    whose file name is not valid UTF-8) is skipped with a one-line problem (``on_error(line)`` is
-    called too) instead of failing the whole archive. Files at the top level are used; if there
-    are none, one folder level is accepted. A problem with the archive itself raises
-    :class:`DataError`.
-    """
-    path = Path(path)
-    problems: list[str] = []
-    zf = None if path.is_dir() else open_zip(path)
-    try:
-        found = _camera_files(path, zf, problems)
-        if "" in found:
-            members = found[""]
-        elif len(found) == 1:
-            members = next(iter(found.values()))
-        else:
-            members = []
-            if found:
-                problems.append(f"{os.fspath(path)}: camera files are spread over several folders "
-                                f"({', '.join(sorted(found)[:3])}); none used")
-        by_stem: dict[str, dict] = {}
-        for stem, member in members:
-            source = member_source(path, member) if zf else member
-            try:
-                data = read_zip_member(zf, member, source) if zf else read_file(member)
-                by_stem[stem] = parse_camera_bytes(data, source)
-            except DataError as e:
-                problems.append(str(e))
-    finally:
-        if zf is not None:
-            zf.close()
-    if on_error is not None:
-        for line in problems:
-            on_error(line)
-    return {s: by_stem[s] for s in sort_stems(by_stem)}, problems
 
 
 def _evaluate_chunk(items: list[tuple[str, Any, dict]], thresholds: tuple[float, ...]) -> list[FrameResult]:
