@@ -101,3 +101,98 @@ def blank_canvas(width: int = 960, height: int = 540) -> np.ndarray:
     canvas = np.full((height, width, 3), 72, np.uint8)
     canvas[:, :, 1] = 84
     return canvas
+
+
+# ----------------------------------------------------------------------------- the keypoint map
+#: the colour of each keypoint set (RGB), the same in the app, its overlays and the keypoint map
+SET_RGB = {"Kp": (230, 40, 40), "Kpe": (255, 220, 0), "Kp1": (30, 120, 255), "Kp2": (255, 90, 200),
+           "Kp3": (60, 200, 60)}
+SET_WORDS = {"Kp": "line-line intersections", "Kpe": "extended-line intersections",
+             "Kp1": "line-circle intersections", "Kp2": "circle tangent points", "Kp3": "additional points"}
+#: how far the crossbar's corners (2.44 m up, above the posts) are drawn behind the goal line
+_CROSSBAR_SHIFT_M = 3.2
+
+
+def _map_position(xyz: np.ndarray) -> np.ndarray:
+    """Where a keypoint is drawn on the top view (metres): itself, except a point above the ground
+    (a crossbar corner), drawn behind its goal line so that it does not hide its post."""
+    x, y, z = xyz
+    return np.array([x + math.copysign(_CROSSBAR_SHIFT_M, x) if z < -0.5 else x, y])
+
+
+def _free_spot(box_w: int, box_h: int, at: tuple[int, int], taken: list, bounds: tuple[int, int]) -> tuple[int, int]:
+    """The top-left corner of a ``box_w`` x ``box_h`` label beside the point ``at`` that overlaps
+    no rectangle in ``taken`` (the first of eight places around it that is free, else the first)."""
+    x, y = at
+    g = 5
+    places = [(x + g, y - box_h - g), (x + g, y + g), (x - box_w - g, y - box_h - g), (x - box_w - g, y + g),
+              (x - box_w // 2, y - box_h - 2 * g), (x - box_w // 2, y + 2 * g), (x + 2 * g, y - box_h // 2),
+              (x - box_w - 2 * g, y - box_h // 2)]
+    for px, py in places:
+        r = (px, py, px + box_w, py + box_h)
+        inside = 0 <= px and px + box_w < bounds[0] and 0 <= py and py + box_h < bounds[1]
+        if inside and not any(r[0] < t[2] and t[0] < r[2] and r[1] < t[3] and t[1] < r[3] for t in taken):
+            return px, py
+    return places[0]
+
+
+def keypoint_map(model: FieldModel | None = None, *, px_per_m: float = 16.0,
+                 highlight: int | None = None, legend: bool = True) -> np.ndarray:
+    """A top view of the pitch with every keypoint id, coloured by set (:data:`SET_RGB`): the
+    picture of PnLCalib's numbering. The far touchline (y < 0, "top" in SoccerNet's names) is at
+    the top, the main camera's side at the bottom; the crossbar's corners (2.44 m above the posts)
+    are drawn just behind their goal line. ``highlight``: an id drawn larger, ringed; ``legend``:
+    the sets' colours and the orientation written along the bottom. BGR uint8."""
+    model = model or load_field_model()
+    margin = 6.0  # metres around the pitch
+    legend_h = 56 if legend else 0
+    W, H = int((105 + 2 * margin) * px_per_m), int((68 + 2 * margin) * px_per_m) + legend_h
+    image = np.full((H, W, 3), (40, 92, 46), np.uint8)
+
+    def px(xy) -> np.ndarray:
+        return (np.asarray(xy, float) + [52.5 + margin, 34 + margin]) * px_per_m
+
+    for name, pts in model.sample_polylines(0.25, 0.1).items():
+        ground = np.abs(pts[:, 2]) < 1e-6
+        colour = (235, 235, 235) if ground.all() else (170, 170, 170)
+        cv2.polylines(image, [_to_int(px(pts[:, :2]))], False, colour, 2, cv2.LINE_AA, shift=4)
+    ids = [int(k) for k in model.keypoint_ids]
+    where = {k: px(_map_position(model.keypoints[k].xyz)) for k in ids}
+    for k in ids:  # a crossbar corner is joined to the top of its post
+        if model.keypoints[k].xyz[2] < -0.5:
+            post = px(model.keypoints[k].xyz[:2])
+            cv2.line(image, tuple(int(v) for v in post), tuple(int(v) for v in where[k]), (150, 150, 150), 1, cv2.LINE_AA)
+    scale = max(0.4, px_per_m / 26)
+    order = sorted(ids, key=lambda k: k == highlight)  # the highlighted one drawn last, on top
+    dot = max(3, int(px_per_m * 0.25)) + 2
+    taken: list = [(int(p[0]) - dot, int(p[1]) - dot, int(p[0]) + dot, int(p[1]) + dot) for p in where.values()]
+    for k in order:
+        rgb = SET_RGB.get(model.keypoints[k].group, (255, 255, 255))
+        bgr = tuple(int(c) for c in rgb[::-1])
+        x, y = (int(round(v)) for v in where[k])
+        big = k == highlight
+        r = max(3, int(px_per_m * (0.45 if big else 0.25)))
+        cv2.circle(image, (x, y), r, bgr, -1, cv2.LINE_AA)
+        cv2.circle(image, (x, y), r, (0, 0, 0), 1, cv2.LINE_AA)
+        if big:
+            cv2.circle(image, (x, y), 2 * r + 2, (255, 255, 255), 2, cv2.LINE_AA)
+        text = str(k)
+        s = scale * (1.5 if big else 1.0)
+        (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, s, 1 + big)
+        tx, ty = _free_spot(tw + 4, th + base + 2, (x, y), taken, (W, H - legend_h))
+        taken.append((tx, ty, tx + tw + 4, ty + th + base + 2))
+        cv2.rectangle(image, (tx, ty), (tx + tw + 4, ty + th + base + 2), (20, 20, 20), -1)
+        cv2.putText(image, text, (tx + 2, ty + th + 1), cv2.FONT_HERSHEY_SIMPLEX, s, bgr, 1 + big, cv2.LINE_AA)
+    if not legend:
+        return image
+    x0 = 8
+    for group, rgb in SET_RGB.items():  # the legend, along the bottom
+        label = f"{group}: {SET_WORDS[group]}"
+        cv2.circle(image, (x0 + 6, H - legend_h + 14), 6, tuple(int(c) for c in rgb[::-1]), -1, cv2.LINE_AA)
+        cv2.putText(image, label, (x0 + 16, H - legend_h + 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (240, 240, 240), 1,
+                    cv2.LINE_AA)
+        x0 += 26 + cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0][0]
+    note = ("top: the far touchline (y < 0); the main camera looks from the bottom. Crossbar corners (2.44 m up) "
+            "are drawn behind their goal line.")
+    cv2.putText(image, note, (8, H - 12), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (240, 240, 240), 1, cv2.LINE_AA)
+    return image

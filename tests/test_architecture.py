@@ -47,12 +47,13 @@ MAX_REPEATED_LINES = 10
 def test_the_geometry_helpers_doctests_hold():
     import doctest
 
+    import pnlviz.field.model
     import pnlviz.geometry.distance
     import pnlviz.geometry.homography
     import pnlviz.geometry.projection
     import pnlviz.geometry.so3
 
-    for module in (pnlviz.geometry.so3, pnlviz.geometry.distance, pnlviz.geometry.homography,
+    for module in (pnlviz.field.model, pnlviz.geometry.so3, pnlviz.geometry.distance, pnlviz.geometry.homography,
                    pnlviz.geometry.projection):
         result = doctest.testmod(module)
         assert result.attempted > 0 and result.failed == 0, module.__name__

@@ -179,3 +179,26 @@ def test_flip_table_is_the_reflection_in_the_halfway_line():
         target = samples[FLIP_X[name]]
         gaps = np.linalg.norm(reflected[:, None, :] - target[None, :, :], axis=2).min(axis=1)
         assert gaps.max() < 0.15, name  # within the sampling step: the same curve
+
+
+def test_keypoint_names_are_distinct_and_say_the_side():
+    names = load_field_model().keypoint_names()
+    assert len(names) == 73 and len(set(names.values())) == 73
+    assert names[33].endswith("(top)") and names[36].endswith("(bottom)")  # once both "Big rect. right main x Circle right"
+    assert names[38].endswith("(left)") and names[39].endswith("(right)")
+
+
+def test_keypoint_map_draws_every_id_at_its_place_in_its_set_colour():
+    from pnlviz.viz import SET_RGB, _map_position, keypoint_map
+
+    model = load_field_model()
+    image = keypoint_map(model, px_per_m=10.0)
+    margin = 6.0
+    for kid in model.keypoint_ids:
+        x, y = (_map_position(model.keypoints[kid].xyz) + [52.5 + margin, 34 + margin]) * 10.0
+        rgb = SET_RGB[model.keypoints[kid].group]
+        assert tuple(image[int(round(y)), int(round(x))][::-1]) == rgb, kid
+    ringed = keypoint_map(model, px_per_m=10.0, highlight=45)
+    changed = np.argwhere(np.any(ringed != image, axis=2))
+    centre = (_map_position(model.keypoints[45].xyz) + [52.5 + margin, 34 + margin]) * 10.0
+    assert len(changed) and np.abs(changed[:, ::-1] - centre).max() < 60  # only around id 45 (its ring, its label)

@@ -92,6 +92,10 @@ class FieldModel:
         attr = "pnlcalib_xyz" if pnlcalib else "xyz"
         return np.array([getattr(self.keypoints[int(i)], attr) for i in ids], dtype=float).reshape(-1, 3)
 
+    def keypoint_names(self) -> dict[int, str]:
+        """A distinct name in words for every keypoint id (see :func:`keypoint_names`)."""
+        return keypoint_names(self)
+
     def keypoints_in_group(self, group: str) -> list[int]:
         return [k.id for k in self.keypoints.values() if k.group == group]
 
@@ -224,6 +228,47 @@ def _load(path: Path) -> FieldModel:
 
 __all__ = ["Arc", "FieldModel", "FieldModelError", "Keypoint", "Segment", "load_field_model",
            "parse_field_model", "pitch_grid", "DEFAULT_MODEL_PATH", "IGNORED_CLASSES"]
+
+
+def _base_name(kp: Keypoint) -> str:
+    """What defines a keypoint, in the catalogue's words (the lines and circles through it)."""
+    d = kp.definition
+    if d.get("kind") == "tangent":
+        return f"tangent to {d['circle']} from keypoint {d['from_keypoint']}"
+    parts = d.get("lines") or [p for p in (d.get("line"), d.get("circle")) if p] or d.get("on") or []
+    return " x ".join(str(p).strip() for p in parts)
+
+
+@lru_cache(maxsize=4)
+def keypoint_names(model: FieldModel) -> dict[int, str]:
+    """``{id: name}``, distinct: what defines each keypoint, and where two share a definition (the
+    two intersections of a line with a circle, a circle's diagonal points...) the side that tells
+    them apart, in SoccerNet's words: *top* / *bottom* for y < 0 / y > 0 (the far and the near
+    touchline), *left* / *right* for x < 0 / x > 0.
+
+    >>> names = load_field_model().keypoint_names()
+    >>> names[33], names[36]
+    ('Big rect. right main x Circle right (top)', 'Big rect. right main x Circle right (bottom)')
+    >>> len(set(names.values())) == len(names)
+    True
+    """
+    base = {int(k): _base_name(kp) for k, kp in model.keypoints.items()}
+    groups: dict[str, list[int]] = {}
+    for kid, name in base.items():
+        groups.setdefault(name, []).append(kid)
+    out = {}
+    for name, ids in groups.items():
+        xyz = np.array([model.keypoints[k].xyz for k in ids])
+        for kid, (x, y, _) in zip(ids, xyz):
+            side = []
+            if len(ids) > 1 and np.ptp(xyz[:, 1]) > 1e-6:
+                side.append("top" if y < 0 else "bottom")
+            if len(ids) > 1 and np.ptp(xyz[:, 0]) > 1e-6:
+                side.append("left" if x < 0 else "right")
+            out[kid] = f"{name} ({' '.join(side)})" if side else name
+    if len(set(out.values())) != len(out):
+        raise FieldModelError("two keypoints of the catalogue have the same definition and position")
+    return dict(sorted(out.items()))
 
 
 def pitch_grid(spacing: float = 5.0, length: float = 105.0, width: float = 68.0) -> np.ndarray:
