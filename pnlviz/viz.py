@@ -162,6 +162,10 @@ def keypoint_map(model: FieldModel | None = None, *, px_per_m: float = 16.0,
         if model.keypoints[k].xyz[2] < -0.5:
             post = px(model.keypoints[k].xyz[:2])
             cv2.line(image, tuple(int(v) for v in post), tuple(int(v) for v in where[k]), (150, 150, 150), 1, cv2.LINE_AA)
+    if highlight in where:  # guides across the map through the highlighted id, to find it at a glance
+        hx, hy = (int(round(v)) for v in where[highlight])
+        cv2.line(image, (0, hy), (W - 1, hy), (0, 215, 255), max(1, int(px_per_m / 8)), cv2.LINE_AA)
+        cv2.line(image, (hx, 0), (hx, H - legend_h - 1), (0, 215, 255), max(1, int(px_per_m / 8)), cv2.LINE_AA)
     scale = max(0.4, px_per_m / 26)
     order = sorted(ids, key=lambda k: k == highlight)  # the highlighted one drawn last, on top
     dot = max(3, int(px_per_m * 0.25)) + 2
@@ -171,7 +175,7 @@ def keypoint_map(model: FieldModel | None = None, *, px_per_m: float = 16.0,
         bgr = tuple(int(c) for c in rgb[::-1])
         x, y = (int(round(v)) for v in where[k])
         big = k == highlight
-        r = max(3, int(px_per_m * (0.45 if big else 0.25)))
+        r = max(3, int(px_per_m * (0.45 if big else 0.25))) + (3 if big else 0)
         cv2.circle(image, (x, y), r, bgr, -1, cv2.LINE_AA)
         cv2.circle(image, (x, y), r, (0, 0, 0), 1, cv2.LINE_AA)
         if big:

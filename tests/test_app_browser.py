@@ -4,6 +4,7 @@ move points by the right number of image pixels; a frame with no camera gets lab
 calibrated; the review keys advance; undo comes back; two tabs keep their own frames."""
 
 import json
+import re
 import shutil
 import time
 
@@ -302,7 +303,7 @@ def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(t
     assert session.view().camera is None and session.workspace.plane is not None
     for n, (kid, p) in enumerate(chosen):
         page.get_by_label("place id").click()
-        page.get_by_role("option", name=str(kid), exact=True).click()
+        page.get_by_role("option", name=re.compile(f"^{kid} · ")).click()
         wait_until(lambda kid=kid: session.editor.place_id == kid)
         page.keyboard.down("Shift")
         page.mouse.click(*on_screen(page, session, p))
@@ -500,3 +501,64 @@ def test_serve_starts_clean_with_a_client_while_the_detector_loads(tmp_path, bro
     finally:
         for b in burners:
             b.kill()
+
+
+def test_hotkeys_work_after_each_kind_of_widget(data, browser, serve):
+    """viser's hotkeys ignore a key pressed in any <input>: after a text field, a dropdown or a
+    checkbox the keys died (G typed a "g" into *jump to stem*). Enter and Escape leave a text
+    field; a dropdown and a checkbox give the keyboard back."""
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    # a text field: typed, Enter leaves it, G reviews (and types nothing)
+    page.get_by_label("jump to stem").click()
+    page.keyboard.type("00001")
+    page.keyboard.press("Enter")
+    wait_until(lambda: session.stem == "00001")
+    page.keyboard.press("g")
+    wait_until(lambda: app.state.edits.review("00001") == "accepted" and session.stem == "00002")
+    assert page.get_by_label("jump to stem").input_value() == "00001"
+    # Escape leaves a field too
+    page.get_by_label("jump to stem").click()
+    page.keyboard.press("Escape")
+    page.keyboard.press("p")
+    page.keyboard.press("p")
+    wait_until(lambda: session.stem == "00000")
+    # a choice in a dropdown: the arrows nudge the chosen point again
+    settle(session)
+    kid, uv = left_keypoint(session.view())
+    page.get_by_label("on this frame").click()
+    page.get_by_role("option", name=f"{kid} · visible", exact=False).first.click()
+    wait_until(lambda: session.editor.selected is not None and session.editor.selected.key == kid)
+    page.keyboard.press("ArrowRight")
+    wait_until(lambda: str(kid) in (app.state.edits.get("00000").get("keypoints") or {}))
+    import numpy as np
+
+    np.testing.assert_allclose(app.state.edits.get("00000")["keypoints"][str(kid)], uv + [1, 0], atol=1e-6)
+    # a checkbox: N goes on
+    page.get_by_label("snap to pitch").click()
+    wait_until(lambda: session.editor.snap)
+    page.keyboard.press("n")
+    wait_until(lambda: session.stem == "00001")
+    page.close()
+
+
+def test_the_picker_finds_an_id_by_name_and_by_number(data, browser, serve):
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    picker = page.get_by_label("place id")
+    picker.click()
+    page.keyboard.type("mark left")
+    page.get_by_role("option", name="45 · penalty mark left").click()
+    wait_until(lambda: session.editor.place_id == 45)
+    shown = session.panels.kp_map.image.copy()
+    # typing a number replaces the choice shown (it gave "345" when the search added to it)
+    picker.click()
+    page.keyboard.type("33")
+    page.keyboard.press("Enter")
+    wait_until(lambda: session.editor.place_id == 33)
+    assert picker.input_value().startswith("33 · ")
+    assert (session.panels.kp_map.image != shown).any()  # the map highlights the chosen id
+    wait_for_text(page, "shift+click places 33")
+    page.close()

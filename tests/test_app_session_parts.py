@@ -340,7 +340,12 @@ def test_the_panel_texts():
     assert rows == ["-", "3 · visible", "12 · visible · 0.8 px", "7 · hidden", "40 · ghost"]
     assert [cards.listed_id(r) for r in rows] == [None, 3, 12, 7, 40]
     model = SimpleNamespace(keypoints={})
-    assert cards.selected_text(None, overlay, model, 9) == "nothing selected · shift+click places id **9**"
+    from pnlviz.field.model import load_field_model
+
+    assert cards.selected_text(None, overlay, load_field_model(), 45) == \
+        "nothing selected · shift+click places **45** penalty mark left (Kp3)"
+    assert cards.selected_text(None, overlay, load_field_model(), 36) == \
+        "nothing selected · shift+click places **36** Big rect. right main x Circle right (bottom) (Kp1)"
     assert cards.selected_text(Selection(PointKind.KEYPOINTS, 12), overlay, model, 9) == \
         "**12** ? · residual 0.84 px · at (10.0, 20.0)"
     assert "not observed" in cards.selected_text(Selection(PointKind.GHOSTS, 40), overlay, model, 9)

@@ -109,7 +109,7 @@ def test_server_panels_navigate_review_and_toggle_pnl(data, serve):
     tab.goto(st.find("00000"))
     assert "00000" in p.title.content and "focal" in p.card.content
     tab.step(1)
-    assert tab.stem == st.stems[st.find("00000") + 1] and p.slider.value == st.find("00000") + 1
+    assert tab.stem == st.stems[st.find("00000") + 1] and p.slider.value == st.find("00000") + 2  # from 1
     st.set_review(tab.stem, "accepted")
     assert "1 of 5 reviewed" in p.progress_text.content  # the change reached the tab
     assert "review: **accepted**" in p.status.content

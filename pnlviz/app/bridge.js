@@ -6,6 +6,10 @@
 // - The arrow keys nudge the selected point by one image pixel (ten with shift) instead of turning
 //   the camera.
 // - Every <label for="..."> points at its input (viser labels inputs whose elements carry no id).
+// - The keys work at the window level except while typing in a text field: Enter and Escape leave
+//   a field; a dropdown gives the keyboard back once a choice is made, and its search starts from
+//   an empty text (typing 45 finds 45, not 345); a key pressed on a checkbox, a button or a
+//   closed dropdown goes to the window's hotkeys (viser's hotkeys ignore every <input>).
 //
 // The server talks to it through the attributes of an element of its own (#pnlviz-bridge:
 // data-input, the uuid of the text field it writes to; data-mode, "image" or "3d"), and it talks
@@ -75,6 +79,7 @@
   };
   window.addEventListener("pointermove", track, { capture: true, passive: true });
 
+  const ARROWS = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, -1], ArrowDown: [0, 1] };
   const zoomBy = (logFactor) => {
     state.logZoom += logFactor;
     send();
@@ -92,19 +97,74 @@
     },
     { capture: true, passive: false },
   );
+  // ---- the keyboard: in a text field only while typing
+  const NOT_TEXT = new Set(["checkbox", "radio", "range", "button", "submit", "reset", "color", "file"]);
+  const isCombobox = (t) => t && t.tagName === "INPUT" && t.getAttribute("aria-haspopup") === "listbox";
+  const isOpen = (t) => t.getAttribute("aria-expanded") === "true";
+  const typingIn = (t) =>
+    !!t && (t.tagName === "TEXTAREA" || t.isContentEditable ||
+      (t.tagName === "INPUT" && !t.readOnly && !NOT_TEXT.has(t.type) && (!isCombobox(t) || isOpen(t))));
+  const release = () => {
+    const t = document.activeElement;
+    if (t && t !== document.body && typeof t.blur === "function") t.blur();
+  };
+  // a choice made in a dropdown: the keyboard goes back to the window
+  window.addEventListener(
+    "click",
+    (event) => {
+      if (event.target && event.target.closest && event.target.closest("[role=option]")) setTimeout(release, 0);
+    },
+    { capture: true },
+  );
+  // a dropdown's search starts empty, so typing replaces the shown choice instead of adding to it
+  window.addEventListener(
+    "focusin",
+    (event) => {
+      const t = event.target;
+      if (isCombobox(t) && !t.readOnly && typeof t.select === "function") setTimeout(() => t.select(), 0);
+    },
+    { capture: true },
+  );
   window.addEventListener(
     "keydown",
     (event) => {
-      const cfg = config();
       const t = event.target;
-      const typing = t && (t.tagName === "INPUT" || t.tagName === "TEXTAREA" || t.isContentEditable);
-      if (!cfg || cfg.mode !== "image" || typing || event.ctrlKey || event.metaKey || event.altKey) return;
-      const arrows = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, -1], ArrowDown: [0, 1] };
-      if (event.key in arrows) {
+      if (typingIn(t)) {
+        if (event.key === "Escape" || (event.key === "Enter" && !isCombobox(t))) release();
+        else if (event.key === "Enter") {
+          // the dropdown takes its choice first; with none highlighted, its first match
+          const list = document.getElementById(t.getAttribute("aria-controls") || "");
+          const options = list ? [...list.querySelectorAll("[role=option]")] : [];
+          if (options.length && !options.some((o) => o.hasAttribute("data-combobox-selected"))) {
+            event.preventDefault();
+            event.stopImmediatePropagation();
+            options[0].click();
+          }
+          setTimeout(release, 0);
+        }
+        return;
+      }
+      if (t && t.tagName === "INPUT" && !["Tab", " ", "Enter"].includes(event.key)) {
+        // a checkbox, a button, a closed dropdown has the focus: the key is the window's
+        release();
+        if (!(event.key in ARROWS)) {
+          event.preventDefault();
+          event.stopImmediatePropagation();
+          const again = new KeyboardEvent("keydown", {
+            key: event.key, code: event.code, shiftKey: event.shiftKey, ctrlKey: event.ctrlKey,
+            metaKey: event.metaKey, altKey: event.altKey, bubbles: true, cancelable: true,
+          });
+          document.body.dispatchEvent(again);
+          return;
+        }
+      }
+      const cfg = config();
+      if (!cfg || cfg.mode !== "image" || event.ctrlKey || event.metaKey || event.altKey) return;
+      if (event.key in ARROWS) {
         // nudge the selected point (instead of turning the camera, which the image view does not do)
         const step = event.shiftKey ? 10 : 1;
-        state.nudgeX += step * arrows[event.key][0];
-        state.nudgeY += step * arrows[event.key][1];
+        state.nudgeX += step * ARROWS[event.key][0];
+        state.nudgeY += step * ARROWS[event.key][1];
         event.preventDefault();
         event.stopImmediatePropagation();
         send();

@@ -55,13 +55,12 @@ def calibration_card(view: FrameView, state: AppState) -> str:
 
 
 def keypoint_name(model, kid: int) -> str:
-    """What a keypoint is, in words (its defining lines and circles)."""
+    """What a keypoint is, in words, distinct for every id (:meth:`FieldModel.keypoint_names`),
+    with its set."""
     kp = model.keypoints.get(int(kid))
     if kp is None:
         return "?"
-    d = kp.definition
-    parts = d.get("lines") or [p for p in (d.get("line"), d.get("circle")) if p] or d.get("on") or []
-    return " x ".join(str(p) for p in parts) + f" ({kp.group})"
+    return f"{model.keypoint_names()[int(kid)]} ({kp.group})"
 
 
 def title_text(view: FrameView, position: int, n: int, outside: bool, flt: str) -> str:
@@ -118,7 +117,7 @@ def listed_id(row) -> int | None:
 def selected_text(selected: Selection | None, overlay: Overlay | None, model, place_id: int) -> str:
     """What is selected: its id and name (or line and index), residual, and where it is."""
     if selected is None or overlay is None:
-        return f"nothing selected · shift+click places id **{place_id}**"
+        return f"nothing selected · shift+click places **{place_id}** {keypoint_name(model, place_id)}"
     key = selected.key
     if selected.kind is PointKind.LINE_POINTS:
         m = overlay.line_points

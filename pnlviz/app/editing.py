@@ -18,7 +18,7 @@ import numpy as np
 
 from pnlviz.app.cards import listed_id
 from pnlviz.app.modes import DragEvent, DragMode, DragPhase, PointKind, Selection, labels
-from pnlviz.app.panels import KEYPOINT_CHOICES
+from pnlviz.app.panels import choice_id
 from pnlviz.app.state import REVIEW_STATES, EditError
 from pnlviz.app.view2d import snap
 
@@ -107,7 +107,7 @@ class Editor:
     def choose_id(self, kid: int) -> None:
         """The id shift+click places."""
         self.place_id = kid
-        self.tab.queue.set_value(self.tab.panels.kp_id, str(kid))
+        self.tab.panels.show_place_id(kid)
 
     def select_listed(self, row) -> None:
         """A choice in the panel's keypoint list ("12 · visible · 0.8 px")."""
@@ -123,7 +123,12 @@ class Editor:
             self.choose_id(kid)
 
     def set_place_id(self, value) -> None:
-        self.place_id = int(self.tab.panels.choice(self.tab.panels.kp_id, KEYPOINT_CHOICES, str(self.place_id)))
+        """A choice in the picker ("45 · penalty mark left")."""
+        panels = self.tab.panels
+        current = panels.kp_choices[[choice_id(c) for c in panels.kp_choices].index(self.place_id)]
+        self.place_id = choice_id(panels.choice(panels.kp_id, panels.kp_choices, current))
+        panels.kp_map.image = panels.map_of(self.place_id)
+        self.tab.painter.show_selected()
 
     def set_drag_mode(self, value) -> None:
         self.drag_mode = DragMode(self.tab.panels.choice(self.tab.panels.drag_mode, labels(DragMode),

@@ -84,10 +84,11 @@ class FrameOrder:
         """The frame ``delta`` places on in the order (stopping at its ends)."""
         return self.order[int(np.clip(self.position() + delta, 0, len(self.order) - 1))]
 
-    def at(self, pos) -> int:
-        """The frame at position ``pos`` of the order (the slider; anything else: the first)."""
+    def at(self, pos, first: int = 0) -> int:
+        """The frame at position ``pos`` of the order, counted from ``first`` (the slider counts
+        from 1; anything not a number: the first frame)."""
         try:
-            pos = int(pos)
+            pos = int(pos) - first
         except (TypeError, ValueError, OverflowError):
             pos = 0
         return self.order[int(np.clip(pos, 0, len(self.order) - 1))]

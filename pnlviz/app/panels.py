@@ -6,17 +6,19 @@ order the browser sent them, and every value is checked by the action it reaches
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from pnlviz.app.bridge import bridge_html
 from pnlviz.app.modes import DragMode, Filter, Mode, Sort, labels
 from pnlviz.app.overlay import LEGEND, SET_RGB
+from pnlviz.viz import keypoint_map
 
 LAYERS = ("keypoints", "ids", "ghosts", "refined_pitch", "initial_pitch", "reference_pitch", "annotation",
           "residuals", "detected_lines")
-KEYPOINT_CHOICES = tuple(str(i) for i in range(1, 74))
 REVIEW_KEYS = {"accepted": "G", "corrected": "C", "rejected": "R"}
 PANEL_WIDTH = 320
+MAP_PX_PER_M = 6.0  # the keypoint map beside the picker (about 700 px wide, shown at the panel's width)
 
 #: every key of the app: (keys, what), for the help section (the bridge handles + and -, the
 #: arrows; viser's camera keys W A S D Q E pan and zoom the image view too)
@@ -39,14 +41,41 @@ KEYS = (
 )
 
 
+def keypoint_choices(model) -> tuple[str, ...]:
+    """The picker's options, "45 · penalty mark left": searchable by id and by name."""
+    return tuple(f"{k} · {name}" for k, name in sorted(model.keypoint_names().items()))
+
+
+def choice_id(choice) -> int | None:
+    """The id of a picker option ("45 · ..." or "45"), None for anything else."""
+    head = str(choice).split(" ", 1)[0]
+    return int(head) if head.isdigit() else None
+
+
+def picker_map(model, kid: int | None) -> np.ndarray:
+    """The keypoint map with ``kid`` highlighted, RGB, for the panel."""
+    return cv2.cvtColor(keypoint_map(model, px_per_m=MAP_PX_PER_M, highlight=kid, legend=False), cv2.COLOR_BGR2RGB)
+
+
+def layer_words(name: str) -> str:
+    """A layer's name as its checkbox shows it (and the legend names it)."""
+    return name.replace("_", " ")
+
+
 def legend_markdown() -> str:
-    """The colours of the overlays and of the keypoint sets."""
+    """The colour of every layer, under the name of its checkbox, and of the keypoint sets."""
     def swatch(rgb) -> str:
         return f'<span style="color:rgb{tuple(int(c) for c in rgb)}">&#9632;</span>'
 
-    rows = [f"{swatch(c)} {text}" for c, text in LEGEND.values()]
-    rows.append("keypoint sets: " + ", ".join(f"{swatch(c)} {name}" for name, c in SET_RGB.items()))
+    rows = [f"{swatch(c)} **{layer_words(name)}**: {text}" for name, (c, text) in LEGEND.items()]
+    rows.append("**keypoints** by set: " + ", ".join(f"{swatch(c)} {name}" for name, c in SET_RGB.items()))
     return "<br>".join(rows)
+
+
+def keys_markdown() -> str:
+    """The keys an annotator uses most, in one line at the top of the panel."""
+    return ("**G** accept · **C** corrected · **R** reject · **N/P** next/previous · **shift+click** place · "
+            "**arrows** nudge · **Del** hide · **Ctrl+Z** undo · **V** 3D · more: Help")
 
 
 def help_markdown() -> str:
@@ -62,6 +91,7 @@ class Panels:
         gui.main_panel.dock_right()
         gui.main_panel.set_width(PANEL_WIDTH)
         self.title = gui.add_markdown("")
+        self.keys = gui.add_markdown(keys_markdown())
         self.status = gui.add_markdown("")
         self._frame_folder(gui)
         self._clip_folder(gui, session.clip.clips)
@@ -79,7 +109,7 @@ class Panels:
 
     def _frame_folder(self, gui) -> None:
         with gui.add_folder("Frame"):
-            self.slider = gui.add_slider("frame", min=0, max=1, step=1, initial_value=0)
+            self.slider = gui.add_slider("frame", min=1, max=2, step=1, initial_value=1)
             self.nav = gui.add_button_group("navigate", ("previous", "next"))
             self.jump = gui.add_text("jump to stem", initial_value="")
             self.filter = gui.add_dropdown("filter", labels(Filter), initial_value=Filter.ALL.value)
@@ -108,10 +138,15 @@ class Panels:
             self.progress_text = gui.add_markdown("")
 
     def _points_folder(self, gui) -> None:
+        model = self.session.state.model
+        self.kp_choices = keypoint_choices(model)
+        self._maps: dict[int, np.ndarray] = {}
         with gui.add_folder("Points"):
             self.selected = gui.add_markdown("")
-            self.kp_id = gui.add_dropdown("place id", KEYPOINT_CHOICES, initial_value="1",
-                                          hint="shift+click on the image places this keypoint")
+            self.kp_id = gui.add_dropdown("place id", self.kp_choices, initial_value=self.kp_choices[0],
+                                          hint="shift+click on the image places this keypoint; type an id or a "
+                                               "name to find it")
+            self.kp_map = gui.add_image(self.map_of(choice_id(self.kp_choices[0])), format="jpeg", jpeg_quality=85)
             self.points = gui.add_dropdown("on this frame", ("-",), initial_value="-",
                                            hint="the frame's keypoints: choose one to select it")
             self.hide = gui.add_button("not visible (Delete)")
@@ -127,7 +162,7 @@ class Panels:
             self.view_buttons = gui.add_button_group("view", ("fit (0)", "1:1 (1)", "3D (V)"))
             self.zoom_text = gui.add_markdown("")
             self.opacity = gui.add_slider("overlay opacity", min=0.1, max=1.0, step=0.05, initial_value=1.0)
-            self.layer_boxes = {name: gui.add_checkbox(name.replace("_", " "), initial_value=getattr(layers, name))
+            self.layer_boxes = {name: gui.add_checkbox(layer_words(name), initial_value=getattr(layers, name))
                                 for name in LAYERS}
             self.legend = gui.add_markdown(legend_markdown())
 
@@ -202,6 +237,19 @@ class Panels:
             command = gui.add_command(label, hotkey=key, modifier=modifier, description=description)
             command.on_trigger(s.queue.ordered(lambda _, action=action: action()))
 
+    # ------------------------------------------------------------------ the picker
+    def map_of(self, kid: int | None) -> np.ndarray:
+        """The keypoint map with ``kid`` highlighted (each drawn once per tab)."""
+        key = -1 if kid is None else int(kid)
+        if key not in self._maps:
+            self._maps[key] = picker_map(self.session.state.model, kid)
+        return self._maps[key]
+
+    def show_place_id(self, kid: int) -> None:
+        """The picker and its map on ``kid``."""
+        self.session.queue.set_value(self.kp_id, self.kp_choices[[choice_id(c) for c in self.kp_choices].index(kid)])
+        self.kp_map.image = self.map_of(kid)
+
     # ------------------------------------------------------------------ values from the browser
     def choice(self, handle, options, fallback: str) -> str:
         """The dropdown's value if it is one of ``options``; else it is reset to ``fallback``."""
@@ -213,7 +261,8 @@ class Panels:
         return fallback
 
     def set_order(self, n: int, pos: int) -> None:
-        """The slider over ``n`` frames at position ``pos`` (disabled when there is only one)."""
-        self.slider.max = max(1, n - 1)
+        """The slider over ``n`` frames at position ``pos`` (from 0); it counts from 1, as the title
+        does (disabled when there is only one frame)."""
+        self.slider.max = max(2, n)
         self.slider.disabled = n <= 1
-        self.session.queue.set_value(self.slider, int(np.clip(pos, 0, max(0, n - 1))))
+        self.session.queue.set_value(self.slider, int(np.clip(pos, 0, max(0, n - 1))) + 1)

@@ -120,7 +120,7 @@ class Session:
 
     def slider_moved(self, value) -> None:
         with self.lock:
-            index = self.frames.at(value)
+            index = self.frames.at(value, first=1)  # the slider counts from 1
             if index != self.frames.index:  # not an echo of goto() moving the slider
                 self.goto(index)
 

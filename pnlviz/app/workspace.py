@@ -408,7 +408,7 @@ class Workspace:
             handle = self._labels.get(k)
             if handle is None:
                 self._labels[k] = self.scene.add_label(f"{self.root}/ids/{k}", text, position=pos,
-                                                       font_screen_scale=0.75, anchor="bottom-left")
+                                                       font_screen_scale=0.9, anchor="bottom-left")
             elif k not in self._label_uv or not np.allclose(self._label_uv[k], uv) or self._label_rank[k] != rank:
                 handle.position, handle.text = pos, text
             self._label_uv[k], self._label_rank[k] = uv, rank
