@@ -76,13 +76,13 @@ def _say_done(args, frames: dict, total: int, cluster: bool) -> None:
 
 
 def run_export(args) -> int:
-    from pnlviz import EXAMPLES_DIR
     from pnlviz.commands.batch import run_batch
+    from pnlviz.commands.common import app_data
     from pnlviz.data.outputs import OutputError, check_output
     from pnlviz.pipeline import FrameReader
     from pnlviz.pipeline.export import ExportWriter, export_stems, failed_frame
 
-    data = args.data or EXAMPLES_DIR / "sample"
+    data, args.edits = app_data(args)
     try:
         check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits))
     except OutputError as exc:

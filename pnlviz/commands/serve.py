@@ -36,26 +36,37 @@ def add_serve_parser(sub) -> None:
 
 def _detector(args):
     """The background detector (in its own process: this one never imports torch), or None."""
-    from pnlviz.detect.default import DEFAULT_MODEL
-    from pnlviz.detect.worker import DetectorProcess
+    from pnlviz.detect.default import DEFAULT_MODEL, torch_missing
+    from pnlviz.detect.worker import DetectorLoadError, DetectorProcess
 
+    missing = torch_missing()
     if args.weights_kp or args.weights_lines or args.weights:
+        if missing:
+            raise DetectorLoadError(missing)
         return DetectorProcess(args.weights_kp, args.weights_lines, threads=args.detector_threads, light=args.weights)
     if not args.no_detect and not args.detections and DEFAULT_MODEL.is_file():
+        if missing:
+            print(f"pnlviz: no background detection ({missing}); frames are calibrated from their labels",
+                  file=sys.stderr)
+            return None
         return DetectorProcess(threads=args.detector_threads)
     return None
 
 
 def run_serve(args) -> int:
-    from pnlviz import EXAMPLES_DIR
     from pnlviz.app.guard import is_loopback
     from pnlviz.app.server import PnlvizApp
     from pnlviz.app.state import AppState
+    from pnlviz.commands.common import app_data
     from pnlviz.data.edits import EditsFolderError
     from pnlviz.detect.worker import DetectorLoadError, DetectorProcessError
 
-    data = args.data or EXAMPLES_DIR / "sample"
-    detector = _detector(args)
+    data, args.edits = app_data(args)
+    try:
+        detector = _detector(args)
+    except DetectorLoadError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     if detector is not None and (not detector.light or args.weights is not None):
         print("pnlviz: loading the detector's checkpoints...", flush=True)
         try:  # a checkpoint that does not fit is an error now, not on the first frame

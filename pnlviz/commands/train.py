@@ -56,6 +56,12 @@ def add_train_parser(subparsers) -> None:
 
 
 def run_train(args) -> int:
+    from pnlviz.detect.default import torch_missing
+
+    if (missing := torch_missing()) is not None:
+        print(f"error: {missing}", file=sys.stderr)
+        return 2
+
     from pnlviz.detect.train import train
     from pnlviz.detect.train_config import DEFAULT_CONFIG_PATH, load_config
 

@@ -47,3 +47,10 @@ class DataError(ValueError):
 def member_source(zip_path: str | os.PathLike, member: str) -> str:
     """The ``<file>`` part of an error message for ``member`` inside ``zip_path``."""
     return f"{os.fspath(zip_path)}:{member}"
+
+
+class ArgumentError(ValueError):
+    """A wrong argument of the Python API (:mod:`pnlviz.api`); the message starts with its name.
+    Shown (and importable) as ``pnlviz.ArgumentError``."""
+
+    __module__ = "pnlviz"

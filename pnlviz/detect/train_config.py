@@ -8,9 +8,11 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from pnlviz.paths import ASSETS_DIR
+
 __all__ = ["DEFAULT_CONFIG_PATH", "TrainConfig", "load_config", "resolve_path"]
 
-DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / "assets" / "models" / "light_config.json"
+DEFAULT_CONFIG_PATH = ASSETS_DIR / "models" / "light_config.json"
 
 
 @dataclass
