@@ -2,6 +2,7 @@
 and never gated out; one it cannot agree with is flagged with its residual; four hand-placed ground
 points calibrate a frame, or the failure names the condition that fails."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -14,6 +15,7 @@ from pnlviz.calib.residuals import Block
 from pnlviz.calib.sources import apply_keypoint_edits
 from pnlviz.field.model import load_field_model
 from pnlviz.geometry.camera import Camera
+from pnlviz.geometry.homography import camera_from_ground_homography
 
 W, H = 960, 540
 MODEL = load_field_model()
@@ -78,10 +80,19 @@ def test_four_hand_placed_ground_points_calibrate_a_frame():
         assert fc.ok, fc.failure
         err = [np.hypot(*(projected(fc.result.camera, k) - p)) for k, p in uv.items()]
         assert np.median(err) < 10.0
-    # the real frame's four points (they gave "degenerate geometry" before)
+    # the real frame's four points
     fc = calibrate_frame(FrameInputs((1073, 603), keypoint_edits=MESSI))
     assert fc.ok and fc.origin == "edits" and sorted(fc.result.pinned) == [6, 7, 10, 22]
     assert max(fc.result.point_residuals.values()) < 3.0
+    # clicked to whole pixels: their homography has no closed-form focal length (this gave
+    # "degenerate geometry"); the field-of-view search finds the camera
+    clicked = {"6": [41, 287], "7": [470, 258], "10": [448, 322], "22": [683, 423]}
+    Hc, _ = cv2.findHomography(MODEL.keypoint_xyz([6, 7, 10, 22])[:, :2], np.array(list(clicked.values()), float), 0)
+    assert camera_from_ground_homography(Hc, 1073, 603) is None
+    fc = calibrate_frame(FrameInputs((1073, 603), keypoint_edits=clicked))
+    assert fc.ok and max(fc.result.point_residuals.values()) < 5.0
+    uv, _ = fc.result.camera.project(MODEL.keypoint_xyz([6, 7, 10, 22]))
+    assert np.max(np.hypot(*(uv - np.array(list(MESSI.values()))).T)) < 8.0
 
 
 @pytest.mark.parametrize("edits, condition, words", [
