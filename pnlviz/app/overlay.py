@@ -31,7 +31,7 @@ RESIDUAL_RGB = (255, 0, 0)
 DETECTED_RGB = (255, 255, 255)  # white: detected line extremities
 GHOST_RGB = (200, 200, 200)
 PIN_RGB = (0, 0, 0)  # black box: a pinned keypoint (placed or moved by hand)
-FLAGGED_RGB = (255, 140, 0)  # orange box: a pinned keypoint the camera cannot agree with
+FLAGGED_RGB = (255, 90, 0)  # orange box: a pinned keypoint the camera cannot agree with
 
 #: BGR of the same, for OpenCV drawing
 SET_BGR = {k: v[::-1] for k, v in SET_RGB.items()}
