@@ -1,6 +1,6 @@
 """Pinned keypoints (placed or moved by hand): the camera fits them, weighted above the detections
 and never gated out; one it cannot agree with is flagged with its residual; four hand-placed ground
-points calibrate a frame, or the failure names the condition that fails."""
+points calibrate a frame, or the failure names the condition that fails; the app draws and says them."""
 
 import cv2
 import numpy as np
@@ -147,3 +147,26 @@ def test_the_pin_rows_jacobian_matches_finite_differences():
     d = np.hypot(*(A @ theta).reshape(-1, 2).T)
     np.testing.assert_allclose(np.hypot(*r[0]), 3 * 10 * np.sqrt(np.log1p((d[0] / 10) ** 2)))
     np.testing.assert_allclose(r[1], (A @ theta).reshape(-1, 2)[1])
+
+
+def test_the_app_draws_and_says_the_pins():
+    """The overlay knows the pinned and the flagged keypoints; the card and the points list say them."""
+    from types import SimpleNamespace
+
+    from pnlviz.app import cards
+    from pnlviz.app.modes import PointKind, Selection
+    from pnlviz.app.overlay import overlay_geometry
+
+    uv = truth_uv()
+    edits = {"22": list(uv[22] + [-300.0, 0.0])}
+    det = {k: p for k, p in uv.items() if k != 22}
+    obs = apply_keypoint_edits(Observations.from_keypoints(W, H, det, model=MODEL), edits, MODEL)
+    result = calibrate(obs, CalibParams(), MODEL)
+    view = SimpleNamespace(size=(W, H), result=result, observations=obs, reference_camera=None, annotation=None,
+                           detections=None, camera=result.camera)
+    overlay = overlay_geometry(view, model=MODEL)
+    assert overlay.pinned == [22] and set(overlay.flagged) == {22}
+    assert f"**pinned point 22 is {result.flagged[22]:.0f} px from the camera**" in cards.pin_lines(result)
+    assert cards.pin_lines(result)[0] == "pinned (placed by hand): 1 point (22)"
+    assert any(r.startswith("22 · visible · flagged pin") for r in cards.point_rows(overlay, set()))
+    assert "cannot agree" in cards.selected_text(Selection(PointKind.KEYPOINTS, 22), overlay, MODEL, 1)

@@ -143,6 +143,10 @@ def selected_text(selected: Selection | None, overlay: Overlay | None, model, pl
             text += " · not observed: drag it where it is"
         elif key in overlay.residuals:
             text += f" · residual {overlay.residuals[key]:.2f} px"
+        if key in overlay.flagged:
+            text += " · pinned, the camera cannot agree with it"
+        elif selected.kind is PointKind.KEYPOINTS and key in overlay.pinned:
+            text += " · pinned"
     if key in m.keys:
         u, v = m.uv[m.keys.index(key)]
         text += f" · at ({u:.1f}, {v:.1f})"
