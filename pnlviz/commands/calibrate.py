@@ -19,7 +19,7 @@ from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
 #: how the summary names the engine's failure codes, in the order of
 #: :data:`pnlviz.calib.calibrate.FAILURE_CODES` (see :func:`failure_words`)
 _ENGINE_WORDS = ("too few keypoints", "degenerate geometry", "no keypoint agrees with the camera",
-                 "residual above the limit")
+                 "residual above the limit", "hand-placed points cannot calibrate")
 
 
 def failure_words() -> dict[str, str]:
