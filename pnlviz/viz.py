@@ -195,6 +195,21 @@ def top_view(camera: Camera | None = None, *, points=None, keypoints=None, model
     return image
 
 
+def inset_top_view(image: np.ndarray, camera: Camera, share: float = 0.28) -> np.ndarray:
+    """Paste :func:`top_view` of ``camera`` into the bottom-right corner of ``image`` (in place;
+    ``share`` of its width, framed), as ``pnlviz render`` does on every frame."""
+    h, w = image.shape[:2]
+    px_per_m = max(1.0, share * w / 117.0)  # the view is 105 m + 2 x 6 m wide
+    inset = top_view(camera, px_per_m=px_per_m)
+    ih, iw = inset.shape[:2]
+    if ih + 8 > h or iw + 8 > w:
+        return image
+    y0, x0 = h - ih - 8, w - iw - 8
+    cv2.rectangle(image, (x0 - 2, y0 - 2), (x0 + iw + 1, y0 + ih + 1), (20, 20, 20), 2)
+    image[y0:y0 + ih, x0:x0 + iw] = inset
+    return image
+
+
 def keypoint_map(model: FieldModel | None = None, *, px_per_m: float = 16.0,
                  highlight: int | None = None, legend: bool = True) -> np.ndarray:
     """A top view of the pitch with every keypoint id, coloured by set (:data:`SET_RGB`): the

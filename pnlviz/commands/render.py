@@ -25,6 +25,8 @@ def add_render_parser(sub) -> None:
     p.add_argument("--cameras", required=True, type=Path, help="camera zip or folder (camera_<stem>.json)")
     p.add_argument("--out", required=True, type=Path, help="output video (.mp4)")
     p.add_argument("--fps", type=float, default=None, help="frames per second (default: the video's, else 25)")
+    p.add_argument("--no-top-view", action="store_true",
+                   help="no bird's-eye inset (the camera's footprint on the pitch, bottom right)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_render)
 
@@ -76,7 +78,7 @@ def _render_frames(args, ds, cameras: dict, stems: list[str], fps: float, tmp) -
 
     from pnlviz.data import DataError
     from pnlviz.geometry.camera import Camera
-    from pnlviz.viz import cv_text, draw_pitch
+    from pnlviz.viz import cv_text, draw_pitch, inset_top_view
 
     writer = None
     drawn = 0
@@ -98,7 +100,10 @@ def _render_frames(args, ds, cameras: dict, stems: list[str], fps: float, tmp) -
             img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
         cam = cameras.get(stem)
         if cam is not None:
-            draw_pitch(img, Camera.from_soccernet(cam, 960, 540), colour=(80, 255, 255), thickness=2)
+            camera = Camera.from_soccernet(cam, 960, 540)
+            draw_pitch(img, camera, colour=(80, 255, 255), thickness=2)
+            if not args.no_top_view:
+                inset_top_view(img, camera)
             drawn += 1
         else:
             cv2.putText(img, cv_text("no camera"), (12, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 255), 2, cv2.LINE_AA)
