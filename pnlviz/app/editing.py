@@ -44,13 +44,14 @@ class EditTrail:
             self.done.append(stem)
             self.undone.clear()
 
-    def undo(self, current: str, goto: Callable[[str], None]) -> None:
+    def undo(self, current: str, goto: Callable[[str], None], settings=None) -> None:
         """Take back this tab's last change (going to its frame with ``goto(stem)``), else the
-        last change of the ``current`` frame."""
-        self._step(self.done, self.undone, self.state.undo, current, goto)
+        last change of the ``current`` frame (a reviewed frame records what it shows under the
+        tab's ``settings``)."""
+        self._step(self.done, self.undone, lambda stem: self.state.undo(stem, settings), current, goto)
 
-    def redo(self, current: str, goto: Callable[[str], None]) -> None:
-        self._step(self.undone, self.done, self.state.redo, current, goto)
+    def redo(self, current: str, goto: Callable[[str], None], settings=None) -> None:
+        self._step(self.undone, self.done, lambda stem: self.state.redo(stem, settings), current, goto)
 
     def _step(self, trail: list[str], other: list[str], step: Callable[[str], bool], current: str,
               goto: Callable[[str], None]) -> None:
@@ -143,7 +144,7 @@ class Editor:
             tab.notify("refused", f"review status {str(status)[:20]!r} is not one of the options")
             return
         stem = tab.stem
-        self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status))
+        self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status, tab.settings))
         if advance and status != "clear" and tab.state.edits.review(stem) == status:
             tab.advance_from(stem)
 
@@ -153,13 +154,13 @@ class Editor:
             return
         stem, kid = self.tab.stem, int(self.selected.key)
         self.selected = None
-        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid))
+        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid, self.tab.settings))
 
     def place(self, stem: str, uv) -> None:
         """Put the chosen keypoint id at pixel ``uv`` of ``stem`` (shift+click)."""
         kid = self.place_id
         uv = self._snapped(uv)
-        self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv))
+        self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv, settings=self.tab.settings))
         overlay = self.tab.painter.overlay
         if stem == self.tab.stem and overlay is not None and kid in overlay.keypoints.keys:
             self.select(Selection(PointKind.KEYPOINTS, kid))
@@ -184,9 +185,9 @@ class Editor:
 
         def edit() -> None:
             if point.kind is PointKind.LINE_POINTS:
-                state.move_line_point(stem, point.key[0], point.key[1], *uv)
+                state.move_line_point(stem, point.key[0], point.key[1], *uv, settings=settings)
             else:
-                state.move_keypoint(stem, int(point.key), *uv)
+                state.move_keypoint(stem, int(point.key), *uv, settings=settings)
             state.view(stem, settings)  # recalibrate now, to time it
             self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
 
@@ -196,10 +197,10 @@ class Editor:
 
     def undo(self) -> None:
         """Take back this tab's last change (going back to its frame), else the frame's last one."""
-        self.trail.undo(self.tab.stem, self._goto_stem)
+        self.trail.undo(self.tab.stem, self._goto_stem, self.tab.settings)
 
     def redo(self) -> None:
-        self.trail.redo(self.tab.stem, self._goto_stem)
+        self.trail.redo(self.tab.stem, self._goto_stem, self.tab.settings)
 
     def _goto_stem(self, stem: str) -> None:
         self.tab.goto(self.tab.state.index_of(stem))

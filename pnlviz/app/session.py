@@ -202,7 +202,7 @@ class Session:
 
         if self.client is not None:
             st = self.state
-            self.client.send_file_download(f"{st.data.name}_labels.zip", export_zip_bytes(st, settings=self.settings),
+            self.client.send_file_download(f"{st.data.name}_labels.zip", export_zip_bytes(st),
                                            save_immediately=True)
 
     def close(self, wait: bool = False) -> None:

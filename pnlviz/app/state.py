@@ -62,6 +62,7 @@ class AppState:
     def __init__(self, data: Path, *, detections: Path | None = None, edits: Path | None = None,
                  size: tuple[int, int] = EVAL_SIZE, detector=None, source: str | None = None, writable: bool = True):
         self.data = Path(data)
+        self.detections_path = None if detections is None else Path(detections)
         self.model = load_field_model()
         self.reader = FrameReader.open(self.data, detections=detections, edits=edits, size=size, writable=writable,
                                        detector_settings=getattr(detector, "calibration", None))
@@ -238,17 +239,41 @@ class AppState:
         return changed
 
     # ------------------------------------------------------------------ review and edits
-    def _edit(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True) -> None:
+    def _edit(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True,
+              settings: Settings | None = None) -> None:
         """One user action on one frame, one undo step, autosaved at once
-        (:meth:`pnlviz.data.edits.EditsStore.act`)."""
+        (:meth:`pnlviz.data.edits.EditsStore.act`); a reviewed frame then records what it shows
+        under ``settings`` (:meth:`snapshot`)."""
         self.index_of(stem)
-        self._changed(stem, self.edits.act(stem, change, corrected=corrected))
+        changed = self.edits.act(stem, change, corrected=corrected)
+        if changed:
+            self.snapshot(stem, settings)
+        self._changed(stem, changed)
 
-    def set_review(self, stem: str, status: str | None) -> None:
+    def snapshot(self, stem: str, settings: Settings | None = None) -> dict | None:
+        """Record in a reviewed (accepted or corrected) frame's edit record what it shows under
+        ``settings`` (default: :attr:`default_settings`): its labels with their provenance, the
+        detections and settings used, the camera (:func:`pnlviz.pipeline.snapshot.take_snapshot`),
+        which is what an export of the frame writes. Returns the snapshot (None: not reviewed)."""
+        from pnlviz.pipeline.snapshot import REVIEWED, take_snapshot
+
+        with self.edits.lock(stem):  # the view and the record it is taken with are one
+            record = self.edits.get(stem)
+            if record.get("review") not in REVIEWED:
+                return None
+            view = self.view(stem, settings or self.default_settings)
+            snap = take_snapshot(view, record, self.applied_detection_settings(view.origin, view.settings), self.model)
+            if snap != record.get("snapshot"):
+                self.edits.update(stem, snapshot=snap)
+        return snap
+
+    def set_review(self, stem: str, status: str | None, settings: Settings | None = None) -> None:
+        """Set the frame's review status; accepting it (or marking it corrected) records what
+        it shows under ``settings``, what its export writes."""
         if status is not None and status not in REVIEW_STATES:
             raise EditError(f"review status must be one of {', '.join(REVIEW_STATES)} or none, "
                             f"got {str(status)[:20]!r}")
-        self._edit(stem, lambda rec: rec.__setitem__("review", status), corrected=False)
+        self._edit(stem, lambda rec: rec.__setitem__("review", status), corrected=False, settings=settings)
 
     def set_annotation(self, stem: str, annotation: dict[str, np.ndarray]) -> None:
         """Store an edited annotation (autosaved at once) and mark the frame corrected."""
@@ -259,33 +284,44 @@ class AppState:
             raise EditError(exc.problem) from None
         self._edit(stem, lambda rec: rec.__setitem__("annotation", text))
 
-    def move_keypoint(self, stem: str, kid: int, x: float, y: float) -> None:
+    def move_keypoint(self, stem: str, kid: int, x: float, y: float, settings: Settings | None = None) -> None:
         """Put keypoint ``kid`` at pixel (x, y) of the frame (adds it if it was missing)."""
         kid = check_keypoint_id(kid)
         self.index_of(stem)
         xy = check_position(x, y, self.frame_size(stem), stem)
-        self._edit(stem, lambda rec: set_keypoint(rec, kid, xy))
+        self._edit(stem, lambda rec: set_keypoint(rec, kid, xy), settings=settings)
 
-    def hide_keypoint(self, stem: str, kid: int) -> None:
-        """Mark keypoint ``kid`` not visible: it leaves the calibration and the labels."""
-        kid = check_keypoint_id(kid)
-        self._edit(stem, lambda rec: set_keypoint(rec, kid, None))
+    def hide_keypoint(self, stem: str, kid, settings: Settings | None = None) -> None:
+        """Mark keypoint ``kid`` not visible: it leaves the calibration and the labels (``kid``: an
+        id, or several ids hidden in one step, e.g. the points the outlier gate flags)."""
+        kids = [check_keypoint_id(k) for k in (kid if isinstance(kid, (list, tuple, set, frozenset)) else [kid])]
 
-    def move_line_point(self, stem: str, name: str, index: int, x: float, y: float) -> None:
+        def change(rec: dict) -> None:
+            for k in kids:
+                set_keypoint(rec, k, None)
+
+        self._edit(stem, change, settings=settings)
+
+    def move_line_point(self, stem: str, name: str, index: int, x: float, y: float,
+                        settings: Settings | None = None) -> None:
         """Move point ``index`` of annotated class ``name`` to pixel (x, y)."""
         self.index_of(stem)
         size = self.frame_size(stem)
         xy = check_position(x, y, size, stem)
-        self._edit(stem, lambda rec: move_line_point(rec, lambda: self.ds.annotation(stem), stem, name, index, xy, size))
+        self._edit(stem, lambda rec: move_line_point(rec, lambda: self.ds.annotation(stem), stem, name, index, xy,
+                                                     size), settings=settings)
 
-    def undo(self, stem: str) -> bool:
-        """Take back the frame's last change (whoever made it); False if there is none."""
+    def undo(self, stem: str, settings: Settings | None = None, back: bool = True) -> bool:
+        """Take back the frame's last change (whoever made it), or with ``back`` False do again
+        the last one taken back; False if there is none."""
         self.index_of(stem)
-        return self._changed(stem, self.edits.step(stem, back=True))
+        changed = self.edits.step(stem, back=back)
+        if changed:
+            self.snapshot(stem, settings)
+        return self._changed(stem, changed)
 
-    def redo(self, stem: str) -> bool:
-        self.index_of(stem)
-        return self._changed(stem, self.edits.step(stem, back=False))
+    def redo(self, stem: str, settings: Settings | None = None) -> bool:
+        return self.undo(stem, settings, back=False)
 
     def history(self, stem: str) -> tuple[int, int]:
         """(undo steps, redo steps) the frame has."""

@@ -6,6 +6,7 @@ Layout::
                                          "annotation": {SoccerNet annotation},
                                          "keypoints": {"<id>": [x, y] | null},   # pixels; null = not visible
                                          "history": {"undo": [step, ...], "redo": [step, ...]},
+                                         "snapshot": {what was on screen when reviewed},
                                          "updated": <unix time>}
         a step: the fields one user action changed, as they were before it ({"review": null, ...})
     <edits>/frames/<stem>.json.damaged  a file that failed validation, moved aside (kept, never deleted)
@@ -42,10 +43,11 @@ from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.data.atomic import atomic_write_text
 from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
+from pnlviz.data.snapshot import validate_snapshot
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
 #: the fields a record may hold; anything else is dropped when it is read
-FIELDS = ("review", "annotation", "keypoints", "history", "updated")
+FIELDS = ("review", "annotation", "keypoints", "history", "snapshot", "updated")
 #: the fields an undo step may restore
 UNDOABLE = ("annotation", "keypoints", "review")
 #: undo steps kept per frame (and per direction)
@@ -165,6 +167,8 @@ def validate_record(obj: Any, source: str, checked_before: Collection[int] = ())
         if not isinstance(kps, Mapping):
             raise DataError(source, f'"keypoints" must be an object of id -> [x, y] | null, got {describe(kps)}')
         rec["keypoints"] = dict(validate_keypoint(k, v, source) for k, v in kps.items())
+    if obj.get("snapshot") is not None:
+        rec["snapshot"] = validate_snapshot(obj["snapshot"], source)
     history = obj.get("history")
     if history is not None:
         rec["history"] = validate_history(history, source, checked_before)

@@ -1,0 +1,179 @@
+"""One export from the data and the edits folder alone: the app's button and `pnlviz export` write
+the same label files whatever the server detected; a reviewed frame exports what was on screen
+when it was reviewed (its snapshot), never detections that came after; the outlier gate flags
+visible points far from their frame's camera unless a hand placed them."""
+
+import hashlib
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from pnlviz import EXAMPLES_DIR
+from pnlviz.cli import main
+
+STEMS = ("00000", "00002", "00003", "00004", "00007")
+
+
+def _true_detections(stem: str, moved: dict | None = None):
+    """Detections of a synthetic sample frame: its keypoints through its true camera (``moved``:
+    id -> pixel offset for some)."""
+    from pnlviz.data import Predictions, open_dataset
+    from pnlviz.field.model import load_field_model
+    from pnlviz.geometry.camera import Camera
+
+    model = load_field_model()
+    ds = open_dataset(EXAMPLES_DIR / "sample")
+    W, H = ds.image_size(stem)
+    cam = Camera.from_soccernet(ds.camera_dict(stem)).scaled(W, H)
+    ids = [int(i) for i in model.keypoint_ids if model.keypoints[int(i)].group == "Kp"]
+    uv, _ = cam.project(model.keypoint_xyz(np.array(ids)))
+    kps = {}
+    for kid, (x, y) in zip(ids, uv):
+        if np.isfinite(x) and 5 <= x < W - 5 and 5 <= y < H - 5:
+            dx, dy = (moved or {}).get(kid, (0.0, 0.0))
+            kps[kid] = ((x + dx) / W, (y + dy) / H, 0.9)
+    return Predictions(keypoints=kps)
+
+
+class FakeDetector:
+    """A detector for the app's state: the frames' true keypoints, known by their pixels."""
+
+    calibration = {"refine_k1": False}
+
+    def __init__(self, preds: dict):
+        self.by_pixels = preds
+
+    def detect(self, images):
+        return [self.by_pixels[hashlib.sha1(np.ascontiguousarray(img).tobytes()).hexdigest()] for img in images]
+
+
+@pytest.fixture()
+def images_only(tmp_path):
+    """Five sample frames as images alone (no annotation), and a detector that knows them."""
+    from pnlviz.data import open_dataset
+
+    data = tmp_path / "frames"
+    data.mkdir()
+    for stem in STEMS:
+        shutil.copy(EXAMPLES_DIR / "sample" / f"{stem}.jpg", data / f"{stem}.jpg")
+    ds = open_dataset(data)
+    preds = {hashlib.sha1(np.ascontiguousarray(ds.image(s)).tobytes()).hexdigest():
+             _true_detections(s, {5: (40.0, 25.0)} if s == "00007" else None) for s in STEMS}
+    return data, FakeDetector(preds)
+
+
+def _export_both(st, data, edits, tmp_path, *flags):
+    from pnlviz.app.export import export_zip_bytes
+    from pnlviz.pipeline.export import read_export_zip
+
+    button = tmp_path / "button.zip"
+    button.write_bytes(export_zip_bytes(st, include_all="--all" in flags))
+    cli = tmp_path / "cli.zip"
+    assert main(["export", "--data", str(data), "--edits", str(edits), "--out", str(cli), "--no-progress", *flags]) == 0
+    return read_export_zip(button), read_export_zip(cli)
+
+
+def test_the_button_and_the_command_write_the_same_files_where_the_server_detected(images_only, tmp_path):
+    """The server detected on image-only frames and the annotator reviewed some of them (one after
+    placing points by hand, before the detections came): the button's zip and `pnlviz export`
+    (which never saw those detections) hold byte-identical label files, with and without --all."""
+    from pnlviz.app.state import AppState
+
+    data, detector = images_only
+    edits = tmp_path / "edits"
+    with AppState(data, edits=edits, detector=detector) as st:
+        for stem in ("00000", "00007", "00002"):
+            st.run_detector(stem)
+        st.set_review("00000", "accepted")
+        st.set_review("00007", "accepted")
+        hand = {k: v for k, v in list(_true_detections("00003").keypoints_px(960, 540).items())[:5]}
+        for kid, (x, y, _) in hand.items():
+            st.move_keypoint("00003", kid, x, y)  # corrected, by hand, before any detection there
+        st.run_detector("00003")  # 17 detections nobody reviewed arrive afterwards
+        assert st.view("00003").observations.n_keypoints > len(hand)
+        (b_members, b_manifest), (c_members, c_manifest) = _export_both(st, data, edits, tmp_path)
+        assert b_members == c_members and b_manifest == c_manifest
+        assert set(b_manifest["frames"]) == {"00000", "00007", "00003"}
+        kps = json.loads(b_members["keypoints/00003.json"])
+        assert {int(k) for k in kps["keypoints"]} == set(hand)  # only what was reviewed
+        assert {k["provenance"] for k in kps["keypoints"].values()} == {"hand"} and kps["reviewed"] is True
+        k0 = json.loads(b_members["keypoints/00000.json"])["keypoints"]
+        assert k0 and {k["provenance"] for k in k0.values()} == {"detection"}
+        assert "cameras/camera_00000.json" in b_members and b_manifest["frames"]["00000"]["labels"] == "snapshot"
+        # --all: the unreviewed frames are there, marked so, the same from both
+        (b_members, b_manifest), (c_members, c_manifest) = _export_both(st, data, edits, tmp_path, "--all")
+        assert b_members == c_members and b_manifest == c_manifest
+        assert json.loads(b_members["keypoints/00004.json"])["reviewed"] is False
+
+
+def test_a_reviewed_frame_exports_what_was_on_screen_and_an_old_record_no_detections(images_only, tmp_path):
+    """Detections made after a review never reach that frame's labels; a reviewed record of an
+    older version (no snapshot) exports its hand points, not the detections given to export."""
+    from pnlviz.app.state import AppState
+    from pnlviz.data import write_predictions
+    from pnlviz.pipeline.export import read_export_zip
+
+    data, detector = images_only
+    edits = tmp_path / "edits"
+    with AppState(data, edits=edits, detector=detector) as st:
+        st.set_review("00002", "accepted")  # nothing on screen yet: no labels
+        st.run_detector("00002")
+        assert st.view("00002").result.ok  # the server now calibrates it from the detections
+    # an older record: reviewed, two hand points, no snapshot
+    (edits / "frames" / "00004.json").write_text(json.dumps({"review": "accepted",
+                                                             "keypoints": {"1": [10.0, 20.0], "2": [400.0, 30.0]}}))
+    preds = tmp_path / "preds.zip"
+    write_predictions(preds, {s: _true_detections(s) for s in STEMS})
+    out = tmp_path / "x.zip"
+    assert main(["export", "--data", str(data), "--edits", str(edits), "--detections", str(preds), "--out", str(out),
+                 "--no-progress"]) == 0
+    members, manifest = read_export_zip(out)
+    assert json.loads(members["keypoints/00002.json"])["keypoints"] == {}
+    assert "cameras/camera_00002.json" not in members
+    k4 = json.loads(members["keypoints/00004.json"])["keypoints"]
+    assert set(k4) == {"1", "2"} and manifest["frames"]["00004"]["labels"] == "edits"
+
+
+def test_the_gate_flags_far_points_unless_a_hand_placed_them():
+    """The gate's pure part: a visible point beyond the threshold (10 px at 960x540, scaled with
+    the frame) is flagged unless hand-placed; points outside the image and frames without a
+    camera are not checked."""
+    from pnlviz.pipeline.snapshot import FrameLabels, Label, gate, gate_threshold
+
+    assert gate_threshold((960, 540)) == pytest.approx(10.0)
+    assert gate_threshold((1280, 720)) == pytest.approx(40 / 3)
+    labels = {1: Label(100, 100, "Kp", "detection", 12.0), 2: Label(100, 100, "Kp", "hand", 80.0),
+              3: Label(-30, 100, "Kp", "annotation", 90.0), 4: Label(200, 100, "Kp", "annotation", 9.0),
+              5: Label(300, 100, "Kp", "detection", None)}
+    fl = FrameLabels((960, 540), labels, {"camera": 1}, None, "snapshot")
+    assert gate(fl) == {1: 12.0, 5: float("inf")}
+    assert gate(FrameLabels((1280, 720), labels, {"camera": 1}, None, "snapshot")) == {5: float("inf")}
+    assert gate(fl, gate_px=15.0) == {5: float("inf")}
+    assert gate(FrameLabels((960, 540), labels, None, None, "snapshot")) == {}
+
+
+def test_a_far_detection_is_exported_flagged_and_a_hand_confirms_it(images_only, tmp_path):
+    """A detection 47 px off (40, 25) on an accepted frame: exported flagged (COCO v 0, its residual in the
+    label file, counted in the manifest); after the annotator moves it, it is ground truth."""
+    from pnlviz.app.state import AppState
+
+    data, detector = images_only
+    edits = tmp_path / "edits"
+    with AppState(data, edits=edits, detector=detector) as st:
+        st.run_detector("00007")
+        st.set_review("00007", "accepted")
+        (members, manifest), _ = _export_both(st, data, edits, tmp_path)
+        k5 = json.loads(members["keypoints/00007.json"])["keypoints"]["5"]
+        assert k5["flagged"] is True and k5["residual"] > 30 and k5["provenance"] == "detection"
+        others = [k for kid, k in json.loads(members["keypoints/00007.json"])["keypoints"].items() if kid != "5"]
+        assert all(not k["flagged"] and k["residual"] < 10 for k in others if k["visible"])
+        coco = json.loads(members["coco_keypoints.json"])
+        assert coco["annotations"][0]["keypoints"][3 * 4 + 2] == 0
+        assert manifest["frames"]["00007"]["flagged"] == 1 and manifest["flagged"] == 1
+        x, y = k5["x"] - 40.0, k5["y"] - 25.0
+        st.move_keypoint("00007", 5, x, y)  # the annotator puts it where it belongs
+        (members, manifest), _ = _export_both(st, data, edits, tmp_path)
+        k5 = json.loads(members["keypoints/00007.json"])["keypoints"]["5"]
+        assert k5["provenance"] == "hand" and not k5["flagged"] and manifest["frames"]["00007"]["flagged"] == 0
