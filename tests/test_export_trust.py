@@ -177,3 +177,23 @@ def test_a_far_detection_is_exported_flagged_and_a_hand_confirms_it(images_only,
         (members, manifest), _ = _export_both(st, data, edits, tmp_path)
         k5 = json.loads(members["keypoints/00007.json"])["keypoints"]["5"]
         assert k5["provenance"] == "hand" and not k5["flagged"] and manifest["frames"]["00007"]["flagged"] == 0
+
+
+def test_accepting_a_frame_with_flagged_points_says_so_and_h_hides_them(images_only, tmp_path, serve):
+    """G on a frame whose snapshot has a point beyond the gate: the panel names it, and H hides
+    it on that frame (one undo step) although the tab has moved on."""
+    data, detector = images_only
+    app = serve(data, edits=tmp_path / "edits", detector=detector)
+    st = app.state
+    st.run_detector("00007")
+    tab = app.session()
+    tab.goto(st.find("00007"))
+    said = []
+    tab.notify = lambda title, body, error=True: said.append(title)
+    tab.editor.review("accepted", advance=True)
+    assert "00007: 1 point flagged" in tab.panels.gate_text.content and "H" in tab.panels.gate_text.content
+    assert said[0] == "1 flagged on 00007"
+    tab.editor.hide_flagged()
+    assert st.edits.get("00007")["keypoints"] == {"5": None} and st.edits.review("00007") == "corrected"
+    assert tab.panels.gate_text.content == ""  # nothing flagged any more
+    assert 5 not in st.view("00007", tab.settings).observations.kp_ids

@@ -93,6 +93,7 @@ class Editor:
         self.dragging: Drag | None = None
         self.grabs = self.releases = 0  # drags started and released in this tab
         self.live_preview = True  # recalibrate while a point is dragged (off: only on release)
+        self.flagged: tuple[str, list[int]] | None = None  # the last reviewed frame's flagged points, for H
         self.last_recalibration_ms = 0.0
 
     # ------------------------------------------------------------------ choices
@@ -145,8 +146,36 @@ class Editor:
             return
         stem = tab.stem
         self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status, tab.settings))
+        self.say_flagged(stem)
         if advance and status != "clear" and tab.state.edits.review(stem) == status:
             tab.advance_from(stem)
+
+    def say_flagged(self, stem: str) -> None:
+        """After a review: the points of the frame the export's outlier gate flags, said in the
+        panel and remembered for H (:meth:`hide_flagged`)."""
+        from pnlviz.pipeline.snapshot import REVIEWED, snapshot_flags
+
+        record = self.tab.state.edits.get(stem)
+        flagged, limit = snapshot_flags(record) if record.get("review") in REVIEWED else ({}, 0.0)
+        self.flagged = (stem, sorted(flagged)) if flagged else None
+        text = ""
+        if flagged:
+            ids = ", ".join(f"{k} ({'off camera' if r == float('inf') else f'{r:.0f} px'})"
+                            for k, r in sorted(flagged.items()))
+            text = (f"**{stem}: {len(flagged)} point{'s' if len(flagged) > 1 else ''} flagged** (farther than "
+                    f"{limit:.1f} px from the camera; exported flagged, not as ground truth): {ids}. "
+                    f"**H** hides them.")
+            self.tab.notify(f"{len(flagged)} flagged on {stem}", text.replace("**", ""), error=False)
+        self.tab.panels.gate_text.content = text
+
+    def hide_flagged(self) -> None:
+        """H: hide the points the gate flagged on the frame reviewed last (one undo step)."""
+        if self.flagged is None:
+            self.tab.notify("nothing flagged", "the last frame reviewed has no flagged point", error=False)
+            return
+        stem, ids = self.flagged
+        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, ids, self.tab.settings))
+        self.say_flagged(stem)
 
     def hide_selected(self) -> None:
         if self.selected is None or self.selected.kind is not PointKind.KEYPOINTS:

@@ -157,6 +157,16 @@ def _from_snapshot(snap: Mapping) -> FrameLabels:
     return FrameLabels(tuple(snap["size"]), labels, snap["camera"], snap["failure"], "snapshot")
 
 
+def snapshot_flags(record: Mapping, gate_px: float = GATE_PX) -> tuple[dict[int, float], float]:
+    """The points a frame's review snapshot would export flagged (id -> residual) and the gate in
+    the frame's pixels; nothing without a snapshot."""
+    snap = record.get("snapshot")
+    if snap is None:
+        return {}, gate_threshold(EVAL_SIZE, gate_px)
+    fl = _from_snapshot(snap)
+    return gate(fl, gate_px), gate_threshold(fl.size, gate_px)
+
+
 def reviewed_labels(reader, stem: str, record: Mapping, model: FieldModel | None = None) -> FrameLabels:
     """A reviewed frame's labels (see the module docstring) from the reader's data and edits
     folder alone: never from detections the reader has that were not on screen."""
@@ -193,4 +203,4 @@ def view_labels(view, record: Mapping, model: FieldModel | None = None) -> Frame
 
 
 __all__ = ["GATE_PX", "REVIEWED", "FrameLabels", "Label", "gate", "gate_threshold", "labels_of", "provenance",
-           "residuals", "reviewed_labels", "take_snapshot", "view_labels"]
+           "residuals", "reviewed_labels", "snapshot_flags", "take_snapshot", "view_labels"]
