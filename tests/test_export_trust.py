@@ -197,3 +197,113 @@ def test_accepting_a_frame_with_flagged_points_says_so_and_h_hides_them(images_o
     assert st.edits.get("00007")["keypoints"] == {"5": None} and st.edits.review("00007") == "corrected"
     assert tab.panels.gate_text.content == ""  # nothing flagged any more
     assert 5 not in st.view("00007", tab.settings).observations.kp_ids
+
+
+# ---------------------------------------------------------------------- triage over the whole dataset
+class CountingDetector(FakeDetector):
+    """The fake detector, counting the frames it was asked about; frame 00004 gets nothing."""
+
+    def __init__(self, preds: dict, empty: set):
+        super().__init__(preds)
+        self.calls, self.empty = 0, empty
+
+    def detect(self, images):
+        self.calls += len(images)
+        return [Predictions_empty() if hashlib.sha1(np.ascontiguousarray(img).tobytes()).hexdigest() in self.empty
+                else p for img, p in zip(images, super().detect(images))]
+
+
+def Predictions_empty():
+    from pnlviz.data import Predictions
+
+    return Predictions()
+
+
+def test_the_background_pass_sees_every_frame_and_resumes(images_only, tmp_path):
+    """Opening an image-only folder: the pass detects and calibrates every frame, keeping
+    summaries only; *failed* is then exactly the frames without a camera; a second opening
+    resumes from the cache beside the edits (nothing detected or calibrated again)."""
+    import threading
+
+    from pnlviz.app.frameorder import visible_order
+    from pnlviz.app.modes import Filter, Sort
+    from pnlviz.app.state import AppState
+    from pnlviz.data import open_dataset
+
+    data, fake = images_only
+    ds = open_dataset(data)
+    empty = {hashlib.sha1(np.ascontiguousarray(ds.image("00004")).tobytes()).hexdigest()}
+    detector = CountingDetector(fake.by_pixels, empty)
+    edits = tmp_path / "edits"
+    lines = []
+    with AppState(data, edits=edits, detector=detector) as st:
+        progress = st.triage.run(threading.Event(), lines.append)
+        assert progress.finished and progress.done == 5 and detector.calls == 5
+        assert st._cache == {}  # no view kept by the pass
+        summaries = st.triage.summaries()
+        assert set(summaries) == set(STEMS)
+        failed = [st.stems[i] for i in visible_order(st.stems, summaries, st.edits.review, Filter.FAILED, Sort.INDEX)]
+        no_camera = [s for s in st.stems if not st.view(s).result or not st.view(s).result.ok]
+        assert failed == no_camera == ["00004"] and progress.failed == 1
+        assert lines[-1].startswith("triage done: 5/5 frames calibrated, 1 without a camera, 5 detected")
+    assert (edits / "cache" / "summaries.jsonl").is_file() and (edits / "cache" / "detections.jsonl").is_file()
+    with AppState(data, edits=edits, detector=detector) as st:
+        calls = []
+        st.triage.calibrate = lambda stem: calls.append(stem)
+        progress = st.triage.run(threading.Event(), lines.append)
+        assert progress.finished and progress.failed == 1 and detector.calls == 5 and calls == []
+        assert st.reader.detections("00000") is not None  # read back from the cache
+
+
+def test_detecting_a_frame_never_discards_its_calibration(tmp_path):
+    """A frame calibrated from its annotation keeps its view when detections come; a frame
+    whose detections change it keeps its summary until it is calibrated again."""
+    from pnlviz.app.state import AppState, Settings
+
+    data = tmp_path / "set"
+    data.mkdir()
+    for stem in ("00000", "00002"):
+        for ext in ("jpg", "json"):
+            shutil.copy(EXAMPLES_DIR / "sample" / f"{stem}.{ext}", data / f"{stem}.{ext}")
+    from pnlviz.data import open_dataset
+
+    ds = open_dataset(data)
+    detector = FakeDetector({hashlib.sha1(np.ascontiguousarray(ds.image(s)).tobytes()).hexdigest(): _true_detections(s)
+                             for s in ("00000", "00002")})
+    with AppState(data, edits=tmp_path / "edits", detector=detector, source="annotation") as st:
+        view = st.view("00000")
+        both = st.view("00002", Settings(source="both"))
+        st.view("00002")
+        assert view.result.ok and both.result.ok
+        st.run_detector("00000")
+        st.run_detector("00002")
+        assert st.cached_view("00000") is view  # the annotation's camera: unchanged, kept
+        assert st.cached_view("00002", Settings(source="both")) is None  # the detections change it
+        assert st.triage.lookup("00002") is not None and st.triage.lookup("00002").ok
+
+
+def test_choosing_a_sort_goes_to_its_first_frame_and_the_title_shows_its_key(images_only, tmp_path, serve):
+    import threading
+
+    from pnlviz.app.frameorder import worst_residual
+
+    data, fake = images_only
+    app = serve(data, edits=tmp_path / "edits", detector=fake)
+    st = app.state
+    app._stop.set()
+    app._worker.join()
+    st.triage.run(threading.Event(), lambda text: None)
+    tab = app.session()
+    tab.goto(st.find("00000"))
+    tab.panels.sort.value = "residual (worst first)"
+    tab.flush()
+    key = {s: worst_residual(st.triage.lookup(s)) for s in st.stems}
+    worst = max(st.stems, key=key.get)
+    assert tab.stem == worst == st.stems[tab.frames.order[0]] and tab.stem != "00000"
+    expected = "no camera" if key[worst] == 1e9 else f"worst residual {key[worst]:,.1f} px"
+    assert f"sorted by **{expected.replace('no camera', 'residual (worst first): no camera')}**" in \
+        tab.panels.title.content
+    tab.step(1)
+    tab.panels.sort.value = "index"
+    tab.flush()
+    assert "sorted by" not in tab.panels.title.content

@@ -34,7 +34,11 @@ from pnlviz.data.edits import (
     set_keypoint,
 )
 from pnlviz.field.model import load_field_model
+from pnlviz.app.triage import Triage
 from pnlviz.pipeline import FrameReader, FrameView, Settings, frame_view
+
+#: views kept in memory (the frames on screen and around them; the whole dataset is in summaries)
+VIEW_CACHE = 256
 
 __all__ = ["AppState", "EditError", "FrameView", "REVIEW_STATES", "SOURCES", "Settings"]
 
@@ -72,8 +76,11 @@ class AppState:
         if detector is not None and self.reader.predictions is None:
             self.reader.predictions = {}
         self.ds, self.edits, self.size = self.reader.ds, self.reader.edits, size
-        self.predictions, self.detected = self.reader.predictions, self.reader.detected
         self.stems = self.reader.stems
+        #: every frame's calibration summary and the background pass (the detector's results
+        #: are kept on disk beside them)
+        self.triage = Triage(self, writable)
+        self.predictions, self.detected = self.reader.predictions, self.reader.detected
         #: the settings a new tab starts with: "both" once there are detections, unless told otherwise
         self.default_settings = Settings(source=source or self.reader.default_settings().source)
         #: the frame a new tab opens: the first with an image, the most telling one
@@ -144,10 +151,12 @@ class AppState:
         if img is None:
             return
         pred = self.detector.detect([img])[0]
+        self.detected[stem] = pred
         with self._lock:
-            self.detected[stem] = pred
-            # views computed before the detections existed are stale
-            for key in [k for k in self._cache if k[0] == stem]:
+            # views the detections change are computed again; the others stay (a frame calibrated
+            # from its annotation alone keeps its camera), and its summary stays until replaced
+            for key in [k for k, v in self._cache.items() if k[0] == stem and not
+                        (v.settings.source == "annotation" and v.origin == "annotation")]:
                 del self._cache[key]
             self._previews.pop(stem, None)
         self._changed(stem)
@@ -176,8 +185,9 @@ class AppState:
 
     def view(self, stem: str, settings: Settings | None = None, *, keep: bool = True) -> FrameView:
         """The frame's view under ``settings`` (default: :attr:`default_settings`), cached (not
-        kept when computed with ``keep=False``: for one pass over many frames, an export). Never
-        raises on bad data."""
+        kept when computed with ``keep=False``: for one pass over many frames; the
+        :data:`VIEW_CACHE` latest are kept), its summary noted (:class:`pnlviz.app.triage.Triage`).
+        Never raises on bad data."""
         settings = settings or self.default_settings
         self.index_of(stem)
         key = _view_key(self.edits, stem, settings)
@@ -193,6 +203,9 @@ class AppState:
         if keep:
             with self._lock:
                 self._cache[key] = view
+                while len(self._cache) > VIEW_CACHE:
+                    self._cache.pop(next(iter(self._cache)))
+        self.triage.note(view)
         return view
 
     def cached_view(self, stem: str, settings: Settings | None = None) -> FrameView | None:

@@ -320,15 +320,16 @@ class EditsStore:
         except OSError as move_error:
             self.warnings.append(f"{path}: damaged edit record ignored ({reason}); cannot move it aside: {move_error}")
 
-    def get(self, stem: str) -> dict:
-        """A copy of the frame's record ({} when it has none). The undo steps in its history are
-        not copied (a hundred of them can be most of the record): they are never changed in
-        place, only added, removed and moved between the lists."""
+    def get(self, stem: str, history: bool = True) -> dict:
+        """A copy of the frame's record ({} when it has none); without its history when not
+        ``history``. The undo steps in its history are not copied (a hundred of them can be most
+        of the record): they are never changed in place, only added, removed and moved between
+        the lists."""
         rec = self._cache.get(stem)
         if not rec:
             return {}
         out = json.loads(json.dumps({k: v for k, v in rec.items() if k != "history"}))
-        if "history" in rec:
+        if "history" in rec and history:
             out["history"] = {side: list(steps) for side, steps in rec["history"].items()}
         return out
 
