@@ -307,3 +307,22 @@ def test_choosing_a_sort_goes_to_its_first_frame_and_the_title_shows_its_key(ima
     tab.panels.sort.value = "index"
     tab.flush()
     assert "sorted by" not in tab.panels.title.content
+
+
+def test_the_summary_file_survives_a_torn_line_and_is_compacted(tmp_path):
+    """A crash mid-line loses that line only; a file of mostly superseded lines is rewritten
+    with the latest summary of each frame when it is opened."""
+    from pnlviz.app.triage import FrameSummary, SummaryStore
+
+    path = tmp_path / "summaries.jsonl"
+    store = SummaryStore(path)
+    for i in range(150):
+        store.put(FrameSummary("a", True, None, float(i), 1.0, 0.5, "t"))
+    store.put(FrameSummary("b", False, "no camera", 0.0, 0.0, None, "t"))
+    with open(path, "ab") as f:
+        f.write(b'{"stem": "c", "ok": tr')  # torn
+    again = SummaryStore(path)
+    assert again.get("a").worst == 149.0 and not again.get("b").ok and again.get("c") is None
+    assert len(path.read_text().splitlines()) == 2  # compacted
+    again.put(FrameSummary("c", True, None, 3.0, 1.0, None, "t"))
+    assert SummaryStore(path).get("c").worst == 3.0

@@ -79,6 +79,20 @@ class _JsonLines:
     def __init__(self, path: Path | None):
         self.path = path
         self._lock = threading.Lock()
+        if path is not None and path.is_file() and path.stat().st_size:
+            with open(path, "rb+") as f:  # a line torn by a crash is ended, so the next one starts clean
+                f.seek(-1, os.SEEK_END)
+                if f.read(1) != b"\n":
+                    f.write(b"\n")
+
+    def rewrite(self, objects) -> None:
+        """The file with these lines only (atomically), e.g. the latest line of each frame."""
+        if self.path is None:
+            return
+        from pnlviz.data.atomic import atomic_write_text
+
+        with self._lock:
+            atomic_write_text(self.path, "".join(json.dumps(o, separators=(",", ":")) + "\n" for o in objects))
 
     def lines(self):
         """(offset, length, object) of each valid line; a torn last line (a crash) is skipped."""
@@ -175,12 +189,17 @@ class SummaryStore:
     def __init__(self, path: Path | None):
         self._file = _JsonLines(path)
         self._by_stem: dict[str, FrameSummary] = {}
+        n = 0
         for _, _, obj in self._file.lines():
+            n += 1
             try:
                 s = FrameSummary(**obj)
             except TypeError:
                 continue
             self._by_stem[s.stem] = s
+        if n > 2 * len(self._by_stem) + 100:  # mostly superseded lines: keep the latest of each frame
+            self._file.rewrite(asdict(s) for s in self._by_stem.values()
+                               if all(not isinstance(v, float) or math.isfinite(v) for v in asdict(s).values()))
 
     def get(self, stem: str) -> FrameSummary | None:
         return self._by_stem.get(stem)
