@@ -6,7 +6,7 @@ is autosaved beside the data.
 
 Each browser tab is a :class:`pnlviz.app.session.Session` with its own frame, view and panel;
 this module holds what they share: the viser server (behind :mod:`pnlviz.app.guard`, which
-refuses foreign pages), the lights, the background calibration of every frame and the
+refuses foreign pages), the lights, the background pass over every frame (triage) and the
 background detector. Everything shown comes from :class:`pnlviz.app.state.AppState`.
 """
 
@@ -111,7 +111,7 @@ class PnlvizApp:
 
     # ------------------------------------------------------------------ background
     def _say(self, text: str) -> None:
-        """The background calibration's progress, in every tab."""
+        """The background pass's progress, in every tab."""
         self._background_text = text
         for session in self._all_sessions():
             session.panels.background.content = text

@@ -215,13 +215,6 @@ class AppState:
         with self._lock:
             return self._cache.get(key)
 
-    def cached_views(self, settings: Settings | None = None) -> list[FrameView]:
-        """The views computed so far under ``settings`` for the frames as they are now."""
-        settings = settings or self.default_settings
-        with self._lock:
-            items = list(self._cache.items())
-        return [v for k, v in items if k[1] == settings and k == _view_key(self.edits, k[0], settings)]
-
     def preview(self, stem: str, settings: Settings, kid: int, x: float, y: float) -> FrameView:
         """The frame as it would be with keypoint ``kid`` at (x, y), calibrated (for feedback while
         a point is dragged): not saved; kept until the frame's next view, which it is if that
