@@ -27,7 +27,6 @@ import numpy as np
 
 from pnlviz.data import DataError
 from pnlviz.data.predictions import parse_predictions, predictions_to_json
-from pnlviz.data.snapshot import edits_digest
 
 CACHE_DIR = "cache"
 
@@ -52,9 +51,10 @@ class FrameSummary:
         return self.median if self.ok else math.inf
 
 
-def summary_token(settings, record: dict, has_detections: bool) -> str:
-    """What a summary depends on: the settings, the frame's edits, whether it has detections."""
-    return f"{settings.source}|{int(settings.pnl)}|{settings.alpha:g}|{edits_digest(record)}|{int(has_detections)}"
+def summary_token(settings, digest: str, has_detections: bool) -> str:
+    """What a summary depends on: the settings, the frame's edits (their ``digest``,
+    :func:`pnlviz.data.snapshot.edits_digest`), whether it has detections."""
+    return f"{settings.source}|{int(settings.pnl)}|{settings.alpha:g}|{digest}|{int(has_detections)}"
 
 
 def same_inputs(token: str, other: str) -> bool:
@@ -290,7 +290,7 @@ class Triage:
         return reader.predictions is not None and (stem in reader.predictions or stem in reader.detected)
 
     def token(self, stem: str, settings=None) -> str:
-        return summary_token(settings or self.state.default_settings, self.state.edits.get(stem, history=False),
+        return summary_token(settings or self.state.default_settings, self.state.edits.digest(stem),
                              self.has_detections(stem))
 
     def note(self, view) -> FrameSummary | None:
@@ -302,15 +302,14 @@ class Triage:
         return summary
 
     def lookup(self, stem: str, settings=None) -> FrameSummary | None:
-        """The frame's summary under ``settings``: of its view if computed, else the stored one
-        while its settings and edits are the same (detections that came since aside)."""
+        """The frame's summary under ``settings``: the stored one while the frame's edits are the
+        same (detections that came since aside) for the default settings, else of its view if
+        computed."""
         settings = settings or self.state.default_settings
-        view = self.state.cached_view(stem, settings)
-        if view is not None:
-            return summarize(view, "")
-        if settings != self.state.default_settings:
-            return None
-        summary = self.store.get(stem)
+        if settings != self.state.default_settings:  # other settings: the views computed under them
+            view = self.state.cached_view(stem, settings)
+            return summarize(view, "") if view is not None else None
+        summary = self.store.get(stem)  # noted whenever a view under the default settings is computed
         return summary if summary is not None and same_inputs(summary.token, self.token(stem)) else None
 
     def summaries(self, settings=None) -> dict[str, FrameSummary]:

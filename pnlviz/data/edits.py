@@ -43,7 +43,7 @@ from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.data.atomic import atomic_write_text
 from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
-from pnlviz.data.snapshot import validate_snapshot
+from pnlviz.data.snapshot import edits_digest, validate_snapshot
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
 #: the fields a record may hold; anything else is dropped when it is read
@@ -202,6 +202,9 @@ def validate_history(obj: Any, source: str, checked_before: Collection[int] = ()
     return out
 
 
+_EMPTY_DIGEST = edits_digest({})
+
+
 class _Unchanged(Exception):
     """Raised inside an edit transaction that changes nothing: no write, no undo step."""
 
@@ -320,18 +323,23 @@ class EditsStore:
         except OSError as move_error:
             self.warnings.append(f"{path}: damaged edit record ignored ({reason}); cannot move it aside: {move_error}")
 
-    def get(self, stem: str, history: bool = True) -> dict:
-        """A copy of the frame's record ({} when it has none); without its history when not
-        ``history``. The undo steps in its history are not copied (a hundred of them can be most
-        of the record): they are never changed in place, only added, removed and moved between
-        the lists."""
+    def get(self, stem: str) -> dict:
+        """A copy of the frame's record ({} when it has none). The undo steps in its history are
+        not copied (a hundred of them can be most of the record): they are never changed in
+        place, only added, removed and moved between the lists."""
         rec = self._cache.get(stem)
         if not rec:
             return {}
         out = json.loads(json.dumps({k: v for k, v in rec.items() if k != "history"}))
-        if "history" in rec and history:
+        if "history" in rec:
             out["history"] = {side: list(steps) for side, steps in rec["history"].items()}
         return out
+
+    def digest(self, stem: str) -> str:
+        """The digest of what the frame's record changes (:func:`pnlviz.data.snapshot.edits_digest`),
+        without copying it (records are replaced on a write, never changed in place)."""
+        rec = self._cache.get(stem)
+        return edits_digest(rec) if rec else _EMPTY_DIGEST
 
     def _checked_steps(self, stem: str) -> set[int]:
         """Ids of the undo steps of the frame's record as it is (all checked when it was)."""
