@@ -282,7 +282,9 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, m
     view = st.view("solo")
     assert view.result is not None and view.result.ok and view.annotation is None
     # detections get the detection settings (no k1, robust final loss), annotations the default
-    assert used["solo"] == CalibParams().updated(st.detector.calibration) and used["00000"] == CalibParams()
+    assert used["solo"] == CalibParams().updated(st.detector.calibration)
+    # the annotated frame was not calibrated again: detections do not change its annotation's camera
+    assert "00000" not in used and st.view("00000").origin == "annotation"
     card = calibration_card(view, st)
     assert view.origin == "detections" and "calibrated from: **detections**" in card and "refine_k1=False" in card
     assert "calibrated from: **annotation**" in calibration_card(st.view("00000"), st)

@@ -75,11 +75,12 @@ def keypoint_name(model, kid: int) -> str:
     return f"{model.keypoint_names()[int(kid)]} ({kp.group})"
 
 
-def title_text(view: FrameView, position: int, n: int, outside: bool, flt: str) -> str:
-    """The frame's stem, where it is in the filter (``position`` from 1 of ``n``), its size."""
+def title_text(view: FrameView, position: int, n: int, outside: bool, flt: str, key: str | None = None) -> str:
+    """The frame's stem, where it is in the filter (``position`` from 1 of ``n``), its size, and
+    what the tab's sort sees of it (``key``)."""
     where = (f"not in the filter '{flt}' (no frame is)" if outside
              else f"{position}/{n}" + (f" of '{flt}'" if flt != "all" else ""))
-    return f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}"
+    return f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}" + (f"  \nsorted by **{key}**" if key else "")
 
 
 def filter_text(stem: str, n: int, outside: bool, flt: str) -> str:

@@ -6,6 +6,7 @@ Layout::
                                          "annotation": {SoccerNet annotation},
                                          "keypoints": {"<id>": [x, y] | null},   # pixels; null = not visible
                                          "history": {"undo": [step, ...], "redo": [step, ...]},
+                                         "snapshot": {what was on screen when reviewed},
                                          "updated": <unix time>}
         a step: the fields one user action changed, as they were before it ({"review": null, ...})
     <edits>/frames/<stem>.json.damaged  a file that failed validation, moved aside (kept, never deleted)
@@ -42,10 +43,11 @@ from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.data.atomic import atomic_write_text
 from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
+from pnlviz.data.snapshot import edits_digest, validate_snapshot
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
 #: the fields a record may hold; anything else is dropped when it is read
-FIELDS = ("review", "annotation", "keypoints", "history", "updated")
+FIELDS = ("review", "annotation", "keypoints", "history", "snapshot", "updated")
 #: the fields an undo step may restore
 UNDOABLE = ("annotation", "keypoints", "review")
 #: undo steps kept per frame (and per direction)
@@ -165,6 +167,8 @@ def validate_record(obj: Any, source: str, checked_before: Collection[int] = ())
         if not isinstance(kps, Mapping):
             raise DataError(source, f'"keypoints" must be an object of id -> [x, y] | null, got {describe(kps)}')
         rec["keypoints"] = dict(validate_keypoint(k, v, source) for k, v in kps.items())
+    if obj.get("snapshot") is not None:
+        rec["snapshot"] = validate_snapshot(obj["snapshot"], source)
     history = obj.get("history")
     if history is not None:
         rec["history"] = validate_history(history, source, checked_before)
@@ -196,6 +200,9 @@ def validate_history(obj: Any, source: str, checked_before: Collection[int] = ()
             checked.append({k: values.get(k) for k in step})
         out[side] = checked
     return out
+
+
+_EMPTY_DIGEST = edits_digest({})
 
 
 class _Unchanged(Exception):
@@ -327,6 +334,12 @@ class EditsStore:
         if "history" in rec:
             out["history"] = {side: list(steps) for side, steps in rec["history"].items()}
         return out
+
+    def digest(self, stem: str) -> str:
+        """The digest of what the frame's record changes (:func:`pnlviz.data.snapshot.edits_digest`),
+        without copying it (records are replaced on a write, never changed in place)."""
+        rec = self._cache.get(stem)
+        return edits_digest(rec) if rec else _EMPTY_DIGEST
 
     def _checked_steps(self, stem: str) -> set[int]:
         """Ids of the undo steps of the frame's record as it is (all checked when it was)."""

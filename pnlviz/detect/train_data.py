@@ -361,7 +361,8 @@ class ExportedFrames:
     """Labels exported from the app (``keypoints/<stem>.json`` and ``annotations/<stem>.json`` of a
     ``pnlviz export`` folder or zip) with the images of ``images`` (the dataset the app served).
     The keypoints are taken as corrected (moved points where the annotator put them, hidden ones
-    absent), the annotation's lines give the line targets; the left-right disambiguation is
+    and those the outlier gate flagged absent), the annotation's lines give the line targets; the
+    left-right disambiguation is
     decided on a homography fitted to the ground keypoints, as for every training target."""
 
     def __init__(self, export: str | os.PathLike, images: str | os.PathLike, *,
@@ -395,7 +396,9 @@ class ExportedFrames:
             try:
                 kp = json.loads(files[name])
                 size = tuple(int(v) for v in kp["image_size"])
-                points = {int(k): (float(v["x"]), float(v["y"])) for k, v in kp["keypoints"].items()}
+                # points the export's outlier gate flagged are not ground truth: left out
+                points = {int(k): (float(v["x"]), float(v["y"])) for k, v in kp["keypoints"].items()
+                          if not v.get("flagged")}
             except (ValueError, KeyError, TypeError) as exc:
                 raise DataError(f"{export}/{name}", f"not a pnlviz keypoint label file ({exc})") from None
             ann = files.get(f"annotations/{stem}.json")
