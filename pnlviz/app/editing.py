@@ -208,11 +208,12 @@ class Editor:
         if sel.key not in markers.keys:
             return
         uv = markers.uv[markers.keys.index(sel.key)] + [dx, dy]
-        self.release(self.tab.stem, sel, uv, snap_to_pitch=False)
+        self.release(self.tab.stem, sel, uv, snap_to_pitch=False, merge=("nudge", sel.kind, sel.key))
 
-    def release(self, stem: str, point: Selection, uv, snap_to_pitch: bool = True) -> None:
+    def release(self, stem: str, point: Selection, uv, snap_to_pitch: bool = True, merge: object = None) -> None:
         """A point of ``stem`` was dropped at pixel ``uv``: the edit goes to ``stem``, the frame
-        the drag began on, whatever this tab shows now."""
+        the drag began on, whatever this tab shows now (``merge``: nudges of one point in a row
+        are one undo step)."""
         t0 = time.perf_counter()
         uv = self._snapped(uv) if snap_to_pitch else np.asarray(uv, float)
         state, settings = self.tab.state, self.tab.settings
@@ -221,7 +222,7 @@ class Editor:
             if point.kind is PointKind.LINE_POINTS:
                 state.move_line_point(stem, point.key[0], point.key[1], *uv, settings=settings)
             else:
-                state.move_keypoint(stem, int(point.key), *uv, settings=settings)
+                state.move_keypoint(stem, int(point.key), *uv, settings=settings, merge=merge)
             state.view(stem, settings)  # recalibrate now, to time it
             self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
 

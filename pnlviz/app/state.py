@@ -246,12 +246,12 @@ class AppState:
 
     # ------------------------------------------------------------------ review and edits
     def _edit(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True,
-              settings: Settings | None = None) -> None:
+              settings: Settings | None = None, merge: object = None) -> None:
         """One user action on one frame, one undo step, autosaved at once
         (:meth:`pnlviz.data.edits.EditsStore.act`); a reviewed frame then records what it shows
         under ``settings`` (:meth:`snapshot`)."""
         self.index_of(stem)
-        changed = self.edits.act(stem, change, corrected=corrected)
+        changed = self.edits.act(stem, change, corrected=corrected, merge=merge)
         if changed:
             self.snapshot(stem, settings)
         self._changed(stem, changed)
@@ -279,6 +279,8 @@ class AppState:
         if status is not None and status not in REVIEW_STATES:
             raise EditError(f"review status must be one of {', '.join(REVIEW_STATES)} or none, "
                             f"got {str(status)[:20]!r}")
+        if status == "corrected" and self.edits.review(stem) == "corrected":
+            self.edits.keep_review(stem)  # set by the edits, now confirmed by hand: undo keeps it
         self._edit(stem, lambda rec: rec.__setitem__("review", status), corrected=False, settings=settings)
 
     def set_annotation(self, stem: str, annotation: dict[str, np.ndarray]) -> None:
@@ -290,12 +292,14 @@ class AppState:
             raise EditError(exc.problem) from None
         self._edit(stem, lambda rec: rec.__setitem__("annotation", text))
 
-    def move_keypoint(self, stem: str, kid: int, x: float, y: float, settings: Settings | None = None) -> None:
-        """Put keypoint ``kid`` at pixel (x, y) of the frame (adds it if it was missing)."""
+    def move_keypoint(self, stem: str, kid: int, x: float, y: float, settings: Settings | None = None,
+                      merge: object = None) -> None:
+        """Put keypoint ``kid`` at pixel (x, y) of the frame (adds it if it was missing);
+        ``merge``: see :meth:`pnlviz.data.edits.EditsStore.act` (nudges of one point: one step)."""
         kid = check_keypoint_id(kid)
         self.index_of(stem)
         xy = check_position(x, y, self.frame_size(stem), stem)
-        self._edit(stem, lambda rec: set_keypoint(rec, kid, xy), settings=settings)
+        self._edit(stem, lambda rec: set_keypoint(rec, kid, xy), settings=settings, merge=merge)
 
     def hide_keypoint(self, stem: str, kid, settings: Settings | None = None) -> None:
         """Mark keypoint ``kid`` not visible: it leaves the calibration and the labels (``kid``: an

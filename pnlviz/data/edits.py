@@ -52,6 +52,8 @@ FIELDS = ("review", "annotation", "keypoints", "history", "snapshot", "updated")
 UNDOABLE = ("annotation", "keypoints", "review")
 #: undo steps kept per frame (and per direction)
 HISTORY_LIMIT = 100
+#: seconds within which actions of one merge key are one undo step (:meth:`EditsStore.act`)
+MERGE_S = 2.0
 #: keypoint coordinates are pixels: anything larger is not a position in a frame
 MAX_COORDINATE = 1e6
 #: how far outside the frame a point may be placed, as a fraction of its size (as the
@@ -238,6 +240,8 @@ class EditsStore:
         self._locks: dict[str, threading.RLock] = {}
         self._locks_lock = threading.Lock()
         self._lock_file = None
+        #: stem -> (merge key, time, undo steps) of the frame's last action that named a merge key
+        self._merging: dict[str, tuple[object, float, int]] = {}
         if writable:
             self._take_folder()
             self._remove_leftovers()
@@ -387,11 +391,14 @@ class EditsStore:
             rec.update(changes)
         return self.get(stem)
 
-    def act(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True) -> bool:
+    def act(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True, merge: object = None) -> bool:
         """One user action on one frame: ``change(record)`` under the frame's lock (``corrected``:
         the frame becomes "corrected"), one undo step kept in the record, written at once. False
         when nothing changed (no write, no step); an OSError of the write reaches the caller and
-        nothing changes."""
+        nothing changes. ``merge``: actions with the same key in a row, each within
+        :data:`MERGE_S` of the last and nothing else done on the frame between, are one undo step
+        (the arrow-key nudges of one point)."""
+        now = time.monotonic()
         try:
             with self.edit(stem) as rec:
                 before = {k: rec.get(k) for k in UNDOABLE}
@@ -402,10 +409,31 @@ class EditsStore:
                 if not step:
                     raise _Unchanged
                 history = rec.get("history") or {}
-                rec["history"] = {"undo": (history.get("undo", []) + [step])[-HISTORY_LIMIT:], "redo": []}
+                undo = list(history.get("undo", []))
+                last = self._merging.get(stem)
+                if not (merge is not None and last is not None and last[0] == merge and now - last[1] < MERGE_S
+                        and last[2] == len(undo) and undo):
+                    undo = (undo + [step])[-HISTORY_LIMIT:]
+                rec["history"] = {"undo": undo, "redo": []}
         except _Unchanged:
             return False
+        if merge is not None:
+            self._merging[stem] = (merge, now, len(rec["history"]["undo"]))
+        else:
+            self._merging.pop(stem, None)
         return True
+
+    def keep_review(self, stem: str) -> None:
+        """The frame's review status, set by hand, stays when its edits are undone: the undo and
+        redo steps no longer carry the status the edits set with them (steps left empty go)."""
+        with self.lock(stem):
+            history = (self._cache.get(stem) or {}).get("history")
+            if not history or not any("review" in step for steps in history.values() for step in steps):
+                return
+            with self.edit(stem) as rec:
+                rec["history"] = {side: [{k: v for k, v in step.items() if k != "review"} for step in steps
+                                         if set(step) != {"review"}] for side, steps in history.items()}
+            self._merging.pop(stem, None)
 
     def step(self, stem: str, back: bool = True) -> bool:
         """Take back the frame's last action (``back``), or do again the last one taken back;
