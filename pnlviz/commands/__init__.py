@@ -5,6 +5,7 @@ no viser unless a command needs them)."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from pnlviz.commands.calibrate import add_calibrate_parser
@@ -52,8 +53,33 @@ def _printable_streams() -> None:
             stream.reconfigure(errors="backslashreplace")
 
 
+class _Escaped:
+    """A text stream whose writes show terminal control characters escaped (file names printed
+    by any command cannot drive the terminal); everything else is the wrapped stream's."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        from pnlviz.data.errors import escape_controls
+
+        return self._stream.write(escape_controls(text))
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv: list[str] | None = None) -> int:
     _printable_streams()
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _Escaped(sys.stdout), _Escaped(sys.stderr)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = saved
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -73,4 +99,17 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:  # a write failure (read-only, full disk, permission) or an unreadable path
+        print(f"error: {os_error_line(exc)}", file=sys.stderr)
+        return 1
+
+
+def os_error_line(exc: OSError) -> str:
+    """``OSError`` as one line naming the path: ``"out/x.zip: No space left on device"``."""
+    from pnlviz.data.errors import DataError
+    from pnlviz.data.filekind import os_error_text
+
+    name = exc.filename if exc.filename is not None else "<output>"
+    text = os_error_text(exc) if exc.errno is not None else (str(exc) or type(exc).__name__)
+    return str(DataError(os.fsdecode(name) if isinstance(name, bytes) else str(name), text))
 

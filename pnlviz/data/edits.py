@@ -42,6 +42,7 @@ from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.data.atomic import atomic_write_text
 from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
+from pnlviz.data.reading import read_file
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
 #: the fields a record may hold; anything else is dropped when it is read
@@ -292,7 +293,7 @@ class EditsStore:
             return
         for p in sorted(self.frames.glob("*.json")):
             try:
-                data = p.read_bytes()
+                data = read_file(p)  # capped; a FIFO or a device is refused, never read
                 rec = validate_record(json.loads(data), str(p))
             except (OSError, ValueError, RecursionError) as exc:  # DataError and JSONDecodeError are ValueErrors
                 self._damaged(p, exc)

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
+from .atomic import refuse_non_regular
 from .errors import DataError, member_source
 from .reading import is_utf8
 
@@ -88,6 +89,7 @@ class _TempOutput:
         self.keep_partial = keep_partial
         if self.path.is_dir():
             raise DataError(os.fspath(self.path), "is a folder: expected a file name for the output")
+        refuse_non_regular(self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = self._new_temp()
         self.closed = False
@@ -103,6 +105,7 @@ class _TempOutput:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(self._tmp, 0o666 & ~umask)  # mkstemp gives 0600; the output gets the usual mode
+        refuse_non_regular(self.path)
         os.replace(self._tmp, self.path)
         self.closed = True
 

@@ -163,12 +163,16 @@ def load_checkpoint(
 
 def save_checkpoint(model: nn.Module, path: str | os.PathLike[str]) -> Path:
     """Write ``model.state_dict()`` (a plain state dict) to ``path`` atomically."""
+    from pnlviz.data.atomic import refuse_non_regular
+
     path = Path(path)
+    refuse_non_regular(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
         torch.save(model.state_dict(), tmp)
+        refuse_non_regular(path)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
