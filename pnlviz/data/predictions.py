@@ -131,6 +131,9 @@ def _parse_entries(obj: Any, fields: tuple[str, ...], valid: range, what: str, s
             v = as_number(entry[name])
             if v is None:
                 raise DataError(source, f'"{what}" id {ident}: "{name}" is not a number, got {describe(entry[name])}')
+            if name.startswith("p") and not 0.0 <= v <= 1.0:  # NaN fails too
+                raise DataError(source, f'probability out of range in "{what}" id {ident}: {name} = {v:g} '
+                                        f"(must lie in [0, 1])")
             if not math.isfinite(v):
                 raise DataError(source, f'non-finite value in "{what}" id {ident}: {name} = {v}')
             if not name.startswith("p") and not (lo <= v <= hi):
