@@ -15,6 +15,7 @@ the checkpoint and its JSON sidecar. The shipped model is only written with ``--
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -73,8 +74,8 @@ def run_train(args) -> int:
                 print(f"error: --{name.replace('_', '-')} must be >= 1", file=sys.stderr)
                 return 2
             setattr(config, attr, int(value))
-    if args.minutes is not None and args.minutes <= 0:
-        print("error: --minutes must be > 0", file=sys.stderr)
+    if args.minutes is not None and not (math.isfinite(args.minutes) and args.minutes > 0):
+        print(f"error: --minutes must be a number > 0, got {args.minutes}", file=sys.stderr)
         return 2
     if _same_file(args.out, DEFAULT_MODEL) and not args.replace_default:
         print(f"error: --out {args.out} is the shipped default model; add --replace-default to overwrite it "
@@ -113,8 +114,8 @@ def _apply_data_args(args, config) -> str | None:
         return f"--data {missing[0]}: no such folder or file"
     share = sum(float(r.get("weight", 1.0)) for r in config.real) or 1.0
     weight = args.data_weight if args.data_weight is not None else share / len(args.data)
-    if weight <= 0:
-        return "--data-weight must be > 0"
+    if not (math.isfinite(weight) and 0 < weight <= 1):
+        return f"--data-weight must be a share in (0, 1], got {weight}"
     if args.labels is not None:
         if len(args.data) != 1:
             return "--labels goes with exactly one --data (the dataset the labels were made on)"
