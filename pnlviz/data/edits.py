@@ -103,11 +103,13 @@ def validate_keypoint(kid: Any, value: Any, source: str) -> tuple[str, list[floa
 
 
 def check_keypoint_id(kid: Any) -> int:
-    """The id of a keypoint to edit, as a whole number of the catalogue; EditError otherwise."""
-    try:
-        kid = int(kid)
-    except (TypeError, ValueError):
-        raise EditError(f"keypoint id must be a whole number, got {str(kid)[:20]!r}") from None
+    """The id of a keypoint to edit, an integer of the catalogue; EditError otherwise. Nothing is
+    coerced: ``5.5``, ``True`` and ``"7"`` are refused (an id comes from the catalogue as an int)."""
+    import numpy as np
+
+    if isinstance(kid, (bool, np.bool_)) or not isinstance(kid, (int, np.integer)):
+        raise EditError(f"keypoint id must be an integer, got {type(kid).__name__} {str(kid)[:20]!r}")
+    kid = int(kid)
     if kid not in keypoint_ids():
         raise EditError(f"keypoint id {kid} is not in the catalogue (1..73)")
     return kid

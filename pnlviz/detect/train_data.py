@@ -367,7 +367,6 @@ class ExportedFrames:
     def __init__(self, export: str | os.PathLike, images: str | os.PathLike, *,
                  exclude: list[str] | None = None) -> None:
         import json
-        import zipfile
 
         from pnlviz.data import open_dataset
         from pnlviz.data.errors import DataError
