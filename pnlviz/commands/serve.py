@@ -46,6 +46,19 @@ def _detector(args):
     return None
 
 
+def _quiet_handshakes() -> None:
+    """A connection that never speaks HTTP (a port scan, a health check, a TLS client) is not an
+    error of the app: websockets logs its failed handshake with three chained tracebacks; drop
+    those records (everything else the library logs is kept)."""
+    import logging
+
+    def keep(record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(("opening handshake failed", "connection rejected"))
+
+    for name in ("websockets.server", "websockets.asyncio.server", "websockets"):
+        logging.getLogger(name).addFilter(keep)
+
+
 def run_serve(args) -> int:
     from pnlviz import EXAMPLES_DIR
     from pnlviz.app.guard import is_loopback
@@ -55,6 +68,7 @@ def run_serve(args) -> int:
     from pnlviz.detect.worker import DetectorLoadError, DetectorProcessError
 
     data = args.data or EXAMPLES_DIR / "sample"
+    _quiet_handshakes()
     detector = _detector(args)
     if detector is not None and (not detector.light or args.weights is not None):
         print("pnlviz: loading the detector's checkpoints...", flush=True)
