@@ -84,7 +84,8 @@ def run_export(args) -> int:
 
     data = args.data or EXAMPLES_DIR / "sample"
     try:
-        check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits))
+        check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits),
+                     folder=Path(args.out).suffix.lower() != ".zip")
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -99,6 +99,9 @@ def run_synth(args: argparse.Namespace) -> int:
     """Run ``pnlviz synth``; returns the process exit code."""
     from pnlviz.synth.writer import OutputFolderError, generate
 
+    from pnlviz.data.outputs import check_writable
+
+    check_writable(args.out, folder=True)  # OutputError: exit 2, one line
     problem = size_problem(tuple(args.size), args.workers)
     if problem:
         print(f"pnlviz synth: error: {problem}", file=sys.stderr)

@@ -84,6 +84,9 @@ def run_train(args) -> int:
     if args.init is not None and not args.init.is_file():
         print(f"error: --init {args.init}: no such file", file=sys.stderr)
         return 2
+    from pnlviz.data.outputs import check_writable
+
+    check_writable(args.out)  # a device, FIFO or link at --out, or a read-only folder: refused before training
     problem = _apply_data_args(args, config)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
