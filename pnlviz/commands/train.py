@@ -95,7 +95,9 @@ def run_train(args) -> int:
         result = train(config, args.out, minutes=args.minutes, progress=not args.no_progress, cache_dir=args.cache,
                        init=args.init)
     except (OSError, ValueError) as exc:  # DataError is a ValueError: a bad dataset or checkpoint
-        print(f"error: {exc}", file=sys.stderr)
+        from pnlviz.commands import os_error_line
+
+        print(f"error: {os_error_line(exc) if isinstance(exc, OSError) else exc}", file=sys.stderr)
         return 2
     note = " (stopped by --minutes)" if result.stopped_early else ""
     print(f"trained {result.epochs_done:.2f} epochs, {result.steps} steps in {result.seconds:.0f} s{note}; "

@@ -8,13 +8,16 @@ Every refusal is a one-line :class:`~pnlviz.data.errors.DataError` naming the pa
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import functools
 import os
 import stat
+from collections.abc import Iterator
 
 from .errors import DataError
 
-__all__ = ["kind_of", "open_regular", "require_input", "output_problem", "os_error_text"]
+__all__ = ["kind_of", "open_regular", "require_input", "output_problem", "os_error_text", "naming", "names_path"]
 
 
 def kind_of(mode: int) -> str:
@@ -88,3 +91,24 @@ def output_problem(path: str | os.PathLike, folder: bool = False) -> str | None:
         if not folder and not stat.S_ISREG(st.st_mode):
             return f"exists and is {kind_of(st.st_mode)}, not a regular file: not replaced"
     return None
+
+
+@contextlib.contextmanager
+def naming(path: str | os.PathLike) -> Iterator[None]:
+    """An OSError inside the block that names no file (a ``write`` on a full disk) names ``path``:
+    the one-line error says which output could not be written."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is None and e.errno is not None:
+            raise OSError(e.errno, e.strerror or str(e), os.fspath(path)) from None
+        raise
+
+
+def names_path(method):
+    """:func:`naming` for a method of an object writing ``self.path``."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        with naming(self.path):
+            return method(self, *args, **kwargs)
+    return wrapper

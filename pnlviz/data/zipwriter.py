@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from .atomic import refuse_non_regular
+from .filekind import names_path
 from .errors import DataError, member_source
 from .reading import is_utf8
 
@@ -113,6 +114,7 @@ class _TempOutput:
         with contextlib.suppress(OSError):
             os.unlink(self._tmp)
 
+    @names_path
     def close(self) -> Path:
         raise NotImplementedError
 
@@ -159,6 +161,7 @@ class ZipStream(_TempOutput):
     def __len__(self) -> int:
         return len(self.names)
 
+    @names_path
     def add(self, name: str, data: str | bytes) -> None:
         """Write one member now. A name that cannot be stored (not UTF-8, already written) raises
         DataError and writes nothing; the zip stays usable."""
@@ -183,6 +186,7 @@ class ZipStream(_TempOutput):
             with contextlib.suppress(OSError):
                 os.unlink(journal_path(self.path))
 
+    @names_path
     def close(self) -> Path:
         """Finish the zip, put its members in ``key`` order, and move it over ``path``."""
         self._zip.close()
@@ -232,6 +236,7 @@ class LineStream(_TempOutput):
     def __len__(self) -> int:
         return len(self._keys)
 
+    @names_path
     def add(self, line: str, key: Any = 0) -> None:
         """Write ``line`` (a newline is added; it must not hold one)."""
         if "\n" in line or "\r" in line:
@@ -240,6 +245,7 @@ class LineStream(_TempOutput):
         self._file.flush()
         self._keys.append(key)
 
+    @names_path
     def close(self) -> Path:
         """Finish the file, put its lines in key order, and move it over ``path``."""
         self._file.close()
