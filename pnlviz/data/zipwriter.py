@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from .atomic import refuse_non_regular
-from .filekind import names_path
+from .filekind import names_path, naming
 from .errors import DataError, member_source
 from .reading import is_utf8
 
@@ -91,8 +91,9 @@ class _TempOutput:
         if self.path.is_dir():
             raise DataError(os.fspath(self.path), "is a folder: expected a file name for the output")
         refuse_non_regular(self.path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._tmp = self._new_temp()
+        with naming(self.path):
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._tmp = self._new_temp()
         self.closed = False
 
     def _new_temp(self) -> str:
