@@ -644,9 +644,11 @@ def summary(results: list[dict], before: list[dict] | None = None) -> list[str]:
         c = Counter(r["outcome"] for r in rows)
         label = "**all**" if kind is None else kind
         lines.append(f"| {label} | {len(rows)} | " + " | ".join(str(c[k]) for k in KINDS) + " |")
-    if before:
-        c = Counter(r["outcome"] for r in before)
-        lines.append(f"| before the fixes | {len(before)} | " + " | ".join(str(c[k]) for k in KINDS) + " |")
+    if before:  # the same cases, run on the code before the fixes
+        names = {r["case"] for r in results}
+        same = [r for r in before if r["case"] in names]
+        c = Counter(r["outcome"] for r in same)
+        lines.append(f"| *before the fixes* | {len(same)} | " + " | ".join(str(c[k]) for k in KINDS) + " |")
     return lines
 
 

@@ -5,11 +5,10 @@ no viser unless a command needs them)."""
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from pnlviz.commands.calibrate import add_calibrate_parser
-from pnlviz.commands.common import parse_size
+from pnlviz.commands.common import os_error_line, parse_size
 from pnlviz.commands.detect import add_detect_parser
 from pnlviz.commands.evaluate import add_eval_parser
 from pnlviz.commands.labels import add_labels_parser
@@ -102,14 +101,4 @@ def _main(argv: list[str] | None) -> int:
     except OSError as exc:  # a write failure (read-only, full disk, permission) or an unreadable path
         print(f"error: {os_error_line(exc)}", file=sys.stderr)
         return 1
-
-
-def os_error_line(exc: OSError) -> str:
-    """``OSError`` as one line naming the path: ``"out/x.zip: No space left on device"``."""
-    from pnlviz.data.errors import DataError
-    from pnlviz.data.filekind import os_error_text
-
-    name = exc.filename if exc.filename is not None else "<output>"
-    text = os_error_text(exc) if exc.errno is not None else (str(exc) or type(exc).__name__)
-    return str(DataError(os.fsdecode(name) if isinstance(name, bytes) else str(name), text))
 

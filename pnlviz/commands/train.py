@@ -95,7 +95,7 @@ def run_train(args) -> int:
         result = train(config, args.out, minutes=args.minutes, progress=not args.no_progress, cache_dir=args.cache,
                        init=args.init)
     except (OSError, ValueError) as exc:  # DataError is a ValueError: a bad dataset or checkpoint
-        from pnlviz.commands import os_error_line
+        from pnlviz.commands.common import os_error_line
 
         print(f"error: {os_error_line(exc) if isinstance(exc, OSError) else exc}", file=sys.stderr)
         return 2
