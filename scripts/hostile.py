@@ -250,7 +250,8 @@ def not_files(m: Material):
         w = m.work()
         d = m.copy(w)
         fifo(d / "00001.json")
-        yield "not a file", f"FIFO as an annotation: {cmd}", dataset_run(m, cmd, d, w, "ok" if cmd == "detect" else "any")
+        run = dataset_run(m, cmd, d, w, "ok" if cmd == "detect" else "any")
+        yield "not a file", f"FIFO as an annotation: {cmd}", run
     for cmd in DATASET_COMMANDS:
         w = m.work()
         d = m.copy(w)
@@ -269,7 +270,8 @@ def not_files(m: Material):
     d = m.copy(w)
     (d / "cameras" / "camera_00002.json").unlink()
     os.symlink("/dev/zero", d / "cameras" / "camera_00002.json")
-    yield "not a file", "a camera that is a link to /dev/zero: sheet", Run(pn("sheet", "--data", d, "--out", w / "s.png"), "any")
+    yield "not a file", "a camera that is a link to /dev/zero: sheet", Run(pn("sheet", "--data", d, "--out",
+                                                                             w / "s.png"), "any")
     w = m.work()
     yield "not a file", "--cameras a FIFO: sheet", Run(pn("sheet", "--data", m.data, "--cameras", fifo(w / "c.zip"),
                                                           "--out", w / "s.png"))
@@ -279,7 +281,8 @@ def not_files(m: Material):
     yield "not a file", "--pred /dev/zero: eval", Run(pn("eval", "--gt", m.data, "--pred", "/dev/zero"))
     w = m.work()
     yield "not a file", "--detections a FIFO: calibrate", Run(pn("calibrate", "--data", m.data, "--detections",
-                                                                 fifo(w / "p.zip"), "--out", w / "c.zip", "--no-progress"))
+                                                                 fifo(w / "p.zip"), "--out", w / "c.zip",
+                                                                 "--no-progress"))
     w = m.work()
     z = m.preds_with(w)
     fifo(w / "p.json")
@@ -343,11 +346,13 @@ def not_file_outputs(m: Material):
         target = chardev(w / f"out{SUFFIX[cmd]}")
         if target is not None:
             argv = output_runs(m, w, target)[cmd]
-            yield "output not a file", f"a device node (like /dev/null) as output: {cmd}", Run(argv, check=still(target, "chr"))
+            yield "output not a file", f"a device node (like /dev/null) as output: {cmd}", Run(
+                argv, check=still(target, "chr"))
     for cmd in SUFFIX:
         w = m.work()
         target = fifo(w / f"out{SUFFIX[cmd]}")
-        yield "output not a file", f"a FIFO as output: {cmd}", Run(output_runs(m, w, target)[cmd], check=still(target, "fifo"))
+        yield "output not a file", f"a FIFO as output: {cmd}", Run(output_runs(m, w, target)[cmd],
+                                                                  check=still(target, "fifo"))
     for cmd in SUFFIX:
         w = m.work()
         victim = w / "elsewhere.txt"
@@ -540,7 +545,8 @@ def smaller(m: Material):
         yield "smaller", f"{what} named .mp4: detect --video", Run(pn("detect", "--video", video, "--out",
                                                                       w / f"p_{video.stem}.zip", "--no-progress"))
         yield "smaller", f"{what} named .mp4: render --video", Run(pn("render", "--video", video, "--cameras", m.cams,
-                                                                      "--out", w / f"r_{video.stem}.mp4", "--no-progress"))
+                                                                      "--out", w / f"r_{video.stem}.mp4",
+                                                                      "--no-progress"))
         yield "smaller", f"{what} named .mp4: calibrate --video", Run(pn("calibrate", "--video", video, "--detections",
                                                                          m.preds, "--out", w / f"c_{video.stem}.zip",
                                                                          "--no-progress"))

@@ -61,7 +61,8 @@ def check_settings(settings: Any, source: str) -> dict:
     known = set(CalibParams.__dataclass_fields__)
     for key, value in settings.items():
         if key not in known:
-            raise DataError(source, f"unknown calibration setting {str(key)[:40]!r} (known: {', '.join(sorted(known))})")
+            raise DataError(source, f"unknown calibration setting {str(key)[:40]!r} "
+                                    f"(known: {', '.join(sorted(known))})")
         problem = _problem(key, value, getattr(defaults, key))
         if problem:
             raise DataError(source, f"calibration setting {key!r} {problem}")
