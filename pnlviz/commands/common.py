@@ -4,6 +4,7 @@ how batch commands open their dataset and report the files they skip (one line e
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 
@@ -67,3 +68,14 @@ def open_input_dataset(path):
     print_skipped(ds.rejected)
     ds.require_frames()
     return ds
+
+
+def os_error_line(exc: OSError) -> str:
+    """``OSError`` as one line naming the path: ``"out/x.zip: No space left on device"``."""
+    from pnlviz.data.errors import DataError
+    from pnlviz.data.filekind import os_error_text
+
+    name = exc.filename if exc.filename is not None else "<output>"
+    text = os_error_text(exc) if exc.errno is not None else (str(exc) or type(exc).__name__)
+    return str(DataError(os.fsdecode(name) if isinstance(name, bytes) else str(name), text))
+

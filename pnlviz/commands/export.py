@@ -94,7 +94,8 @@ def run_export(args) -> int:
         print(f"error: --gate-px must be a positive number of pixels, got {args.gate_px}", file=sys.stderr)
         return 2
     try:
-        check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits))
+        check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits),
+                     folder=Path(args.out).suffix.lower() != ".zip")
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -35,6 +35,7 @@ def run_render(args) -> int:
     from pnlviz.commands.common import open_input_dataset, print_skipped
     from pnlviz.data import check_output
     from pnlviz.data.layout import clips
+    from pnlviz.data.atomic import refuse_non_regular
     from pnlviz.data.cameras import read_cameras
 
     if args.out.suffix.lower() not in (".mp4", ".m4v", ".mov"):
@@ -63,6 +64,11 @@ def run_render(args) -> int:
     if not wrote:
         print(f"error: no frame could be read from {args.video or args.data}", file=sys.stderr)
         return 1
+    if not tmp.is_file() or tmp.stat().st_size == 0:
+        print(f"error: {args.out}: the video could not be written (full disk?)", file=sys.stderr)
+        tmp.unlink(missing_ok=True)
+        return 1
+    refuse_non_regular(args.out)
     tmp.replace(args.out)
     print(f"wrote {args.out}: {len(stems) - len(skipped)} frames at {fps:g} fps, the pitch drawn on {drawn}")
     print_skipped(skipped, prefix="  skipped: ")
@@ -93,7 +99,8 @@ def _render_frames(args, ds, cameras: dict, stems: list[str], fps: float, tmp) -
         if writer is None:
             writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (w, h))
             if not writer.isOpened():
-                print(f"error: OpenCV cannot write {args.out} (no mp4 encoder)", file=sys.stderr)
+                print(f"error: OpenCV cannot write {args.out} (no mp4 encoder, or its folder cannot be written)",
+                      file=sys.stderr)
                 return drawn, skipped, None
             size = (w, h)
         if (w, h) != size:

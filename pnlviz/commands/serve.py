@@ -53,6 +53,19 @@ def _detector(args):
     return None
 
 
+def _quiet_handshakes() -> None:
+    """A connection that never speaks HTTP (a port scan, a health check, a TLS client) is not an
+    error of the app: websockets logs its failed handshake with three chained tracebacks; drop
+    those records (everything else the library logs is kept)."""
+    import logging
+
+    def keep(record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(("opening handshake failed", "connection rejected"))
+
+    for name in ("websockets.server", "websockets.asyncio.server", "websockets"):
+        logging.getLogger(name).addFilter(keep)
+
+
 def run_serve(args) -> int:
     from pnlviz.app.guard import is_loopback
     from pnlviz.app.server import PnlvizApp
@@ -62,6 +75,7 @@ def run_serve(args) -> int:
     from pnlviz.detect.worker import DetectorLoadError, DetectorProcessError
 
     data, args.edits = app_data(args)
+    _quiet_handshakes()
     try:
         detector = _detector(args)
     except DetectorLoadError as exc:

@@ -43,6 +43,7 @@ from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.data.atomic import atomic_write_text
 from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
+from pnlviz.data.reading import read_file
 from pnlviz.data.snapshot import edits_digest, validate_snapshot
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
@@ -106,11 +107,13 @@ def validate_keypoint(kid: Any, value: Any, source: str) -> tuple[str, list[floa
 
 
 def check_keypoint_id(kid: Any) -> int:
-    """The id of a keypoint to edit, as a whole number of the catalogue; EditError otherwise."""
-    try:
-        kid = int(kid)
-    except (TypeError, ValueError):
-        raise EditError(f"keypoint id must be a whole number, got {str(kid)[:20]!r}") from None
+    """The id of a keypoint to edit, an integer of the catalogue; EditError otherwise. Nothing is
+    coerced: ``5.5``, ``True`` and ``"7"`` are refused (an id comes from the catalogue as an int)."""
+    import numpy as np
+
+    if isinstance(kid, (bool, np.bool_)) or not isinstance(kid, (int, np.integer)):
+        raise EditError(f"keypoint id must be an integer, got {type(kid).__name__} {str(kid)[:20]!r}")
+    kid = int(kid)
     if kid not in keypoint_ids():
         raise EditError(f"keypoint id {kid} is not in the catalogue (1..73)")
     return kid
@@ -303,7 +306,7 @@ class EditsStore:
             return
         for p in sorted(self.frames.glob("*.json")):
             try:
-                data = p.read_bytes()
+                data = read_file(p)  # capped; a FIFO or a device is refused, never read
                 rec = validate_record(json.loads(data), str(p))
             except (OSError, ValueError, RecursionError) as exc:  # DataError and JSONDecodeError are ValueErrors
                 self._damaged(p, exc)

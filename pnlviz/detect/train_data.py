@@ -368,20 +368,25 @@ class ExportedFrames:
     def __init__(self, export: str | os.PathLike, images: str | os.PathLike, *,
                  exclude: list[str] | None = None) -> None:
         import json
-        import zipfile
 
         from pnlviz.data import open_dataset
         from pnlviz.data.errors import DataError
 
+        from pnlviz.data.reading import open_zip, read_file, read_zip_member
+
         export = Path(export)
         files: dict[str, bytes] = {}
         if export.is_file():
-            with zipfile.ZipFile(export) as z:
-                files = {n: z.read(n) for n in z.namelist() if n.endswith(".json")}
+            with open_zip(export, not_zip="not a pnlviz export (not a valid .zip archive)") as z:
+                files = {n: read_zip_member(z, n, f"{export}:{n}") for n in z.namelist() if n.endswith(".json")}
         elif export.is_dir():
-            files = {str(p.relative_to(export).as_posix()): p.read_bytes() for p in export.rglob("*.json")}
+            files = {str(p.relative_to(export).as_posix()): read_file(p) for p in export.glob("*/*.json")}
+            files.update({p.name: read_file(p) for p in export.glob("*.json")})
         else:
             raise DataError(str(export), "no such export folder or zip")
+        if not any(n.rsplit("/", 1)[-1].startswith("manifest") for n in files):
+            raise DataError(str(export), "no manifest: not a complete pnlviz export (an interrupted export?); "
+                                         "export again and train on the finished one")
         self.dataset = open_dataset(images)
         skip = set(exclude or ())
         self.stems: list[str] = []
