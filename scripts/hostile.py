@@ -662,6 +662,10 @@ def escape(text: str) -> str:
     return text.encode("unicode_escape").decode("ascii").replace("|", "\\|")
 
 
+BEFORE_NOTE = ("*Before the fixes*: the same cases run on commit b67a54e (`PNLVIZ_CODE=<a checkout of it> "
+               "python scripts/hostile.py --json ...`), kept in `docs/reliability_before.json`.")
+
+
 def section(results: list[dict], before: list[dict] | None, commit: str) -> list[str]:
     lines = [SECTION, "",
              f"`python scripts/hostile.py` on {time.strftime('%Y-%m-%d')} (commit {commit}): "
@@ -671,8 +675,7 @@ def section(results: list[dict], before: list[dict] | None, commit: str) -> list
              "field not named, raw terminal escapes printed, a checkpoint written after a failure), "
              "destructive (a device node, FIFO or symlink at an output path replaced or written through).", "",
              *summary(results, before), "",
-             *(["*Before the fixes*: the same cases run on commit b67a54e (`PNLVIZ_CODE=<a checkout of it> "
-                "python scripts/hostile.py --json ...`), kept in `docs/reliability_before.json`.", ""] if before else []),
+             *([BEFORE_NOTE, ""] if before else []),
              "| kind | case | outcome | what was printed (last line) |", "|---|---|---|---|"]
     for r in results:
         lines.append(f"| {r['kind']} | {escape(r['case'])} | {r['outcome']} | {escape(r['detail'])} |")

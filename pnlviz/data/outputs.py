@@ -65,7 +65,6 @@ def check_output(out: PathLike, *, inputs: Iterable[PathLike | None] = (), datas
     that must not be overwritten), or is, or lies inside, one of ``datasets`` (dataset folders or
     zips), or cannot be written (:func:`check_writable`). ``what`` names the output in the message
     (the option that gave it). None entries are ignored."""
-    check_writable(out, what, folder)
     target = _resolved(out)
     source = f"{what} {os.fspath(out)}"
     for inp in inputs:
@@ -80,3 +79,4 @@ def check_output(out: PathLike, *, inputs: Iterable[PathLike | None] = (), datas
         if root.is_dir() and root in target.parents:
             raise OutputError(source, f"is inside the dataset folder {os.fspath(ds)}: it would become part of "
                                       f"the dataset; write it elsewhere")
+    check_writable(out, what, folder)
