@@ -499,7 +499,7 @@ def training(m: Material):
                                                 check=no_file(out), timeout=240)
     options = {"--minutes nan": ["--minutes", "nan"], "--minutes -1": ["--minutes", "-1"],
                "--data-weight nan": ["--data", m.data, "--data-weight", "nan"],
-               "--data-weight 7": ["--data", m.data, "--data-weight", "7"],
+               "--data-weight inf": ["--data", m.data, "--data-weight", "inf"],
                "--epochs 0": ["--epochs", "0"], "--batch-size -2": ["--batch-size", "-2"],
                "--frames -3": ["--frames", "-3"], "--threads 0": ["--threads", "0"]}
     for what, extra in options.items():
