@@ -79,4 +79,4 @@ def check_output(out: PathLike, *, inputs: Iterable[PathLike | None] = (), datas
         if root.is_dir() and root in target.parents:
             raise OutputError(source, f"is inside the dataset folder {os.fspath(ds)}: it would become part of "
                                       f"the dataset; write it elsewhere")
-    check_writable(out, what, folder)
+    check_writable(out, what, folder)  # after the checks above, whose messages say more
