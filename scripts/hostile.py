@@ -499,7 +499,7 @@ def training(m: Material):
                                                 check=no_file(out), timeout=240)
     options = {"--minutes nan": ["--minutes", "nan"], "--minutes -1": ["--minutes", "-1"],
                "--data-weight nan": ["--data", m.data, "--data-weight", "nan"],
-               "--data-weight 7": ["--data", m.data, "--data-weight", "7"],
+               "--data-weight inf": ["--data", m.data, "--data-weight", "inf"],
                "--epochs 0": ["--epochs", "0"], "--batch-size -2": ["--batch-size", "-2"],
                "--frames -3": ["--frames", "-3"], "--threads 0": ["--threads", "0"]}
     for what, extra in options.items():
@@ -662,6 +662,10 @@ def escape(text: str) -> str:
     return text.encode("unicode_escape").decode("ascii").replace("|", "\\|")
 
 
+BEFORE_NOTE = ("*Before the fixes*: the same cases run on commit b67a54e (`PNLVIZ_CODE=<a checkout of it> "
+               "python scripts/hostile.py --json ...`), kept in `docs/reliability_before.json`.")
+
+
 def section(results: list[dict], before: list[dict] | None, commit: str) -> list[str]:
     lines = [SECTION, "",
              f"`python scripts/hostile.py` on {time.strftime('%Y-%m-%d')} (commit {commit}): "
@@ -671,6 +675,7 @@ def section(results: list[dict], before: list[dict] | None, commit: str) -> list
              "field not named, raw terminal escapes printed, a checkpoint written after a failure), "
              "destructive (a device node, FIFO or symlink at an output path replaced or written through).", "",
              *summary(results, before), "",
+             *([BEFORE_NOTE, ""] if before else []),
              "| kind | case | outcome | what was printed (last line) |", "|---|---|---|---|"]
     for r in results:
         lines.append(f"| {r['kind']} | {escape(r['case'])} | {r['outcome']} | {escape(r['detail'])} |")

@@ -125,8 +125,8 @@ def _apply_data_args(args, config) -> str | None:
         return f"--data {missing[0]}: no such folder or file"
     share = sum(float(r.get("weight", 1.0)) for r in config.real) or 1.0
     weight = args.data_weight if args.data_weight is not None else share / len(args.data)
-    if not (math.isfinite(weight) and 0 < weight <= 1):
-        return f"--data-weight must be a share in (0, 1], got {weight}"
+    if not (math.isfinite(weight) and weight > 0):  # a relative weight: any finite positive number
+        return f"--data-weight must be a finite number > 0, got {weight}"
     if args.labels is not None:
         if len(args.data) != 1:
             return "--labels goes with exactly one --data (the dataset the labels were made on)"
