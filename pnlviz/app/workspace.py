@@ -100,6 +100,7 @@ class _PointNodes:
         self.dragging = False  # one of these points is being dragged: the grab mesh stays
         self._grab_made: tuple[np.ndarray, np.ndarray] | None = None  # its instances as made
         self._grabs_made = 0
+        self._retired: list = []  # grab meshes replaced during a drag, removed at its release
 
     def show(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
         self.keys, self.plane, self.world_per_px = list(markers.keys), plane, world_per_px
@@ -122,7 +123,9 @@ class _PointNodes:
             update_changed(self.grab, batched_positions=pos, batched_scales=scales)
             self._grab_made = None
             return
-        if self.grab is not None:
+        if self.grab is not None and self.dragging:
+            self._retired.append(self.grab)  # the drag lives on it until its release
+        elif self.grab is not None:
             self.grab.remove()
         self._grabs_made += 1
         vertices, faces = _disc()
@@ -237,6 +240,8 @@ class _PointNodes:
             if phase is DragPhase.END:  # before the release is handled: it makes the grab mesh anew
                 grabbed.clear()
                 self.dragging = False
+                while self._retired:
+                    self._retired.pop().remove()
             events.drag(DragEvent(self.kind, key, phase, now))
 
 
