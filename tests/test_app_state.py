@@ -365,3 +365,18 @@ def test_a_corrected_confirmed_by_hand_survives_undoing_the_edits(data):
     while st.undo("00001"):
         pass
     assert st.edits.review("00001") is None
+
+
+def test_the_views_and_images_go_when_the_last_tab_leaves(data, serve):
+    """serve's memory only grew: every frame visited stayed cached after the client left."""
+    app = serve(data)
+    a, b = app.session(), app.session()
+    for _ in range(3):
+        a.step(1)
+    st = app.state
+    assert len(st._cache) >= 3 and len(st._images) >= 1
+    app.close_session(a)
+    assert len(st._cache) >= 3  # tab b still shows frames
+    app.close_session(b)
+    assert st._cache == {} and st._images == {} and st._previews == {}
+    assert st.view("00000").result.ok  # and they come back when asked for

@@ -72,7 +72,21 @@ class PnlvizApp:
         with self._sessions_lock:
             session = self.sessions.pop(client.client_id, None)
         if session is not None:
-            session.close()
+            self._closed(session)
+
+    def close_session(self, session: Session) -> None:
+        """Close a tab (what a browser leaving does)."""
+        with self._sessions_lock:
+            for key in [k for k, v in self.sessions.items() if v is session]:
+                del self.sessions[key]
+        self._closed(session)
+
+    def _closed(self, session: Session) -> None:
+        session.close()
+        with self._sessions_lock:
+            nobody = not self.sessions
+        if nobody:  # no tab needs the frames' views and images any more
+            self.state.release_caches()
 
     def session(self) -> Session:
         """A session on the server's own panels (no browser needed); shown at once."""

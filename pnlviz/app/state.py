@@ -53,6 +53,20 @@ def _view_key(edits: EditsStore, stem: str, settings: Settings, keypoints: dict 
     return stem, settings, json.dumps(edit, sort_keys=True) if edit else None
 
 
+def _return_free_memory() -> None:
+    """Give the memory freed by the caches back to the system: glibc keeps freed small blocks in
+    its heap (the process would stay at its peak); ``malloc_trim`` returns them. A no-op elsewhere."""
+    import ctypes
+    import ctypes.util
+    import gc
+
+    gc.collect()
+    try:
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
 class AppState:
     """Dataset + calibration cache + detections + edits; thread-safe for the server's callbacks.
 
@@ -94,6 +108,15 @@ class AppState:
         #: why an image could not be decoded (stem -> one line), once it was tried
         self.image_errors: dict[str, str] = {}
         self._listeners: list[Callable[[str], None]] = []
+
+    def release_caches(self) -> None:
+        """Drop the frames' views, previews and images (no tab shows them any more); the triage
+        summaries, the edits and the detections stay."""
+        with self._lock:
+            self._cache.clear()
+            self._previews.clear()
+            self._images.clear()
+        _return_free_memory()
 
     def close(self) -> None:
         """Release the edits folder (and stop the detector, when it runs in a process)."""

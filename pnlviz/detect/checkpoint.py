@@ -43,6 +43,10 @@ def _shape(shape: Any) -> str:
     return "[" + ", ".join(str(int(s)) for s in shape) + "]"
 
 
+#: the largest checkpoint read (PnLCalib's HRNet checkpoints are about 250 MB)
+MAX_CHECKPOINT_BYTES = 2 * 2**30
+
+
 def _listed(items: list[str]) -> str:
     shown = ", ".join(items[:MAX_LISTED])
     if len(items) > MAX_LISTED:
@@ -54,6 +58,9 @@ def _read(source: str | os.PathLike[str], weights_only: bool) -> Any:
     path = Path(source)
     if not path.is_file():
         raise CheckpointError(f"checkpoint {path} does not exist or is not a file.")
+    if path.stat().st_size > MAX_CHECKPOINT_BYTES:
+        raise CheckpointError(f"checkpoint {path} is {path.stat().st_size / 2**30:.1f} GiB: larger than any network "
+                              f"here ({MAX_CHECKPOINT_BYTES / 2**30:.0f} GiB at most); not read.")
     try:
         return torch.load(path, map_location="cpu", weights_only=weights_only)
     except Exception as exc:  # torch raises many types for corrupt / foreign files

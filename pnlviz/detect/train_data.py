@@ -43,6 +43,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from pnlviz.data.limits import MAX_IMAGE_BYTES
+from pnlviz.data.reading import read_file
 from pnlviz.field.names import FLIP_X, canonical_class_name
 from pnlviz.geometry.polylines import segment_in_image
 
@@ -287,7 +289,7 @@ class HomographyFrames:
                         None)
             if path is None:
                 raise DataError(str(folder), f"no image for frame {stem!r}")
-            img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            img = cv2.imdecode(np.frombuffer(read_file(path, MAX_IMAGE_BYTES), np.uint8), cv2.IMREAD_COLOR)
             if img is None:
                 raise DataError(str(path), "cannot decode the image")
             self.stems.append(stem)
