@@ -17,6 +17,7 @@ import time
 
 import viser
 
+from pnlviz.app.bridge import page_url
 from pnlviz.app.guard import AccessPolicy, guarded_viser_server
 from pnlviz.app.session import Session
 from pnlviz.app.state import AppState
@@ -56,6 +57,12 @@ class PnlvizApp:
     def url(self) -> str:
         """The URL a browser on this machine opens (with the token when one is needed)."""
         return self.policy.urls()[0]
+
+    @property
+    def page_url(self) -> str:
+        """:attr:`url` with the canvas at a fixed device pixel ratio (``?fixedDpr=1``; a page on
+        another ratio reloads once with its own, see :func:`pnlviz.app.bridge.page_url`)."""
+        return page_url(self.url)
 
     # ------------------------------------------------------------------ tabs
     def _connect(self, client: viser.ClientHandle) -> None:

@@ -260,6 +260,7 @@ class Workspace:
         self._label_uv: dict[object, np.ndarray] = {}
         self._label_rank: dict[object, int] = {}
         self.selected: Selection | None = None
+        self.on_points: Callable[[], None] | None = None  # the points or their grab size changed
 
     # ------------------------------------------------------------------ the frame
     def show_image(self, key: tuple, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> bool:
@@ -395,6 +396,8 @@ class Workspace:
         labelled += [(k, uv, 1) for k, uv in zip(ghosted.keys, ghosted.uv)] if ids else []
         self._show_labels(labelled)
         self._show_selection()
+        if self.on_points is not None:
+            self.on_points()
 
     def _show_labels(self, labelled: list) -> None:
         wanted = {k: (np.asarray(uv, float), rank) for k, uv, rank in labelled}

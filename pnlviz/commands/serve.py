@@ -48,6 +48,7 @@ def _detector(args):
 
 def run_serve(args) -> int:
     from pnlviz import EXAMPLES_DIR
+    from pnlviz.app.bridge import page_url
     from pnlviz.app.guard import is_loopback
     from pnlviz.app.server import PnlvizApp
     from pnlviz.app.state import AppState
@@ -91,7 +92,8 @@ def run_serve(args) -> int:
     if not is_loopback(args.host):
         print(f"pnlviz: warning: listening on {args.host}: anyone who can reach this machine and has the token can "
               f"read and edit these labels", file=sys.stderr)
-    print(f"pnlviz: open {urls[0]}" + "".join(f"\npnlviz:   or {u}" for u in urls[1:]), flush=True)
+    pages = [page_url(u) for u in urls]  # the canvas at the page's device pixel ratio, never lowered
+    print(f"pnlviz: open {pages[0]}" + "".join(f"\npnlviz:   or {u}" for u in pages[1:]), flush=True)
     signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as Ctrl+C does: edits folder released
     try:
         while True:
