@@ -75,16 +75,15 @@
     }
     return best;
   };
-  // the WebGL canvas: the one inside react-three-fiber's clipping wrapper (a 2D overlay of the
-  // same size sits beside it); `target` is moved by the transform, `clip` holds it still
+  // the WebGL canvas (three.js marks it; a 2D overlay of the same size sits over it): `target`,
+  // its react-three-fiber wrapper, is moved by the transform; `clip`, the wrapper's parent (overflow
+  // hidden, the canvas's size), holds it still and clips it
   const glCanvas = () => {
     let best = null;
-    for (const c of document.querySelectorAll("canvas")) {
-      const clip = c.parentElement && c.parentElement.parentElement;
-      if (!clip || getComputedStyle(clip).overflow !== "hidden") continue;
+    for (const c of document.querySelectorAll("canvas[data-engine]")) {
       if (!best || c.clientWidth * c.clientHeight > best.clientWidth * best.clientHeight) best = c;
     }
-    return best || viewCanvas();
+    return best;
   };
   const stage = () => {
     const canvas = glCanvas();
