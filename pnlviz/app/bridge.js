@@ -294,7 +294,8 @@
     "pointerdown",
     (event) => {
       state.swallowClick = false;
-      if (!imageMode() || !plainLeft(event) || !canvasOf(event.target) || state.press) return;
+      if (state.press) finishPress(); // its release never came (the window lost the pointer)
+      if (!imageMode() || !plainLeft(event) || !canvasOf(event.target)) return;
       const p = local(event);
       if (!p) return;
       const point = pointAt(p);
@@ -321,7 +322,8 @@
     "pointermove",
     (event) => {
       const press = state.press;
-      if (press && event.pointerId === press.id) {
+      if (press && event.pointerId === press.id && !(event.buttons & 1)) finishPress(); // released unseen
+      else if (press && event.pointerId === press.id) {
         event.stopImmediatePropagation(); // viser sees no move: no drag of the image starts
         if (!press.panning && Math.max(Math.abs(event.clientX - press.x0), Math.abs(event.clientY - press.y0)) > 3) {
           press.panning = true;
@@ -349,16 +351,20 @@
     },
     { capture: true },
   );
+  // a pan's press is over: its gesture goes to the server; true if it was a pan
+  const finishPress = () => {
+    const press = state.press;
+    state.press = null;
+    if (press && press.panning) endGesture();
+    return !!(press && press.panning);
+  };
+  window.addEventListener("blur", () => finishPress());
   const released = (event) => {
     if (state.cancelling) return;
     const press = state.press;
-    if (press && event.pointerId === press.id) {
-      state.press = null;
-      if (press.panning) {
-        event.stopImmediatePropagation(); // viser's click was called off at the start of the pan
-        state.swallowClick = event.type === "pointerup";
-        endGesture();
-      }
+    if (press && event.pointerId === press.id && finishPress()) {
+      event.stopImmediatePropagation(); // viser's click was called off at the start of the pan
+      state.swallowClick = event.type === "pointerup";
     }
     const pt = state.point;
     if (pt && event.pointerId === pt.id) {
