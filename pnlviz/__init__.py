@@ -1,10 +1,26 @@
-"""pnlviz: PnLCalib sports field registration with an interactive inspection and annotation app."""
+"""pnlviz: PnLCalib sports field registration with an interactive inspection and annotation app.
 
-from pathlib import Path
+The Python API (:mod:`pnlviz.api`): :func:`keypoints`, :func:`calibrate` -> :class:`Calibration`,
+:class:`Camera` (``project``, ``image_to_pitch``, ``homography``), :func:`top_view`,
+:func:`open_dataset`, and ``pnlviz.detect(image)`` with ``pip install 'pnlviz[detect]'``.
+"""
 
 __version__ = "0.1.0"
 
-#: Repository root when pnlviz runs from a checkout (``pip install -e .``).
-REPO_ROOT = Path(__file__).resolve().parent.parent
-ASSETS_DIR = REPO_ROOT / "assets"
-EXAMPLES_DIR = REPO_ROOT / "examples"
+from pnlviz.paths import ASSETS_DIR, EXAMPLES_DIR, REPO_ROOT, SAMPLE_DIR  # noqa: E402
+
+# pnlviz.detect(image) is the subpackage pnlviz.detect, callable (see pnlviz/detect/__init__.py)
+from pnlviz import detect  # noqa: E402
+from pnlviz.api import (  # noqa: E402
+    ArgumentError,
+    Calibration,
+    Camera,
+    calibrate,
+    keypoint_names,
+    keypoints,
+    open_dataset,
+    top_view,
+)
+
+__all__ = ["ASSETS_DIR", "EXAMPLES_DIR", "REPO_ROOT", "SAMPLE_DIR", "ArgumentError", "Calibration", "Camera",
+           "calibrate", "detect", "keypoint_names", "keypoints", "open_dataset", "top_view"]

@@ -136,6 +136,80 @@ def _free_spot(box_w: int, box_h: int, at: tuple[int, int], taken: list, bounds:
     return places[0]
 
 
+def _top_canvas(model: FieldModel, px_per_m: float, margin: float = 6.0):
+    """The pitch seen from above (the far touchline at the top) with ``margin`` metres around it:
+    ``(image BGR, px)``, ``px`` mapping pitch metres (N, 2) to image pixels."""
+    W, H = int((105 + 2 * margin) * px_per_m), int((68 + 2 * margin) * px_per_m)
+    image = np.full((H, W, 3), (40, 92, 46), np.uint8)
+
+    def px(xy) -> np.ndarray:
+        return (np.asarray(xy, float) + [52.5 + margin, 34 + margin]) * px_per_m
+
+    for pts in model.sample_polylines(0.25, 0.1).values():
+        ground = np.abs(pts[:, 2]) < 1e-6
+        colour = (235, 235, 235) if ground.all() else (170, 170, 170)
+        cv2.polylines(image, [_to_int(px(pts[:, :2]))], False, colour, 2, cv2.LINE_AA, shift=4)
+    return image, px
+
+
+def top_view(camera: Camera | None = None, *, points=None, keypoints=None, model: FieldModel | None = None,
+             px_per_m: float = 8.0) -> np.ndarray:
+    """A bird's-eye view of the pitch (BGR uint8, the far touchline at the top): where ``camera``
+    sees the ground (its footprint, shaded, and its position), ``keypoints`` ``{id: (u, v)}``
+    pixels of its image put on the ground (yellow, with their ids) and ``points`` (N, 2) pixels
+    put on the ground (players' feet: red discs)."""
+    model = model or load_field_model()
+    image, px = _top_canvas(model, px_per_m)
+    H, W = image.shape[:2]
+    if camera is not None:
+        # the footprint: every ground point of the view that the camera puts inside its image
+        margin = 6.0
+        xs = (np.arange(W) + 0.5) / px_per_m - 52.5 - margin
+        ys = (np.arange(H) + 0.5) / px_per_m - 34 - margin
+        gx, gy = np.meshgrid(xs, ys)
+        ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+        uv, _ = camera.project(ground)
+        seen = (np.all(np.isfinite(uv), axis=1) & camera.in_image(np.nan_to_num(uv, nan=-1.0))).reshape(H, W)
+        shade = image.copy()
+        shade[seen] = (0.55 * shade[seen] + 0.45 * np.array([255, 200, 90])).astype(np.uint8)
+        image = shade
+        edges = cv2.findContours(seen.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]
+        cv2.drawContours(image, edges, -1, (255, 200, 90), 1, cv2.LINE_AA)
+        c = px(camera.C[:2])
+        inside = 0 <= c[0] < W and 0 <= c[1] < H
+        at = tuple(int(v) for v in np.clip(c, 4, [W - 5, H - 5]))
+        cv2.circle(image, at, 5, (255, 200, 90), -1 if inside else 2, cv2.LINE_AA)
+    for kid, uv in (keypoints or {}).items():
+        if camera is None:
+            break
+        xy = camera.image_to_pitch(np.asarray(uv, float).reshape(1, 2))[0]
+        if np.all(np.isfinite(xy)):
+            q = tuple(int(v) for v in px(xy))
+            cv2.circle(image, q, 3, (0, 220, 255), -1, cv2.LINE_AA)
+            cv2.putText(image, str(kid), (q[0] + 4, q[1] - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 220, 255), 1,
+                        cv2.LINE_AA)
+    if points is not None and camera is not None:
+        for xy in camera.image_to_pitch(np.asarray(points, float).reshape(-1, 2)):
+            if np.all(np.isfinite(xy)):
+                cv2.circle(image, tuple(int(v) for v in px(xy)), 4, (40, 40, 230), -1, cv2.LINE_AA)
+    return image
+
+
+def inset_top_view(image: np.ndarray, camera: Camera, share: float = 0.28) -> np.ndarray:
+    """Paste :func:`top_view` of ``camera`` into the bottom-right corner of ``image`` (in place;
+    ``share`` of its width, framed), as ``pnlviz render`` does on every frame."""
+    h, w = image.shape[:2]
+    px_per_m = max(1.0, share * w / 117.0)  # the view is 105 m + 2 x 6 m wide
+    inset = top_view(camera, px_per_m=px_per_m)
+    ih, iw = inset.shape[:2]
+    if ih + 8 > h or iw + 8 > w:
+        return image
+    y0, x0 = h - ih - 8, w - iw - 8
+    cv2.rectangle(image, (x0 - 2, y0 - 2), (x0 + iw + 1, y0 + ih + 1), (20, 20, 20), 2)
+    image[y0:y0 + ih, x0:x0 + iw] = inset
+    return image
+
+
 def keypoint_map(model: FieldModel | None = None, *, px_per_m: float = 16.0,
                  highlight: int | None = None, legend: bool = True) -> np.ndarray:
     """A top view of the pitch with every keypoint id, coloured by set (:data:`SET_RGB`): the
@@ -144,18 +218,10 @@ def keypoint_map(model: FieldModel | None = None, *, px_per_m: float = 16.0,
     are drawn just behind their goal line. ``highlight``: an id drawn larger, ringed; ``legend``:
     the sets' colours and the orientation written along the bottom. BGR uint8."""
     model = model or load_field_model()
-    margin = 6.0  # metres around the pitch
     legend_h = 56 if legend else 0
-    W, H = int((105 + 2 * margin) * px_per_m), int((68 + 2 * margin) * px_per_m) + legend_h
-    image = np.full((H, W, 3), (40, 92, 46), np.uint8)
-
-    def px(xy) -> np.ndarray:
-        return (np.asarray(xy, float) + [52.5 + margin, 34 + margin]) * px_per_m
-
-    for name, pts in model.sample_polylines(0.25, 0.1).items():
-        ground = np.abs(pts[:, 2]) < 1e-6
-        colour = (235, 235, 235) if ground.all() else (170, 170, 170)
-        cv2.polylines(image, [_to_int(px(pts[:, :2]))], False, colour, 2, cv2.LINE_AA, shift=4)
+    pitch, px = _top_canvas(model, px_per_m)
+    image = np.vstack([pitch, np.full((legend_h, pitch.shape[1], 3), (40, 92, 46), np.uint8)])
+    H, W = image.shape[:2]
     ids = [int(k) for k in model.keypoint_ids]
     where = {k: px(_map_position(model.keypoints[k].xyz)) for k in ids}
     for k in ids:  # a crossbar corner is joined to the top of its post

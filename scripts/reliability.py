@@ -545,11 +545,30 @@ def access_section(tmp: Path) -> list[str]:
             "| server | request | result |", "|---|---|---|", *rows, ""]
 
 
+# ------------------------------------------------------------------------------ round two
+def hostile_section(tmp: Path, commit: str) -> list[str]:
+    """Section 6: files that are not files, outputs that are not files, full disks, impossible
+    values, training failures (:mod:`hostile`, also runnable alone)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import hostile
+
+    root = tmp / "hostile"
+    root.mkdir()
+    root.chmod(0o755)
+    try:
+        results = hostile.run_all(root, None, 60.0)
+    finally:
+        hostile.unmount_all()
+    before = REPO_ROOT / "docs" / "reliability_before.json"
+    return hostile.section(results, json.loads(before.read_text()) if before.is_file() else None, commit)
+
+
 # ------------------------------------------------------------------------------ main
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--kill-rounds", type=int, default=20)
     ap.add_argument("--no-browser", action="store_true", help="skip the two-tab browser run")
+    ap.add_argument("--no-hostile", action="store_true", help="skip section 6 (scripts/hostile.py, ~15 min)")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO_ROOT, capture_output=True,
@@ -570,6 +589,8 @@ def main() -> None:
         print(f"concurrency: {time.time() - t0:.0f} s", flush=True)
         lines += damaged_section(tmp)
         lines += access_section(tmp)
+        if not args.no_hostile:
+            lines += hostile_section(tmp, commit)
         OUT.write_text("\n".join(lines) + "\n")
         print(f"wrote {OUT} ({time.time() - t0:.0f} s)")
     finally:

@@ -561,4 +561,101 @@ def test_the_picker_finds_an_id_by_name_and_by_number(data, browser, serve):
     assert picker.input_value().startswith("33 · ")
     assert (session.panels.kp_map.image != shown).any()  # the map highlights the chosen id
     wait_for_text(page, "shift+click places 33")
+
+
+def _synthetic_frame(folder, camera, seed: int = 5):
+    """A folder with one image (``frame.jpg``) rendered through ``camera``, and nothing else."""
+    import cv2
+    import numpy as np
+
+    from pnlviz.synth import render_frame
+
+    folder.mkdir()
+    cv2.imwrite(str(folder / "frame.jpg"), render_frame(camera, np.random.default_rng(seed)))
+    return folder
+
+
+def test_a_point_dragged_60_px_to_its_true_place_stays_there_and_the_pitch_follows(tmp_path, browser, serve):
+    """The detector saw the frame a little zoomed out (its keypoints fit one camera, 60 px off
+    at the farthest one): the annotator drags that point to where it is in the image. It stays
+    where it was put (pinned: no outlier of the detections' camera), and the pitch comes to it."""
+    import numpy as np
+
+    from pnlviz.data.predictions import Predictions, write_predictions
+    from pnlviz.field.model import load_field_model
+    from pnlviz.geometry.camera import Camera
+    from pnlviz.synth import make_frame
+
+    W, H = 960, 540
+    truth = Camera.from_soccernet(make_frame(0, 0, (W, H))["camera"]).scaled(W, H)
+    data = _synthetic_frame(tmp_path / "set", truth)
+    model = load_field_model()
+    ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
+    uv, _ = truth.project(model.keypoint_xyz(ground))
+    seen = {k: p for k, p in zip(ground, uv) if np.isfinite(p).all() and 30 < p[0] < W - 30 and 30 < p[1] < H - 30}
+    centre = np.array([W / 2, H / 2])
+    kid = max(seen, key=lambda k: np.hypot(*(seen[k] - centre)))  # the farthest from the centre
+    s = 1 - 60 / np.hypot(*(seen[kid] - centre))  # zoomed out so that it is 60 px off
+    detected = {k: centre + s * (p - centre) for k, p in seen.items() if k == kid or np.hypot(*(p - centre)) < 250}
+    write_predictions(tmp_path / "preds.zip",
+                      {"frame": Predictions({k: (p[0] / W, p[1] / H, 1.0) for k, p in detected.items()})})
+    app = serve(data, detections=tmp_path / "preds.zip", edits=tmp_path / "edits")
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    before = session.view().result.camera.project(model.keypoint_xyz([kid]))[0][0]
+    assert np.hypot(*(before - seen[kid])) > 55  # the detections' camera puts it 60 px off
+    start = on_screen(page, session, detected[kid])
+    target = on_screen(page, session, seen[kid])
+    drag(page, start, (target[0] - start[0], target[1] - start[1]), steps=10)
+    wait_until(lambda: str(kid) in (app.state.edits.get("frame").get("keypoints") or {}))
+    put = np.array(app.state.edits.get("frame")["keypoints"][str(kid)])
+    assert np.hypot(*(put - seen[kid])) < 1.5  # dropped at its true place
+    settle(session, 1.0)
+    wait_for_text(page, "pinned (placed by hand): 1 point")
+    view = session.view()
+    assert view.result.ok and view.result.pinned == [kid] and view.result.flagged == {}
+    nodes = session.workspace.points["keypoints"]
+    np.testing.assert_allclose(nodes.uv[nodes.keys.index(kid)], put)  # it stays where it was put...
+    after = view.result.camera.project(model.keypoint_xyz([kid]))[0][0]
+    assert np.hypot(*(after - put)) < 5.0  # ...and the pitch follows it
+    assert kid in session.workspace.pins[0] and not session.workspace.pins[0][kid]  # drawn pinned, not flagged
+    page.close()
+
+
+def test_four_hand_placed_points_calibrate_an_image_only_frame(tmp_path, browser, serve):
+    """An image and nothing else, seen close on the right penalty area: three points placed say
+    which condition is missing; the fourth (6, 7, 10 and 22, which gave "degenerate geometry")
+    calibrates the frame, close to the camera the image was made with, the four drawn pinned."""
+    import numpy as np
+
+    from pnlviz.field.model import load_field_model
+    from pnlviz.geometry.camera import Camera
+
+    truth = Camera.from_look_at([10, 50, -20], [44, -5, 0], hfov_deg=35, width=960, height=540)
+    data = _synthetic_frame(tmp_path / "bare", truth)
+    model = load_field_model()
+    chosen = [6, 7, 10, 22]
+    uv = dict(zip(chosen, truth.project(model.keypoint_xyz(chosen))[0]))
+    app = serve(data, edits=tmp_path / "edits")
+    page = open_page(browser, app, "place four keypoints")
+    session = tab(app)
+    for n, kid in enumerate(chosen):
+        page.get_by_label("place id").click()
+        page.get_by_role("option", name=re.compile(f"^{kid} · ")).click()
+        wait_until(lambda kid=kid: session.editor.place_id == kid)
+        page.keyboard.down("Shift")
+        page.mouse.click(*on_screen(page, session, uv[kid]))
+        page.keyboard.up("Shift")
+        wait_until(lambda n=n: len(app.state.edits.get("frame").get("keypoints") or {}) == n + 1)
+        if n == 2:
+            wait_for_text(page, "fewer than 4 hand-placed ground points (3: 6, 7, 10)")
+    wait_for_text(page, "focal")
+    wait_for_text(page, "pinned (placed by hand): 4 points (6, 7, 10, 22)")
+    result = session.view().result
+    assert result.ok and sorted(result.pinned) == chosen and result.flagged == {}
+    ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
+    true_uv, _ = truth.project(model.keypoint_xyz(ground))
+    err = np.hypot(*(result.camera.project(model.keypoint_xyz(ground))[0] - true_uv).T)
+    assert np.nanmedian(err) < 6.0  # four clicks: the pitch about the penalty area within a few px
+    assert set(session.workspace.pins[0]) == set(chosen)
     page.close()

@@ -93,8 +93,11 @@ def test_the_guard_shows_refusals_and_failed_saves_and_redraws_once():
 
 # ---------------------------------------------------------------------- frame order
 def fake_view(ok=True, residuals=(), jac5=None):
-    result = SimpleNamespace(ok=ok, point_residuals=dict(enumerate(residuals)), line_residuals={})
-    return SimpleNamespace(result=result, jac={} if jac5 is None else {5: jac5})
+    """A frame's summary as triage keeps it."""
+    from pnlviz.app.triage import FrameSummary
+
+    return FrameSummary("x", ok, None if ok else "failed", max(residuals, default=0.0),
+                        float(np.median(residuals)) if residuals else 0.0, jac5 if ok else None, "")
 
 
 STEMS = ["a", "b", "c", "d", "e"]
@@ -318,7 +321,8 @@ def clip_tab(errors):
     stems = [f"f{i}" for i in range(8)]
     views = {f"f{i}": fake_view(residuals=(e,)) for i, e in zip(range(2, 7), errors) if e is not None}
     tab = SimpleNamespace(index=2, settings=None, notes=[], panels=SimpleNamespace(clip_text=None),
-                          state=SimpleNamespace(stems=stems, cached_view=lambda stem, settings: views.get(stem)))
+                          state=SimpleNamespace(stems=stems, triage=SimpleNamespace(
+                              lookup=lambda stem, settings: views.get(stem))))
     tab.goto = lambda i: setattr(tab, "index", i)
     tab.notify = lambda title, body, error=True: tab.notes.append(title)
     tab.queue = SimpleNamespace(closed=False, enqueue=lambda action: action())
@@ -369,6 +373,8 @@ def test_the_panel_texts():
     view = SimpleNamespace(stem="00042", size=(960, 540))
     assert cards.title_text(view, 3, 7, False, "all") == "### 00042\n3/7 · 960x540"
     assert cards.title_text(view, 1, 2, False, "failed") == "### 00042\n1/2 of 'failed' · 960x540"
+    assert cards.title_text(view, 1, 2, False, "all", "worst residual 14,479.0 px").endswith(
+        "960x540  \nsorted by **worst residual 14,479.0 px**")
     assert "not in the filter 'rejected'" in cards.title_text(view, 0, 1, True, "rejected")
     assert cards.filter_text("00042", 1, False, "all") == "1 frame"
     assert cards.filter_text("00042", 2, False, "all") == "2 frames"

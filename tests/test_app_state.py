@@ -5,7 +5,6 @@ import shutil
 
 import numpy as np
 import pytest
-from helpers import free_port
 
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app.modes import DragEvent, DragPhase, PointKind
@@ -282,7 +281,9 @@ def test_light_default_detector_calibrates_frames_without_annotation(tmp_path, m
     view = st.view("solo")
     assert view.result is not None and view.result.ok and view.annotation is None
     # detections get the detection settings (no k1, robust final loss), annotations the default
-    assert used["solo"] == CalibParams().updated(st.detector.calibration) and used["00000"] == CalibParams()
+    assert used["solo"] == CalibParams().updated(st.detector.calibration)
+    # the annotated frame was not calibrated again: detections do not change its annotation's camera
+    assert "00000" not in used and st.view("00000").origin == "annotation"
     card = calibration_card(view, st)
     assert view.origin == "detections" and "calibrated from: **detections**" in card and "refine_k1=False" in card
     assert "calibrated from: **annotation**" in calibration_card(st.view("00000"), st)
@@ -319,3 +320,48 @@ def test_the_detector_process_keeps_torch_out_of_the_app():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+
+
+def test_nudges_of_one_point_in_a_row_are_one_undo_step(data, monkeypatch):
+    """Each arrow nudge was its own undo step: ten nudges, ten Ctrl+Z. Nudges of one point in a
+    row (each within 2 s of the last, nothing else between) are one step now."""
+    import pnlviz.data.edits as edits_module
+
+    st = AppState(data)
+    kid, (x, y) = int(st.view("00000").observations.kp_ids[0]), st.view("00000").observations.kp_xy[0]
+    for k in range(1, 4):
+        st.move_keypoint("00000", kid, x + k, y, merge=("nudge", kid))
+    assert st.history("00000") == (1, 0)
+    st.move_keypoint("00000", kid, x + 3, y + 1)  # a drag: its own step
+    st.move_keypoint("00000", kid, x + 4, y + 1, merge=("nudge", kid))  # another run of nudges
+    assert st.history("00000") == (3, 0)
+    monkeypatch.setattr(edits_module, "MERGE_S", 0.0)  # a pause: the next nudge is a step of its own
+    st.move_keypoint("00000", kid, x + 5, y + 1, merge=("nudge", kid))
+    assert st.history("00000") == (4, 0)
+    for _ in range(2):
+        st.undo("00000")
+    assert st.edits.get("00000")["keypoints"][str(kid)] == [x + 3, y + 1]
+    st.undo("00000")  # the drag
+    assert st.edits.get("00000")["keypoints"][str(kid)] == [x + 3, y]
+    st.undo("00000")  # the three first nudges, in one step
+    assert str(kid) not in (st.edits.get("00000").get("keypoints") or {}) and st.edits.review("00000") is None
+
+
+def test_a_corrected_confirmed_by_hand_survives_undoing_the_edits(data):
+    """An edit marks the frame corrected; the annotator then says *corrected* (C) too: undoing
+    every edit used to clear it with them."""
+    st = AppState(data)
+    kid, (x, y) = int(st.view("00000").observations.kp_ids[0]), st.view("00000").observations.kp_xy[0]
+    st.move_keypoint("00000", kid, x + 4, y)
+    st.move_keypoint("00000", kid, x + 8, y)
+    assert st.edits.review("00000") == "corrected"
+    st.set_review("00000", "corrected")
+    while st.undo("00000"):
+        pass
+    assert str(kid) not in (st.edits.get("00000").get("keypoints") or {})
+    assert st.edits.review("00000") == "corrected"
+    # without the confirmation the edits take their "corrected" back with them
+    st.move_keypoint("00001", int(st.view("00001").observations.kp_ids[0]), 10.0, 10.0)
+    while st.undo("00001"):
+        pass
+    assert st.edits.review("00001") is None

@@ -364,3 +364,63 @@ def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_
     assert nodes._instance(2, np.array([600.0, 400.0])) is None  # nothing within reach of the pointer
     assert nodes._instance(1, np.array([300.0 + 1.4 * GRAB_PX, 200.0])) == 1
     assert nodes._instance(1, None) == 1 and nodes._instance(7, None) is None  # no hit position: trust it
+
+
+def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
+    """Tab B's release adds a point to the frame tab A is dragging on: A's grab mesh is made anew
+    (more instances). A's drag lives on the old mesh: it stays until A's release, then goes."""
+    import asyncio
+    from types import SimpleNamespace
+
+    from pnlviz.app.modes import PointKind
+    from pnlviz.app.overlay import Markers
+    from pnlviz.app.workspace import _PointNodes
+
+    class Node:
+        def __init__(self, name, positions, scales):
+            self.name, self.batched_positions, self.batched_scales = name, positions, scales
+            self.removed, self.handlers, self.visible = False, {}, True
+
+        def on_click(self, f):
+            self.handlers["click"] = f
+
+        def on_drag(self, f):
+            self.handlers["drag"] = f
+
+        def remove(self):
+            self.removed = True
+
+    class Scene:
+        def __init__(self):
+            self.nodes = []
+
+        def add_batched_meshes_simple(self, name, vertices, faces, wxyz, pos, **kw):
+            self.nodes.append(Node(name, pos, kw["batched_scales"]))
+            return self.nodes[-1]
+
+        def add_point_cloud(self, name, points, colors, **kw):
+            return SimpleNamespace(points=points, colors=colors, visible=True, point_size=1.0)
+
+    dragged = []
+    events = SimpleNamespace(drag=dragged.append, screen_to_pixel=lambda xy: np.asarray(xy, float))
+    scene = Scene()
+    nodes = _PointNodes(scene, "/t", PointKind.KEYPOINTS, "keypoints", events=events)
+    plane = ImagePlane(960, 540)
+    uv = np.array([[100.0 + 50 * i, 200.0] for i in range(8)])
+    nodes.show(Markers(list(range(1, 9)), uv, np.zeros((8, 3), np.uint8)), plane, plane.scale)
+    first = nodes.grab
+
+    def event(phase, at):
+        xyz = plane.world(np.asarray(at, float).reshape(1, 2), "grab")[0]
+        return SimpleNamespace(phase=phase, start_position=xyz, end_position=xyz, instance_index=0,
+                               end_screen_pos=(0.0, 0.0))
+
+    asyncio.run(first.handlers["drag"](event("start", uv[0])))
+    assert nodes.dragging
+    more = np.vstack([uv, [[700.0, 400.0]]])  # the other tab's point: 9 points, more than the 8 made
+    nodes.show(Markers(list(range(1, 10)), more, np.zeros((9, 3), np.uint8)), plane, plane.scale)
+    assert nodes.grab is not first and not first.removed  # the drag's mesh lives on
+    asyncio.run(first.handlers["drag"](event("update", uv[0] + [5.0, 0.0])))
+    asyncio.run(first.handlers["drag"](event("end", uv[0] + [9.0, 0.0])))
+    assert [e.key for e in dragged] == [1, 1, 1] and np.allclose(dragged[-1].uv, uv[0] + [9.0, 0.0])
+    assert first.removed and not nodes.grab.removed and not nodes.dragging

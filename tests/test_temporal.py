@@ -242,7 +242,18 @@ def test_a_video_file_goes_through_detect_and_calibrate(tmp_path, capsys):
                       colour=(255, 255, 255), thickness=2)[:, :, 0] > 128
     assert mask.sum() > 200
     changed = np.abs(drawn - plain).sum(axis=2) > 60
-    assert changed[mask].mean() > 0.5 and changed[~mask].mean() < 0.05
+    # the bird's-eye inset in the bottom-right corner (the camera's footprint on the pitch)
+    from pnlviz.viz import inset_top_view
+
+    inset = np.any(inset_top_view(np.zeros((270, 480, 3), np.uint8), Camera.from_soccernet(got[stem], 960, 540)) > 0,
+                   axis=2)
+    assert 0.02 < inset.mean() < 0.15 and not inset[:100].any()
+    assert changed[inset].mean() > 0.5
+    assert changed[mask & ~inset].mean() > 0.5 and changed[~mask & ~inset].mean() < 0.05
+    assert main(["render", "--video", str(video), "--cameras", str(cams), "--out", str(overlay), "--no-progress",
+                 "--no-top-view"]) == 0
+    bare = VideoDataset(overlay).image(out.stems[ds.stems.index(stem)]).astype(int)
+    assert (np.abs(bare - plain).sum(axis=2) > 60)[inset & ~mask].mean() < 0.05
     assert main(["calibrate", "--video", str(video), "--out", str(cams)]) == 2  # --video needs --detections
     with pytest.raises(SystemExit):
         main(["detect", "--video", str(video), "--data", str(tmp_path), "--out", str(preds)])

@@ -48,10 +48,22 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         (f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, {len(res.inliers)} inliers; "
          f"PnL set: {len(res.pnl_lines)} lines/circles"),
     ]
+    lines += pin_lines(res)
     if view.jac:
         lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))
     lines.append(f"computed in {view.ms:.0f} ms")
     return "\n\n".join(lines)
+
+
+def pin_lines(res) -> list[str]:
+    """The card's lines on the pinned keypoints: how many, and each one the camera cannot agree
+    with, by how far (flagged, not dropped)."""
+    if not res.pinned:
+        return []
+    lines = [f"pinned (placed by hand): {len(res.pinned)} point" + ("s" if len(res.pinned) != 1 else "")
+             + f" ({', '.join(str(k) for k in sorted(res.pinned))})"]
+    lines += [f"**pinned point {k} is {r:.0f} px from the camera**" for k, r in sorted(res.flagged.items())]
+    return lines
 
 
 def keypoint_name(model, kid: int) -> str:
@@ -63,11 +75,12 @@ def keypoint_name(model, kid: int) -> str:
     return f"{model.keypoint_names()[int(kid)]} ({kp.group})"
 
 
-def title_text(view: FrameView, position: int, n: int, outside: bool, flt: str) -> str:
-    """The frame's stem, where it is in the filter (``position`` from 1 of ``n``), its size."""
+def title_text(view: FrameView, position: int, n: int, outside: bool, flt: str, key: str | None = None) -> str:
+    """The frame's stem, where it is in the filter (``position`` from 1 of ``n``), its size, and
+    what the tab's sort sees of it (``key``)."""
     where = (f"not in the filter '{flt}' (no frame is)" if outside
              else f"{position}/{n}" + (f" of '{flt}'" if flt != "all" else ""))
-    return f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}"
+    return f"### {view.stem}\n{where} · {view.size[0]}x{view.size[1]}" + (f"  \nsorted by **{key}**" if key else "")
 
 
 def filter_text(stem: str, n: int, outside: bool, flt: str) -> str:
@@ -102,7 +115,8 @@ def point_rows(overlay: Overlay | None, hidden: set[int]) -> list[str]:
     if overlay is not None:
         for kid in sorted(overlay.keypoints.keys):
             r = overlay.residuals.get(kid)
-            rows.append(f"{kid} · visible" + (f" · {r:.1f} px" if r is not None else ""))
+            pin = " · flagged pin" if kid in overlay.flagged else " · pinned" if kid in overlay.pinned else ""
+            rows.append(f"{kid} · visible{pin}" + (f" · {r:.1f} px" if r is not None else ""))
         rows += [f"{kid} · hidden" for kid in sorted(hidden)]
         rows += [f"{kid} · ghost" for kid in sorted(overlay.ghosts.keys)]
     return rows
@@ -129,6 +143,10 @@ def selected_text(selected: Selection | None, overlay: Overlay | None, model, pl
             text += " · not observed: drag it where it is"
         elif key in overlay.residuals:
             text += f" · residual {overlay.residuals[key]:.2f} px"
+        if key in overlay.flagged:
+            text += " · pinned, the camera cannot agree with it"
+        elif selected.kind is PointKind.KEYPOINTS and key in overlay.pinned:
+            text += " · pinned"
     if key in m.keys:
         u, v = m.uv[m.keys.index(key)]
         text += f" · at ({u:.1f}, {v:.1f})"

@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from pnlviz.app import cards
+from pnlviz.app.frameorder import sort_key_text
 from pnlviz.app.modes import DragMode, Mode
 from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
 from pnlviz.app.panels import LAYERS
@@ -139,7 +140,8 @@ class Painter:
         st, frames = tab.state, tab.frames
         flt, n = frames.filter.value, len(frames.order)
         position = frames.position() + 1 if frames.index in frames.order else 0
-        update_changed(p.title, content=cards.title_text(view, position, n, frames.outside_filter, flt))
+        key = sort_key_text(frames.sort, st.triage.lookup(view.stem, tab.settings))
+        update_changed(p.title, content=cards.title_text(view, position, n, frames.outside_filter, flt, key))
         update_changed(p.status, content=cards.status_line(view, st.edits.review(view.stem), st.edits.get(view.stem),
                                                            tab.guard.save_error, tab.app.detection_status(view.stem)))
         update_changed(p.filter_text, content=cards.filter_text(view.stem, n, frames.outside_filter, flt))

@@ -44,13 +44,14 @@ class EditTrail:
             self.done.append(stem)
             self.undone.clear()
 
-    def undo(self, current: str, goto: Callable[[str], None]) -> None:
+    def undo(self, current: str, goto: Callable[[str], None], settings=None) -> None:
         """Take back this tab's last change (going to its frame with ``goto(stem)``), else the
-        last change of the ``current`` frame."""
-        self._step(self.done, self.undone, self.state.undo, current, goto)
+        last change of the ``current`` frame (a reviewed frame records what it shows under the
+        tab's ``settings``)."""
+        self._step(self.done, self.undone, lambda stem: self.state.undo(stem, settings), current, goto)
 
-    def redo(self, current: str, goto: Callable[[str], None]) -> None:
-        self._step(self.undone, self.done, self.state.redo, current, goto)
+    def redo(self, current: str, goto: Callable[[str], None], settings=None) -> None:
+        self._step(self.undone, self.done, lambda stem: self.state.redo(stem, settings), current, goto)
 
     def _step(self, trail: list[str], other: list[str], step: Callable[[str], bool], current: str,
               goto: Callable[[str], None]) -> None:
@@ -92,6 +93,7 @@ class Editor:
         self.dragging: Drag | None = None
         self.grabs = self.releases = 0  # drags started and released in this tab
         self.live_preview = True  # recalibrate while a point is dragged (off: only on release)
+        self.flagged: tuple[str, list[int]] | None = None  # the last reviewed frame's flagged points, for H
         self.last_recalibration_ms = 0.0
 
     # ------------------------------------------------------------------ choices
@@ -148,9 +150,37 @@ class Editor:
             tab.notify("refused", f"review status {str(status)[:20]!r} is not one of the options")
             return
         stem = tab.stem
-        self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status))
+        self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status, tab.settings))
+        self.say_flagged(stem)
         if advance and status != "clear" and tab.state.edits.review(stem) == status:
             tab.advance_from(stem)
+
+    def say_flagged(self, stem: str) -> None:
+        """After a review: the points of the frame the export's outlier gate flags, said in the
+        panel and remembered for H (:meth:`hide_flagged`)."""
+        from pnlviz.pipeline.snapshot import REVIEWED, snapshot_flags
+
+        record = self.tab.state.edits.get(stem)
+        flagged, limit = snapshot_flags(record) if record.get("review") in REVIEWED else ({}, 0.0)
+        self.flagged = (stem, sorted(flagged)) if flagged else None
+        text = ""
+        if flagged:
+            ids = ", ".join(f"{k} ({'off camera' if r == float('inf') else f'{r:.0f} px'})"
+                            for k, r in sorted(flagged.items()))
+            text = (f"**{stem}: {len(flagged)} point{'s' if len(flagged) > 1 else ''} flagged** (farther than "
+                    f"{limit:.1f} px from the camera; exported flagged, not as ground truth): {ids}. "
+                    f"**H** hides them.")
+            self.tab.notify(f"{len(flagged)} flagged on {stem}", text.replace("**", ""), error=False)
+        self.tab.panels.gate_text.content = text
+
+    def hide_flagged(self) -> None:
+        """H: hide the points the gate flagged on the frame reviewed last (one undo step)."""
+        if self.flagged is None:
+            self.tab.notify("nothing flagged", "the last frame reviewed has no flagged point", error=False)
+            return
+        stem, ids = self.flagged
+        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, ids, self.tab.settings))
+        self.say_flagged(stem)
 
     def hide_selected(self) -> None:
         if self.selected is None or self.selected.kind is not PointKind.KEYPOINTS:
@@ -158,13 +188,13 @@ class Editor:
             return
         stem, kid = self.tab.stem, int(self.selected.key)
         self.selected = None
-        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid))
+        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid, self.tab.settings))
 
     def place(self, stem: str, uv) -> None:
         """Put the chosen keypoint id at pixel ``uv`` of ``stem`` (shift+click)."""
         kid = self.place_id
         uv = self._snapped(uv)
-        self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv))
+        self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv, settings=self.tab.settings))
         overlay = self.tab.painter.overlay
         if stem == self.tab.stem and overlay is not None and kid in overlay.keypoints.keys:
             self.select(Selection(PointKind.KEYPOINTS, kid))
@@ -178,20 +208,21 @@ class Editor:
         if sel.key not in markers.keys:
             return
         uv = markers.uv[markers.keys.index(sel.key)] + [dx, dy]
-        self.release(self.tab.stem, sel, uv, snap_to_pitch=False)
+        self.release(self.tab.stem, sel, uv, snap_to_pitch=False, merge=("nudge", sel.kind, sel.key))
 
-    def release(self, stem: str, point: Selection, uv, snap_to_pitch: bool = True) -> None:
+    def release(self, stem: str, point: Selection, uv, snap_to_pitch: bool = True, merge: object = None) -> None:
         """A point of ``stem`` was dropped at pixel ``uv``: the edit goes to ``stem``, the frame
-        the drag began on, whatever this tab shows now."""
+        the drag began on, whatever this tab shows now (``merge``: nudges of one point in a row
+        are one undo step)."""
         t0 = time.perf_counter()
         uv = self._snapped(uv) if snap_to_pitch else np.asarray(uv, float)
         state, settings = self.tab.state, self.tab.settings
 
         def edit() -> None:
             if point.kind is PointKind.LINE_POINTS:
-                state.move_line_point(stem, point.key[0], point.key[1], *uv)
+                state.move_line_point(stem, point.key[0], point.key[1], *uv, settings=settings)
             else:
-                state.move_keypoint(stem, int(point.key), *uv)
+                state.move_keypoint(stem, int(point.key), *uv, settings=settings, merge=merge)
             state.view(stem, settings)  # recalibrate now, to time it
             self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
 
@@ -201,10 +232,10 @@ class Editor:
 
     def undo(self) -> None:
         """Take back this tab's last change (going back to its frame), else the frame's last one."""
-        self.trail.undo(self.tab.stem, self._goto_stem)
+        self.trail.undo(self.tab.stem, self._goto_stem, self.tab.settings)
 
     def redo(self) -> None:
-        self.trail.redo(self.tab.stem, self._goto_stem)
+        self.trail.redo(self.tab.stem, self._goto_stem, self.tab.settings)
 
     def _goto_stem(self, stem: str) -> None:
         self.tab.goto(self.tab.state.index_of(stem))

@@ -10,13 +10,13 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from pnlviz.app.modes import Filter, Sort
-from pnlviz.app.state import FrameView
+from pnlviz.app.triage import FrameSummary
 
 
-def matches(flt: Filter, view: FrameView | None, review: str | None) -> bool:
-    """Whether a frame with this view (None: not calibrated yet) and review status is in ``flt``."""
+def matches(flt: Filter, summary: FrameSummary | None, review: str | None) -> bool:
+    """Whether a frame with this summary (None: not calibrated yet) and review status is in ``flt``."""
     if flt is Filter.FAILED:
-        return view is not None and (view.result is None or not view.result.ok)
+        return summary is not None and not summary.ok
     if flt is Filter.UNREVIEWED:
         return review is None
     if flt.review is not None:
@@ -24,33 +24,47 @@ def matches(flt: Filter, view: FrameView | None, review: str | None) -> bool:
     return True
 
 
-def worst_residual(view: FrameView | None) -> float:
+def worst_residual(summary: FrameSummary | None) -> float:
     """A frame's largest keypoint or line residual (px) for the sort: frames without a camera
     first (1e9), those not calibrated yet last (-1)."""
-    if view is None:
+    if summary is None:
         return -1.0
-    if view.result is None or not view.result.ok:
+    if not summary.ok:
         return 1e9
-    r = list(view.result.point_residuals.values()) + list(view.result.line_residuals.values())
-    return max(r) if r else 0.0
+    return summary.worst
 
 
-def sort_key(sort: Sort, view: FrameView | None) -> float:
+def sort_key(sort: Sort, summary: FrameSummary | None) -> float:
     """The key a frame is sorted by (ascending; equal keys keep the dataset's order)."""
     if sort is Sort.JAC5:
-        return view.jac.get(5, -1.0) if view is not None else 2.0
+        if summary is None:
+            return 2.0
+        return summary.jac5 if summary.ok and summary.jac5 is not None else -1.0
     if sort is Sort.RESIDUAL:
-        return -worst_residual(view)
+        return -worst_residual(summary)
     return 0.0
 
 
-def visible_order(stems: Sequence[str], views: Mapping[str, FrameView], review: Callable[[str], str | None],
+def sort_key_text(sort: Sort, summary: FrameSummary | None) -> str | None:
+    """What the tab's sort sees of a frame, for the panel (None when the sort is the dataset's order)."""
+    if sort is Sort.INDEX:
+        return None
+    if summary is None:
+        return f"{sort.value}: not calibrated yet"
+    if not summary.ok:
+        return f"{sort.value}: no camera"
+    if sort is Sort.JAC5:
+        return f"JaC@5 {summary.jac5:.3f}" if summary.jac5 is not None else "JaC@5: no annotation to score against"
+    return f"worst residual {summary.worst:,.1f} px"
+
+
+def visible_order(stems: Sequence[str], summaries: Mapping[str, FrameSummary], review: Callable[[str], str | None],
                   flt: Filter, sort: Sort) -> list[int]:
-    """Dataset indices of the frames in ``flt``, in ``sort``'s order. ``views``: the views
-    computed so far, by stem; ``review(stem)``: a frame's review status."""
-    idx = [i for i, stem in enumerate(stems) if matches(flt, views.get(stem), review(stem))]
+    """Dataset indices of the frames in ``flt``, in ``sort``'s order. ``summaries``: the frames'
+    summaries known so far, by stem; ``review(stem)``: a frame's review status."""
+    idx = [i for i, stem in enumerate(stems) if matches(flt, summaries.get(stem), review(stem))]
     if sort is not Sort.INDEX:
-        idx.sort(key=lambda i: sort_key(sort, views.get(stems[i])))
+        idx.sort(key=lambda i: sort_key(sort, summaries.get(stems[i])))
     return idx
 
 
@@ -73,12 +87,13 @@ class FrameOrder:
     def clamp(self, index: int) -> int:
         return int(np.clip(index, 0, self.n_frames - 1))
 
-    def refreshed(self, order: list[int]) -> int:
+    def refreshed(self, order: list[int], first: bool = False) -> int:
         """A new order (the filter or the sort changed): the frame to show, this one if it is in
-        the new order, else its first (with no match this one, outside the filter)."""
+        the new order (unless ``first``: a new sort), else its first (with no match this one,
+        outside the filter)."""
         self.outside_filter = not order
         self.order = order or [self.index]
-        return self.index if self.index in self.order else self.order[0]
+        return self.index if self.index in self.order and not first else self.order[0]
 
     def stepped(self, delta: int) -> int:
         """The frame ``delta`` places on in the order (stopping at its ends)."""
@@ -107,4 +122,4 @@ class FrameOrder:
         return nxt, False
 
 
-__all__ = ["FrameOrder", "matches", "sort_key", "visible_order", "worst_residual"]
+__all__ = ["FrameOrder", "matches", "sort_key", "sort_key_text", "visible_order", "worst_residual"]

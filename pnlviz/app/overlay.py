@@ -30,6 +30,8 @@ REFERENCE_RGB = (255, 80, 255)  # magenta: pitch through a known camera (synthet
 RESIDUAL_RGB = (255, 0, 0)
 DETECTED_RGB = (255, 255, 255)  # white: detected line extremities
 GHOST_RGB = (200, 200, 200)
+PIN_RGB = (0, 0, 0)  # black box: a pinned keypoint (placed or moved by hand)
+FLAGGED_RGB = (255, 90, 0)  # orange box: a pinned keypoint the camera cannot agree with
 
 #: BGR of the same, for OpenCV drawing
 SET_BGR = {k: v[::-1] for k, v in SET_RGB.items()}
@@ -42,6 +44,8 @@ LEGEND = {
     "residuals": (RESIDUAL_RGB, "keypoint -> where the camera puts it"),
     "detected_lines": (DETECTED_RGB, "detected line extremities"),
     "ghosts": (GHOST_RGB, "not observed: click to choose, drag to place"),
+    "pins": (PIN_RGB, "box: pinned (placed by hand); the camera is fitted to it"),
+    "flagged": (FLAGGED_RGB, "orange box: pinned, but the camera cannot agree with it"),
 }
 
 
@@ -107,6 +111,8 @@ class Overlay:
     ghosts: Markers  # catalogue keypoints the camera puts in the frame, not observed (key: id)
     line_points: Markers  # points of the annotated lines and circles (key: (class, index))
     residuals: dict[int, float]  # keypoint id -> reprojection error, pixels
+    pinned: list[int] = field(default_factory=list)  # observed keypoints placed or moved by hand
+    flagged: dict[int, float] = field(default_factory=dict)  # pinned ids the camera cannot agree with -> px
 
 
 #: how far a drawn pitch line may stray from the projected one, image pixels (0.4 screen pixels at
@@ -193,7 +199,9 @@ def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldMod
                 seg["residuals"] = Segments(np.stack([obs.kp_xy[good], proj[good]], axis=1),
                                             np.tile(np.uint8(RESIDUAL_RGB), (int(good.sum()), 1)))
     ghosts = _ghosts(view, model, set(hidden)) if layers.ghosts else Markers()
-    return Overlay(seg, markers, ghosts, line_points, residuals)
+    pinned = [int(k) for k in obs.kp_ids[obs.pins]] if obs is not None else []
+    flagged = dict(res.flagged) if res is not None and res.ok else {}
+    return Overlay(seg, markers, ghosts, line_points, residuals, pinned, flagged)
 
 
 def render(view: FrameView, image: np.ndarray | None, layers: Layers = Layers(), max_width: int = 1280) -> np.ndarray:

@@ -29,6 +29,7 @@ KEYS = (
     ("V", "image view <-> 3D view (the pitch, the camera frustum)"),
     ("N / P", "next / previous frame (of the filter)"),
     ("G / C / R", "review: accepted / corrected / rejected, then the next frame"),
+    ("H", "hide the points the outlier gate flagged on the frame reviewed last"),
     ("click a point", "select it (a ghost: choose its id)"),
     ("drag a point", "move it (a ghost: place it); the frame recalibrates as you drag"),
     ("shift+click", "place the chosen id there"),
@@ -134,6 +135,7 @@ class Panels:
             statuses = tuple(f"{k} ({v})" for k, v in REVIEW_KEYS.items()) + ("clear",)
             self.review = gui.add_button_group("status", statuses)
             self.advance = gui.add_checkbox("then next frame", initial_value=True)
+            self.gate_text = gui.add_markdown("")
             self.progress = gui.add_progress_bar(0.0)
             self.progress_text = gui.add_markdown("")
 
@@ -221,6 +223,7 @@ class Panels:
                 ("review: accepted, next", "G", None, lambda: edit.review("accepted", advance=self.advance.value)),
                 ("review: corrected, next", "C", None, lambda: edit.review("corrected", advance=self.advance.value)),
                 ("review: rejected, next", "R", None, lambda: edit.review("rejected", advance=self.advance.value)),
+                ("hide the flagged points of the frame reviewed last", "H", None, edit.hide_flagged),
                 ("undo", "Z", "cmd/ctrl", edit.undo),
                 ("redo", "Z", "cmd/ctrl+shift", edit.redo),
                 ("image view / 3D view", "V", None, s.toggle_mode),

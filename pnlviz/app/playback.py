@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from pnlviz.app.cards import clip_text
-from pnlviz.app.timeline import frame_error, strip_image, worst_frames
+from pnlviz.app.timeline import strip_image, worst_frames
 from pnlviz.app.workspace import update_changed
 
 PLAY_INTERVAL = 0.2  # seconds between frames while a clip plays
@@ -36,10 +36,12 @@ class ClipPlayer:
         return self.clips.get(name, []) if name is not None else []
 
     def errors(self) -> list[float]:
-        """Each clip frame's error (:func:`pnlviz.app.timeline.frame_error`), from the views already
-        computed: a lookup per clip frame, not a pass over every cached frame."""
+        """Each clip frame's error (the median residual, ``inf`` without a camera, NaN not
+        calibrated yet), from the frames' summaries (:meth:`pnlviz.app.triage.Triage.lookup`):
+        a lookup per clip frame, not a pass over every frame."""
         st = self.tab.state
-        return [frame_error(st.cached_view(st.stems[i], self.tab.settings)) for i in self.members()]
+        summaries = [st.triage.lookup(st.stems[i], self.tab.settings) for i in self.members()]
+        return [float("nan") if s is None else s.error for s in summaries]
 
     def show(self) -> None:
         """The clip line, the strip and the clip slider of the panel (a dataset without clips

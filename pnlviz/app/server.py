@@ -6,14 +6,13 @@ is autosaved beside the data.
 
 Each browser tab is a :class:`pnlviz.app.session.Session` with its own frame, view and panel;
 this module holds what they share: the viser server (behind :mod:`pnlviz.app.guard`, which
-refuses foreign pages), the lights, the background calibration of every frame and the
+refuses foreign pages), the lights, the background pass over every frame (triage) and the
 background detector. Everything shown comes from :class:`pnlviz.app.state.AppState`.
 """
 
 from __future__ import annotations
 
 import threading
-import time
 
 import viser
 
@@ -63,6 +62,10 @@ class PnlvizApp:
         """:attr:`url` with the canvas at a fixed device pixel ratio (``?fixedDpr=1``; a page on
         another ratio reloads once with its own, see :func:`pnlviz.app.bridge.page_url`)."""
         return page_url(self.url)
+
+    def page_urls(self) -> list[str]:
+        """Every URL a browser can open (:meth:`AccessPolicy.urls`), as :attr:`page_url` is."""
+        return [page_url(u) for u in self.policy.urls()]
 
     # ------------------------------------------------------------------ tabs
     def _connect(self, client: viser.ClientHandle) -> None:
@@ -119,7 +122,7 @@ class PnlvizApp:
 
     # ------------------------------------------------------------------ background
     def _say(self, text: str) -> None:
-        """The background calibration's progress, in every tab."""
+        """The background pass's progress, in every tab."""
         self._background_text = text
         for session in self._all_sessions():
             session.panels.background.content = text
@@ -150,17 +153,14 @@ class PnlvizApp:
         threading.Thread(target=work, daemon=True, name=f"detect-{stem}").start()
 
     def _calibrate_all(self) -> None:
-        """Calibrate every frame in the background (default settings) so filters and sorting see
-        the whole dataset; the frames on screen go first because their tabs compute them."""
-        st = self.state
-        n = len(st.stems)
-        for i, stem in enumerate(st.stems):
-            if self._stop.is_set():
-                return
-            st.view(stem)
-            if (i % 10 == 0 or i == n - 1) and not self._stop.is_set():
-                self._say(f"background calibration: {i + 1}/{n} frames")
-            time.sleep(0)
+        """Triage in the background: detect (with a detector) and calibrate every frame under the
+        default settings, keeping summaries only (:class:`pnlviz.app.triage.Triage`), so filters,
+        counts and sorts see the whole dataset; a frame on a tab's screen is computed by its tab
+        meanwhile. Resumes from the summaries kept on disk; every tab's order is refreshed at the end."""
+        progress = self.state.triage.run(self._stop, self._say)
+        if progress.finished and not self._stop.is_set():
+            for session in self._all_sessions():
+                session.queue.enqueue(session.refresh_order)
 
     def stop(self) -> None:
         self._stop.set()

@@ -140,18 +140,19 @@ class Session:
 
     def set_sort(self, value) -> None:
         self.frames.sort = Sort(self.panels.choice(self.panels.sort, labels(Sort), Sort.INDEX.value))
-        self.refresh_order()
+        self.refresh_order(first=self.frames.sort is not Sort.INDEX)
 
     def _visible_order(self) -> list[int]:
         st = self.state
-        views = {v.stem: v for v in st.cached_views(self.settings)}
-        return visible_order(st.stems, views, st.edits.review, self.frames.filter, self.frames.sort)
+        summaries = st.triage.summaries(self.settings)
+        return visible_order(st.stems, summaries, st.edits.review, self.frames.filter, self.frames.sort)
 
-    def refresh_order(self) -> None:
+    def refresh_order(self, first: bool = False) -> None:
         """The frames of the filter, in the chosen order; the tab stays on its frame if it is one
-        of them, else goes to the first (with no match it stays, and says so)."""
+        of them (unless ``first``: a sort was chosen, its first frame is shown), else goes to the
+        first (with no match it stays, and says so)."""
         with self.lock:
-            index = self.frames.refreshed(self._visible_order())
+            index = self.frames.refreshed(self._visible_order(), first)
             if self.frames.outside_filter:
                 self.notify("no match", f"no frame matches the filter '{self.frames.filter.value}'", error=False)
             self.goto(index)
@@ -207,7 +208,7 @@ class Session:
 
         if self.client is not None:
             st = self.state
-            self.client.send_file_download(f"{st.data.name}_labels.zip", export_zip_bytes(st, settings=self.settings),
+            self.client.send_file_download(f"{st.data.name}_labels.zip", export_zip_bytes(st),
                                            save_immediately=True)
 
     def close(self, wait: bool = False) -> None:

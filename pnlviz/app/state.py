@@ -34,7 +34,11 @@ from pnlviz.data.edits import (
     set_keypoint,
 )
 from pnlviz.field.model import load_field_model
+from pnlviz.app.triage import Triage
 from pnlviz.pipeline import FrameReader, FrameView, Settings, frame_view
+
+#: views kept in memory (the frames on screen and around them; the whole dataset is in summaries)
+VIEW_CACHE = 256
 
 __all__ = ["AppState", "EditError", "FrameView", "REVIEW_STATES", "SOURCES", "Settings"]
 
@@ -62,6 +66,7 @@ class AppState:
     def __init__(self, data: Path, *, detections: Path | None = None, edits: Path | None = None,
                  size: tuple[int, int] = EVAL_SIZE, detector=None, source: str | None = None, writable: bool = True):
         self.data = Path(data)
+        self.detections_path = None if detections is None else Path(detections)
         self.model = load_field_model()
         self.reader = FrameReader.open(self.data, detections=detections, edits=edits, size=size, writable=writable,
                                        detector_settings=getattr(detector, "calibration", None))
@@ -71,8 +76,11 @@ class AppState:
         if detector is not None and self.reader.predictions is None:
             self.reader.predictions = {}
         self.ds, self.edits, self.size = self.reader.ds, self.reader.edits, size
-        self.predictions, self.detected = self.reader.predictions, self.reader.detected
         self.stems = self.reader.stems
+        #: every frame's calibration summary and the background pass (the detector's results
+        #: are kept on disk beside them)
+        self.triage = Triage(self, writable)
+        self.predictions, self.detected = self.reader.predictions, self.reader.detected
         #: the settings a new tab starts with: "both" once there are detections, unless told otherwise
         self.default_settings = Settings(source=source or self.reader.default_settings().source)
         #: the frame a new tab opens: the first with an image, the most telling one
@@ -143,10 +151,12 @@ class AppState:
         if img is None:
             return
         pred = self.detector.detect([img])[0]
+        self.detected[stem] = pred
         with self._lock:
-            self.detected[stem] = pred
-            # views computed before the detections existed are stale
-            for key in [k for k in self._cache if k[0] == stem]:
+            # views the detections change are computed again; the others stay (a frame calibrated
+            # from its annotation alone keeps its camera), and its summary stays until replaced
+            for key in [k for k, v in self._cache.items() if k[0] == stem and not
+                        (v.settings.source == "annotation" and v.origin == "annotation")]:
                 del self._cache[key]
             self._previews.pop(stem, None)
         self._changed(stem)
@@ -175,8 +185,9 @@ class AppState:
 
     def view(self, stem: str, settings: Settings | None = None, *, keep: bool = True) -> FrameView:
         """The frame's view under ``settings`` (default: :attr:`default_settings`), cached (not
-        kept when computed with ``keep=False``: for one pass over many frames, an export). Never
-        raises on bad data."""
+        kept when computed with ``keep=False``: for one pass over many frames; the
+        :data:`VIEW_CACHE` latest are kept), its summary noted (:class:`pnlviz.app.triage.Triage`).
+        Never raises on bad data."""
         settings = settings or self.default_settings
         self.index_of(stem)
         key = _view_key(self.edits, stem, settings)
@@ -192,6 +203,9 @@ class AppState:
         if keep:
             with self._lock:
                 self._cache[key] = view
+                while len(self._cache) > VIEW_CACHE:
+                    self._cache.pop(next(iter(self._cache)))
+        self.triage.note(view)
         return view
 
     def cached_view(self, stem: str, settings: Settings | None = None) -> FrameView | None:
@@ -200,13 +214,6 @@ class AppState:
         key = _view_key(self.edits, stem, settings or self.default_settings)
         with self._lock:
             return self._cache.get(key)
-
-    def cached_views(self, settings: Settings | None = None) -> list[FrameView]:
-        """The views computed so far under ``settings`` for the frames as they are now."""
-        settings = settings or self.default_settings
-        with self._lock:
-            items = list(self._cache.items())
-        return [v for k, v in items if k[1] == settings and k == _view_key(self.edits, k[0], settings)]
 
     def preview(self, stem: str, settings: Settings, kid: int, x: float, y: float) -> FrameView:
         """The frame as it would be with keypoint ``kid`` at (x, y), calibrated (for feedback while
@@ -238,17 +245,43 @@ class AppState:
         return changed
 
     # ------------------------------------------------------------------ review and edits
-    def _edit(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True) -> None:
+    def _edit(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True,
+              settings: Settings | None = None, merge: object = None) -> None:
         """One user action on one frame, one undo step, autosaved at once
-        (:meth:`pnlviz.data.edits.EditsStore.act`)."""
+        (:meth:`pnlviz.data.edits.EditsStore.act`); a reviewed frame then records what it shows
+        under ``settings`` (:meth:`snapshot`)."""
         self.index_of(stem)
-        self._changed(stem, self.edits.act(stem, change, corrected=corrected))
+        changed = self.edits.act(stem, change, corrected=corrected, merge=merge)
+        if changed:
+            self.snapshot(stem, settings)
+        self._changed(stem, changed)
 
-    def set_review(self, stem: str, status: str | None) -> None:
+    def snapshot(self, stem: str, settings: Settings | None = None) -> dict | None:
+        """Record in a reviewed (accepted or corrected) frame's edit record what it shows under
+        ``settings`` (default: :attr:`default_settings`): its labels with their provenance, the
+        detections and settings used, the camera (:func:`pnlviz.pipeline.snapshot.take_snapshot`),
+        which is what an export of the frame writes. Returns the snapshot (None: not reviewed)."""
+        from pnlviz.pipeline.snapshot import REVIEWED, take_snapshot
+
+        with self.edits.lock(stem):  # the view and the record it is taken with are one
+            record = self.edits.get(stem)
+            if record.get("review") not in REVIEWED:
+                return None
+            view = self.view(stem, settings or self.default_settings)
+            snap = take_snapshot(view, record, self.applied_detection_settings(view.origin, view.settings), self.model)
+            if snap != record.get("snapshot"):
+                self.edits.update(stem, snapshot=snap)
+        return snap
+
+    def set_review(self, stem: str, status: str | None, settings: Settings | None = None) -> None:
+        """Set the frame's review status; accepting it (or marking it corrected) records what
+        it shows under ``settings``, what its export writes."""
         if status is not None and status not in REVIEW_STATES:
             raise EditError(f"review status must be one of {', '.join(REVIEW_STATES)} or none, "
                             f"got {str(status)[:20]!r}")
-        self._edit(stem, lambda rec: rec.__setitem__("review", status), corrected=False)
+        if status == "corrected" and self.edits.review(stem) == "corrected":
+            self.edits.keep_review(stem)  # set by the edits, now confirmed by hand: undo keeps it
+        self._edit(stem, lambda rec: rec.__setitem__("review", status), corrected=False, settings=settings)
 
     def set_annotation(self, stem: str, annotation: dict[str, np.ndarray]) -> None:
         """Store an edited annotation (autosaved at once) and mark the frame corrected."""
@@ -259,33 +292,46 @@ class AppState:
             raise EditError(exc.problem) from None
         self._edit(stem, lambda rec: rec.__setitem__("annotation", text))
 
-    def move_keypoint(self, stem: str, kid: int, x: float, y: float) -> None:
-        """Put keypoint ``kid`` at pixel (x, y) of the frame (adds it if it was missing)."""
+    def move_keypoint(self, stem: str, kid: int, x: float, y: float, settings: Settings | None = None,
+                      merge: object = None) -> None:
+        """Put keypoint ``kid`` at pixel (x, y) of the frame (adds it if it was missing);
+        ``merge``: see :meth:`pnlviz.data.edits.EditsStore.act` (nudges of one point: one step)."""
         kid = check_keypoint_id(kid)
         self.index_of(stem)
         xy = check_position(x, y, self.frame_size(stem), stem)
-        self._edit(stem, lambda rec: set_keypoint(rec, kid, xy))
+        self._edit(stem, lambda rec: set_keypoint(rec, kid, xy), settings=settings, merge=merge)
 
-    def hide_keypoint(self, stem: str, kid: int) -> None:
-        """Mark keypoint ``kid`` not visible: it leaves the calibration and the labels."""
-        kid = check_keypoint_id(kid)
-        self._edit(stem, lambda rec: set_keypoint(rec, kid, None))
+    def hide_keypoint(self, stem: str, kid, settings: Settings | None = None) -> None:
+        """Mark keypoint ``kid`` not visible: it leaves the calibration and the labels (``kid``: an
+        id, or several ids hidden in one step, e.g. the points the outlier gate flags)."""
+        kids = [check_keypoint_id(k) for k in (kid if isinstance(kid, (list, tuple, set, frozenset)) else [kid])]
 
-    def move_line_point(self, stem: str, name: str, index: int, x: float, y: float) -> None:
+        def change(rec: dict) -> None:
+            for k in kids:
+                set_keypoint(rec, k, None)
+
+        self._edit(stem, change, settings=settings)
+
+    def move_line_point(self, stem: str, name: str, index: int, x: float, y: float,
+                        settings: Settings | None = None) -> None:
         """Move point ``index`` of annotated class ``name`` to pixel (x, y)."""
         self.index_of(stem)
         size = self.frame_size(stem)
         xy = check_position(x, y, size, stem)
-        self._edit(stem, lambda rec: move_line_point(rec, lambda: self.ds.annotation(stem), stem, name, index, xy, size))
+        self._edit(stem, lambda rec: move_line_point(rec, lambda: self.ds.annotation(stem), stem, name, index, xy,
+                                                     size), settings=settings)
 
-    def undo(self, stem: str) -> bool:
-        """Take back the frame's last change (whoever made it); False if there is none."""
+    def undo(self, stem: str, settings: Settings | None = None, back: bool = True) -> bool:
+        """Take back the frame's last change (whoever made it), or with ``back`` False do again
+        the last one taken back; False if there is none."""
         self.index_of(stem)
-        return self._changed(stem, self.edits.step(stem, back=True))
+        changed = self.edits.step(stem, back=back)
+        if changed:
+            self.snapshot(stem, settings)
+        return self._changed(stem, changed)
 
-    def redo(self, stem: str) -> bool:
-        self.index_of(stem)
-        return self._changed(stem, self.edits.step(stem, back=False))
+    def redo(self, stem: str, settings: Settings | None = None) -> bool:
+        return self.undo(stem, settings, back=False)
 
     def history(self, stem: str) -> tuple[int, int]:
         """(undo steps, redo steps) the frame has."""

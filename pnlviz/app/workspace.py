@@ -18,12 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection
-from pnlviz.app.overlay import Markers, Overlay, Segments
+from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter
 
 #: screen pixels: the radius of a point's disc, of its black rim, of the area that grabs it, and
 #: of the selection ring
 DISC_PX, RIM_PX, GRAB_PX, RING_PX = 4.5, 6.0, 8.0, 11.0
+PIN_BOX_PX = 8.5  #: screen pixels: half the side of the box around a pinned keypoint
 #: screen thickness of each layer's lines
 THICKNESS = {"refined_pitch": 2.0, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
              "detected_lines": 2.0, "residuals": 1.5}
@@ -99,6 +100,7 @@ class _PointNodes:
         self.dragging = False  # one of these points is being dragged: the grab mesh stays
         self._grab_made: tuple[np.ndarray, np.ndarray] | None = None  # its instances as made
         self._grabs_made = 0
+        self._retired: list = []  # grab meshes replaced during a drag, removed at its release
 
     def show(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
         self.keys, self.plane, self.world_per_px = list(markers.keys), plane, world_per_px
@@ -121,7 +123,9 @@ class _PointNodes:
             update_changed(self.grab, batched_positions=pos, batched_scales=scales)
             self._grab_made = None
             return
-        if self.grab is not None:
+        if self.grab is not None and self.dragging:
+            self._retired.append(self.grab)  # the drag lives on it until its release
+        elif self.grab is not None:
             self.grab.remove()
         self._grabs_made += 1
         vertices, faces = _disc()
@@ -236,6 +240,8 @@ class _PointNodes:
             if phase is DragPhase.END:  # before the release is handled: it makes the grab mesh anew
                 grabbed.clear()
                 self.dragging = False
+                while self._retired:
+                    self._retired.pop().remove()
             events.drag(DragEvent(self.kind, key, phase, now))
 
 
@@ -250,7 +256,8 @@ class Workspace:
         self._slots: list[dict] = []  # image nodes: the frame shown, and frames sent ahead (hidden)
         self._clock = 0
         self._backdrop = None
-        self._ring = None
+        self._ring = self._pin_boxes = None
+        self.pins: tuple[dict, Markers] = ({}, Markers())  # pinned id -> flagged, and where the keypoints are
         self._lines: dict[str, object] = {}
         self.points = {kind: _PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity, events)
                        for kind, layer, opacity in ((PointKind.KEYPOINTS, "keypoints", 1.0),
@@ -395,9 +402,32 @@ class Workspace:
         labelled = [(k, uv, 0) for k, uv in zip(observed.keys, observed.uv)] if ids else []
         labelled += [(k, uv, 1) for k, uv in zip(ghosted.keys, ghosted.uv)] if ids else []
         self._show_labels(labelled)
+        self.pins = ({k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}, observed)
+        self._show_pins()
         self._show_selection()
         if self.on_points is not None:
             self.on_points()
+
+    def _show_pins(self) -> None:
+        """A box around each pinned keypoint, black, orange where the camera cannot agree with it."""
+        (pins, observed), handle = self.pins, self._pin_boxes
+        if not pins or self.plane is None:
+            if handle is not None:
+                update_changed(handle, visible=False)
+            return
+        h = PIN_BOX_PX * self.world_per_px / self.plane.scale
+        corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h], [-h, -h]])
+        segs, cols = [], []
+        for k, flagged in pins.items():
+            box = observed.uv[observed.keys.index(k)] + corners
+            segs.append(np.stack([box[:-1], box[1:]], 1))
+            cols.append(np.tile(np.uint8(FLAGGED_RGB if flagged else PIN_RGB), (4, 2, 1)))
+        pts, cols = self.plane.world(np.concatenate(segs), "selection"), np.concatenate(cols)
+        if handle is None:
+            self._pin_boxes = self.scene.add_line_segments(f"{self.root}/pins", pts, cols, thickness=2.0,
+                                                           thickness_units="screen")
+        else:
+            update_changed(handle, points=pts, colors=cols, visible=True)
 
     def _show_labels(self, labelled: list) -> None:
         wanted = {k: (np.asarray(uv, float), rank) for k, uv, rank in labelled}
@@ -463,4 +493,5 @@ class Workspace:
             nodes.rescale(world_per_px)
         if self.plane is not None:
             self.declutter()
+            self._show_pins()
             self._show_selection()

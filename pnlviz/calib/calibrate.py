@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from pnlviz.calib.observations import Observations
+from pnlviz.calib.pins import PinFailure, pin_camera
 from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_frame, plane_masks
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.refine import CameraProblem, RefineParams
@@ -47,9 +48,10 @@ from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.homography import camera_from_ground_homography
 
 
-#: why a frame has no camera (``CalibrationResult.failure_code``); the engine adds "no_input"
+#: why a frame has no camera (``CalibrationResult.failure_code``; "pins": its hand-placed points
+#: alone cannot calibrate it, ``pin_condition`` says which condition fails); the engine adds "no_input"
 #: (nothing to calibrate from) and "internal" (a bug), the commands "bad_input" (unreadable files)
-FAILURE_CODES = ("too_few_keypoints", "degenerate", "no_inliers", "residual")
+FAILURE_CODES = ("too_few_keypoints", "degenerate", "no_inliers", "residual", "pins")
 
 
 @dataclass(frozen=True)
@@ -75,6 +77,10 @@ class CalibParams:
     refine_top: int = 3  #: candidates refined (focal + pose) after the first vote
     tol: float = 1e-6  #: refinements stop when the cost drops by less than this fraction
     prior_good_rms: float = 3.0  #: stop the prior search at a camera fitting everything this well (px RMS)
+    pin_weight: float = 3.0  #: weight of pinned (hand-placed) keypoints in every refinement
+    pin_scale_px: float = 10.0  #: px where the pins' bounded (Cauchy) loss bends
+    pin_vote_px: float = 50.0  #: a pinned keypoint counts as an inlier of the vote up to this far
+    pin_flag_px: float = 10.0  #: a pinned keypoint farther than this from the camera is flagged (never dropped)
 
     def px(self, value: float, width: float) -> float:
         return value * width / EVAL_WIDTH
@@ -154,23 +160,30 @@ def _kp_errors(cam: Camera, obs: Observations) -> np.ndarray:
     return np.where(z > 1e-3, err, np.inf)
 
 
+def pin_settings(params: CalibParams, width: int, obs: Observations) -> dict:
+    """The :class:`RefineParams` fields of pinned keypoints, when the frame has some."""
+    if not obs.pins.any():
+        return {}
+    return {"pin_weight": params.pin_weight, "pin_scale": params.px(params.pin_scale_px, width)}
+
+
 def refine_candidate(c: Candidate, data: FrameData, params: CalibParams) -> Candidate | None:
     """Focal length and pose of a candidate refined on its inliers (all three planes), with one
-    re-selection of the inliers among the subset's keypoints."""
+    re-selection of the inliers among the subset's keypoints; pinned keypoints are always in."""
     obs = data.obs
-    in_subset = subset_mask(obs, c.subset)
+    in_subset = subset_mask(obs, c.subset) | obs.pins if c.subset in SUBSETS else obs.pins | np.isin(obs.kp_ids, c.inliers)
     sub = obs.subset(in_subset)
-    quick = RefineParams(refine_focal=True, max_iter=20, tol=1e-6)
+    quick = RefineParams(refine_focal=True, max_iter=20, tol=1e-6, **pin_settings(params, obs.width, obs))
 
     def solve(start: Camera, inliers: np.ndarray) -> Camera:  # keypoints alone; lines join in PnL
         use = np.zeros(obs.n_keypoints, bool)
         use[np.flatnonzero(in_subset)[inliers]] = True
         return CameraProblem(start, data, quick, use_keypoints=use, lines=(), circles=()).solve()[0]
 
-    inl = np.isin(sub.kp_ids, c.inliers)
+    inl = np.isin(sub.kp_ids, c.inliers) | sub.pins
     cam = solve(c.estimate, inl)
     err = _kp_errors(cam, sub)
-    inl2 = err < params.px(c.threshold, obs.width)
+    inl2 = (err < params.px(c.threshold, obs.width)) | sub.pins
     if inl2.sum() >= params.min_points and not np.array_equal(inl2, inl):
         cam = solve(cam, inl2)
         inl = inl2
@@ -288,6 +301,26 @@ class CameraKind:
     def scorer(self, first: Camera):
         return CameraProblem(first, self.data, RefineParams(alpha=0.5)).residuals  # residuals at any camera
 
+    def vote_taus(self, n: int, tau: float, pin_tau: float) -> np.ndarray:
+        """The truncation of each of the scorer's ``n`` residuals: ``pin_tau`` for the pinned
+        keypoints' rows (keypoints come first, two rows each), ``tau`` for the rest."""
+        taus = np.full(n, tau)
+        rows = 2 * np.flatnonzero(self.data.obs.pins)
+        taus[np.concatenate([rows, rows + 1])] = pin_tau
+        return taus
+
+    def pin_candidates(self) -> list[Candidate]:
+        """The camera of the hand-placed ground points alone (:func:`pnlviz.calib.pins.pin_camera`),
+        its inliers among every keypoint; none when they cannot give one."""
+        obs, p = self.data.obs, self.params
+        cam = pin_camera(obs, p.min_hfov_deg, p.max_hfov_deg, p.px(p.max_rms, obs.width))
+        if isinstance(cam, PinFailure) or _sane(cam, p):
+            return []
+        thr = p.ransac_thresholds[-1]
+        err = _kp_errors(cam, obs)
+        inl = (err < p.px(thr, obs.width)) | obs.pins
+        return [Candidate("pins", float(thr), "ground", cam, obs.kp_ids[inl], float(np.sqrt(np.mean(err[inl] ** 2))))]
+
     def refine(self, c: Candidate) -> Candidate | None:
         return refine_candidate(c, self.data, self.params)
 
@@ -312,7 +345,8 @@ class CameraKind:
         intrinsics = p.refine_focal or p.refine_k1
         rp = RefineParams(alpha=p.alpha, refine_focal=p.refine_focal, refine_k1=p.refine_k1,
                           loss=p.final_loss if intrinsics else "linear",
-                          f_scale=p.px(p.final_f_scale, self.data.obs.width), tol=p.tol)
+                          f_scale=p.px(p.final_f_scale, self.data.obs.width), tol=p.tol,
+                          **pin_settings(p, self.data.obs.width, self.data.obs))
         prob = CameraProblem(cam, self.data, rp, use_keypoints=keypoints, lines=lines, circles=circles)
         if prob.n_res < prob.n_free + 1:
             return None
@@ -321,5 +355,11 @@ class CameraKind:
 
 
 def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: FieldModel | None = None) -> CalibrationResult:
-    """Calibrate one frame. Never raises on bad geometry: failures come back with a reason."""
-    return calibrate_with(CameraKind(FrameData.build(obs, model or load_field_model()), params), params)
+    """Calibrate one frame. Never raises on bad geometry: failures come back with a reason; a
+    frame with hand-placed points that cannot give a camera says which condition they fail."""
+    result = calibrate_with(CameraKind(FrameData.build(obs, model or load_field_model()), params), params)
+    if not result.ok and obs.pins.any():
+        why = pin_camera(obs, params.min_hfov_deg, params.max_hfov_deg, params.px(params.max_rms, obs.width))
+        if isinstance(why, PinFailure):
+            result.failure, result.failure_code, result.pin_condition = why.message, "pins", why.condition.value
+    return result

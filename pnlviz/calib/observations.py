@@ -21,6 +21,9 @@ class Observations:
       'main-keypoints' subset).
     * ``lines``: straight class -> (M, 2) pixels on that line (annotated points or detected
       extremities); ``circles``: circle class -> (M, 2) pixels on it.
+    * ``kp_pinned`` (N,) True for keypoints a hand placed or moved (pinned: the camera is fitted
+      to them above the others and never drops them; see :mod:`pnlviz.calib.pins`). Empty means
+      none.
     """
 
     width: int
@@ -32,6 +35,7 @@ class Observations:
     kp_main: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     lines: dict[str, np.ndarray] = field(default_factory=dict)
     circles: dict[str, np.ndarray] = field(default_factory=dict)
+    kp_pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @classmethod
     def from_keypoints(cls, width: int, height: int, keypoints: dict[int, tuple[float, float]],
@@ -56,7 +60,13 @@ class Observations:
         """Mask of keypoints on the ground plane (z = 0)."""
         return np.abs(self.kp_xyz[:, 2]) < 1e-9
 
+    @property
+    def pins(self) -> np.ndarray:
+        """Mask (N,) of the pinned keypoints (placed or moved by hand)."""
+        pinned = np.asarray(self.kp_pinned, bool)
+        return pinned if pinned.shape == (self.n_keypoints,) else np.zeros(self.n_keypoints, bool)
+
     def subset(self, mask: np.ndarray) -> "Observations":
         """The same observations with only the keypoints in ``mask``."""
         return Observations(self.width, self.height, self.kp_ids[mask], self.kp_xy[mask], self.kp_xyz[mask],
-                            self.kp_sets[mask], self.kp_main[mask], self.lines, self.circles)
+                            self.kp_sets[mask], self.kp_main[mask], self.lines, self.circles, self.pins[mask])

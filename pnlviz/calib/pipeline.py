@@ -17,6 +17,12 @@ What differs between the models is a :class:`Kind`: the camera (:mod:`pnlviz.cal
 all three planes, the 3D rig) and the ground homography (:mod:`pnlviz.calib.homography`, the
 ground-plane subset of everything: keypoints, lines and circles). Pixel thresholds are given at
 960 px image width and scaled with the width (``params.px``).
+
+Pinned keypoints (placed or moved by hand, ``Observations.pins``; :mod:`pnlviz.calib.pins`) are
+in every subset and every candidate's inliers, count in the vote up to ``pin_vote_px`` (where the
+others count up to ``vote_tau``), join PnL whatever their residual, and are left out of the
+verdict's RMS when flagged (farther than ``pin_flag_px`` from the camera: the result says so).
+Without pins every step is what it was.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from pnlviz.calib.observations import Observations
+from pnlviz.calib.pins import flagged_pins
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.voting import best, subset_mask, truncated_score
 from pnlviz.field.model import FieldModel
@@ -64,6 +71,9 @@ class FrameResult:
     candidates: list[dict] = field(default_factory=list)
     failure: str | None = None
     failure_code: str | None = None
+    pinned: list[int] = field(default_factory=list)  #: ids of the pinned (hand-placed) keypoints
+    flagged: dict[int, float] = field(default_factory=dict)  #: pinned ids the camera cannot agree with -> residual px
+    pin_condition: str | None = None  #: the :class:`pnlviz.calib.pins.PinCondition` that failed, if one did
 
     @property
     def ok(self) -> bool:
@@ -127,8 +137,9 @@ def make_candidates(kind: Kind, params) -> list[Candidate]:
     out: list[Candidate] = []
     thresholds = {params.px(t, obs.width): t for t in params.ransac_thresholds}
     done: set[bytes] = set()
+    pins = obs.pins & (obs.ground if kind.ground_only else True)
     for subset in params.subsets:
-        mask = subset_mask(obs, subset, kind.ground_only)
+        mask = subset_mask(obs, subset, kind.ground_only) | pins
         if mask.sum() < params.min_points or mask.tobytes() in done:
             continue
         done.add(mask.tobytes())
@@ -149,6 +160,7 @@ def make_candidates(kind: Kind, params) -> list[Candidate]:
                 if fit is None:
                     continue
                 estimate, inl, err = fit
+                inl = inl | sub.pins
                 key = tuple(sub.kp_ids[inl])
                 found = True
                 if key in seen:
@@ -158,17 +170,25 @@ def make_candidates(kind: Kind, params) -> list[Candidate]:
                                      float(np.sqrt(np.mean(err[inl] ** 2)))))
             if found:
                 break
+    extra = getattr(kind, "pin_candidates", None)
+    if pins.any() and extra is not None:
+        out += [c for c in extra() if tuple(c.inliers) not in seen]
     return out
 
 
 def vote(cands: list[Candidate], kind: Kind, params) -> Candidate | None:
-    """Step 2: truncated-quadratic score of each candidate on all observations; lowest wins."""
+    """Step 2: truncated-quadratic score of each candidate on all observations; lowest wins
+    (pinned keypoints truncated at ``pin_vote_px``: see ``kind.vote_taus``)."""
     if not cands:
         return None
-    tau = params.px(params.vote_tau, kind.data.obs.width)
+    obs = kind.data.obs
+    tau = params.px(params.vote_tau, obs.width)
+    taus = getattr(kind, "vote_taus", None)
+    pinned = taus is not None and obs.pins.any()
     residuals = kind.scorer(cands[0].estimate)
     for c in cands:
-        c.score = truncated_score(residuals(c.estimate), tau)
+        r = residuals(c.estimate)
+        c.score = truncated_score(r, taus(len(r), tau, params.px(params.pin_vote_px, obs.width)) if pinned else tau)
     return best(cands)
 
 
@@ -183,7 +203,7 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
     gate_p = params.px(params.point_gate_px, obs.width)
     lines = [k for k in obs.lines if line_errors.get(k, np.inf) < gate_l]
     circles = [k for k in obs.circles if line_errors.get(k, np.inf) < gate_l]
-    kp_ok = np.array([point_errors.get(int(i), np.inf) for i in obs.kp_ids]).reshape(-1) < gate_p
+    kp_ok = (np.array([point_errors.get(int(i), np.inf) for i in obs.kp_ids]).reshape(-1) < gate_p) | obs.pins
     new = kind.pnl_solve(estimate, kp_ok, lines, circles)
     if new is None:
         return estimate, []
@@ -224,6 +244,10 @@ def calibrate_with(kind: Kind, params) -> FrameResult:
     result.estimate = estimate
     result.point_residuals = kind.point_errors(estimate)
     result.line_residuals = kind.class_errors(estimate)
+    if obs.pins.any():
+        result.pinned = [int(i) for i in obs.kp_ids[obs.pins]]
+        limit = params.px(getattr(params, "pin_flag_px", 10.0), obs.width)
+        result.flagged = flagged_pins(obs, result.point_residuals, limit)
     _verdict(result, obs, params)
     return result
 
@@ -231,7 +255,7 @@ def calibrate_with(kind: Kind, params) -> FrameResult:
 def _verdict(result: FrameResult, obs: Observations, params) -> None:
     """Step 4: no estimate when no inlier keypoint has a residual, or their RMS is above ``max_rms``."""
     inlier_residuals = [result.point_residuals[int(i)] for i in obs.kp_ids[np.isin(obs.kp_ids, result.inliers)]
-                        if int(i) in result.point_residuals]
+                        if int(i) in result.point_residuals and int(i) not in result.flagged]
     if not inlier_residuals:
         result.estimate, result.failure_code = None, "no_inliers"
         result.failure = "no keypoint agrees with the camera (no inliers)"

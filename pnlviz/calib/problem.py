@@ -6,7 +6,8 @@ Residuals, all in pixels, in this order: keypoints (2 per point), the perpendicu
 every observed line point, its overshoot beyond the segment's ends, and the distance of every
 observed circle point to the projected arc (a dense polyline). Line and circle terms are weighted
 ``sqrt(alpha)`` and keypoints ``sqrt(1 - alpha)`` (the paper's cost, in squares); when only one
-kind is present its weight is 1.
+kind is present its weight is 1. Pinned keypoints (placed by hand) may be weighted above the
+others with a bounded robust loss of their own (``pin_weight``, ``pin_scale``: :func:`pin_block`).
 """
 
 from __future__ import annotations
@@ -140,7 +141,8 @@ class Problem:
     """
 
     def __init__(self, model, data: FrameData, alpha: float = DEFAULT_ALPHA, *, keypoints: np.ndarray | None = None,
-                 lines=None, circles=None, ground_only: bool = False, circle_step: float = 0.5):
+                 lines=None, circles=None, ground_only: bool = False, circle_step: float = 0.5,
+                 pin_weight: float = 1.0, pin_scale: float = 0.0):
         self.model, self.data = model, data
         lay = data.layout(model.lift, keypoints, lines, circles, ground_only, circle_step)
         self.kp_mask, self.kp_ids, self.kp_xy = lay.kp_mask, lay.kp_ids, lay.kp_xy
@@ -151,6 +153,9 @@ class Problem:
         has_curves = lay.n_res > 2 * lay.K
         self.w_pt = np.sqrt(1 - alpha) if has_curves else 1.0
         self.w_ln = np.sqrt(alpha) if lay.K else 1.0
+        pins = data.obs.pins[lay.kp_mask]
+        self.pins = pins if pins.any() and (pin_weight != 1.0 or pin_scale > 0) else None
+        self.pin_weight, self.pin_scale = pin_weight, pin_scale
 
     @property
     def n_free(self) -> int:
@@ -166,7 +171,10 @@ class Problem:
         at = 0
         if K:
             uv, Juv = m.pixels(T[:K], state, jac, self.kp_X)
-            at = self._put(r, J, at, self.w_pt, point_block(uv, Juv, self.kp_xy))
+            block = point_block(uv, Juv, self.kp_xy)
+            if self.pins is not None:
+                block = pin_block(block, self.pins, self.pin_weight, self.pin_scale)
+            at = self._put(r, J, at, self.w_pt, block)
         if L:
             A, B = T[K:K + L], T[K + L:K + 2 * L]
             q, dq = m.observed(self.line_pts, state, jac)
@@ -211,3 +219,30 @@ class Problem:
             out[name] = np.abs(r[start:start + len(pts)]) / self.w_ln
             start += len(pts)
         return out
+
+
+def pin_block(block: Block, pins: np.ndarray, weight: float, scale: float) -> Block:
+    """The keypoint block (2 rows per point) with the rows of pinned points (mask ``pins``)
+    weighted ``weight`` under a bounded loss: a pin ``d`` px from its projection costs
+    ``weight^2 c^2 log(1 + d^2 / c^2)`` (Cauchy, ``c = scale``; ``scale`` 0: squares), so it pulls
+    the camera hard when the camera can agree with it, and an impossible one pulls no harder than
+    a few pixels' worth of the others. As a residual ``e' = s(d) e`` with ``s = g(d) / d``,
+    ``g = c sqrt(log(1 + d^2 / c^2))``; its Jacobian ``(s I + s'/d e e^T) de``."""
+    r = block.r.reshape(-1, 2).copy()
+    J = None if block.J is None else block.J.reshape(len(r), 2, -1).copy()
+    e = r[pins]
+    s, ds = np.ones(len(e)), np.zeros(len(e))
+    if scale > 0:
+        d = np.linalg.norm(e, axis=1)
+        big = d > 1e-9 * scale
+        dd, q = d[big], (d[big] / scale) ** 2
+        g = scale * np.sqrt(np.log1p(q))
+        dg = dd / (scale * np.sqrt(np.log1p(q)) * (1 + q))
+        s[big] = g / dd
+        ds[big] = (dg * dd - g) / dd**2 / dd  # s'(d) / d
+    r[pins] = weight * s[:, None] * e
+    if J is not None:
+        Je = J[pins]
+        eJ = np.einsum("ni,nip->np", e, Je)
+        J[pins] = weight * (s[:, None, None] * Je + ds[:, None, None] * e[:, :, None] * eJ[:, None, :])
+    return Block(r.ravel(), None if J is None else J.reshape(len(block.r), -1))

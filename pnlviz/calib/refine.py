@@ -41,6 +41,8 @@ class RefineParams:
     tol: float = 1e-8  #: stop when the cost drops by less than this fraction
     k1_bound: float = 1.0  #: |k1| limit (SN22 fits push k1 to +0.4..0.6 at 15-30 deg FOV; a 0.5 cap cost 0.8 FS)
     circle_step: float = 0.5  #: metres between samples of projected circles (chord error < 4 mm)
+    pin_weight: float = 1.0  #: weight of pinned (hand-placed) keypoints against the others
+    pin_scale: float = 0.0  #: px where the pins' bounded loss bends (0: squares)
 
     @property
     def solver(self) -> SolverParams:
@@ -62,7 +64,7 @@ class CameraProblem:
         self.cam0, self.params = cam0, params
         self.model = CameraModel(cam0, params.refine_focal, params.refine_k1, params.k1_bound)
         self.problem = Problem(self.model, data, params.alpha, keypoints=use_keypoints, lines=lines, circles=circles,
-                               circle_step=params.circle_step)
+                               circle_step=params.circle_step, pin_weight=params.pin_weight, pin_scale=params.pin_scale)
         self.n_res, self.n_free = self.problem.n_res, self.problem.n_free
 
     def residuals(self, cam: Camera | None = None) -> np.ndarray:

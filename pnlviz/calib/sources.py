@@ -56,20 +56,22 @@ def merge_observations(ann: Observations, det: Observations, model: FieldModel) 
     keep = ~np.isin(det.kp_ids, ann.kp_ids)
     return Observations(ann.width, ann.height, np.concatenate([ann.kp_ids, det.kp_ids[keep]]),
                         np.vstack([ann.kp_xy, det.kp_xy[keep]]), np.vstack([ann.kp_xyz, det.kp_xyz[keep]]),
-                        np.concatenate([ann.kp_sets, det.kp_sets[keep]]), np.concatenate([ann.kp_main, det.kp_main[keep]]),
-                        {**det.lines, **ann.lines}, ann.circles)
+                        np.concatenate([ann.kp_sets, det.kp_sets[keep]]),
+                        np.concatenate([ann.kp_main, det.kp_main[keep]]), {**det.lines, **ann.lines}, ann.circles,
+                        np.concatenate([ann.pins, det.pins[keep]]))
 
 
 def apply_keypoint_edits(obs: Observations, edits: Mapping[str, KeypointEdit], model: FieldModel) -> Observations:
     """Observations with keypoint edits applied: ``{"id": [x, y]}`` moves or adds a keypoint (at
-    the catalogue position), ``{"id": None}`` removes it (not visible)."""
+    the catalogue position; a hand put it there, so it is pinned), ``{"id": None}`` removes it
+    (not visible)."""
     ids, xy = list(obs.kp_ids), [tuple(p) for p in obs.kp_xy]
-    sets, main = list(obs.kp_sets), list(obs.kp_main)
+    sets, main, pinned = list(obs.kp_sets), list(obs.kp_main), list(obs.pins)
     for key, value in edits.items():
         kid = int(key)
         if kid in ids:
             i = ids.index(kid)
-            for lst in (ids, xy, sets, main):
+            for lst in (ids, xy, sets, main, pinned):
                 lst.pop(i)
         if value is not None:
             ids.append(kid)
@@ -77,6 +79,8 @@ def apply_keypoint_edits(obs: Observations, edits: Mapping[str, KeypointEdit], m
             group = model.keypoints[kid].group
             sets.append(group)
             main.append(group == "Kp")
+            pinned.append(True)
     ids_arr = np.array(ids, int)
     return Observations(obs.width, obs.height, ids_arr, np.array(xy, float).reshape(-1, 2), model.keypoint_xyz(ids_arr),
-                        np.array(sets, dtype="<U3"), np.array(main, bool), obs.lines, obs.circles)
+                        np.array(sets, dtype="<U3"), np.array(main, bool), obs.lines, obs.circles,
+                        np.array(pinned, bool))

@@ -8,7 +8,7 @@ import argparse
 import sys
 
 from pnlviz.commands.calibrate import add_calibrate_parser
-from pnlviz.commands.common import parse_size
+from pnlviz.commands.common import os_error_line, parse_size
 from pnlviz.commands.detect import add_detect_parser
 from pnlviz.commands.evaluate import add_eval_parser
 from pnlviz.commands.labels import add_labels_parser
@@ -52,8 +52,33 @@ def _printable_streams() -> None:
             stream.reconfigure(errors="backslashreplace")
 
 
+class _Escaped:
+    """A text stream whose writes show terminal control characters escaped (file names printed
+    by any command cannot drive the terminal); everything else is the wrapped stream's."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        from pnlviz.data.errors import escape_controls
+
+        return self._stream.write(escape_controls(text))
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv: list[str] | None = None) -> int:
     _printable_streams()
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _Escaped(sys.stdout), _Escaped(sys.stderr)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = saved
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -73,4 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:  # a write failure (read-only, full disk, permission) or an unreadable path
+        print(f"error: {os_error_line(exc)}", file=sys.stderr)
+        return 1
 

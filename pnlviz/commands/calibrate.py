@@ -19,7 +19,7 @@ from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
 #: how the summary names the engine's failure codes, in the order of
 #: :data:`pnlviz.calib.calibrate.FAILURE_CODES` (see :func:`failure_words`)
 _ENGINE_WORDS = ("too few keypoints", "degenerate geometry", "no keypoint agrees with the camera",
-                 "residual above the limit")
+                 "residual above the limit", "hand-placed points cannot calibrate")
 
 
 def failure_words() -> dict[str, str]:
@@ -283,10 +283,13 @@ def _detection_settings(args):
     """(settings recorded beside the detections, the engine's settings); DataError/ValueError
     (an unknown setting) for a bad file."""
     from pnlviz.calib.calibrate import CalibParams
-    from pnlviz.data import read_predictions_info
+    from pnlviz.data import predictions_info_path, read_predictions_info
+    from pnlviz.pipeline.settings import check_settings
 
     recorded = (read_predictions_info(args.detections).get("calibration") or {}) if args.detections else {}
-    CalibParams().updated(recorded)  # unknown names fail here, not on every frame
+    if recorded:  # unknown names, wrong types and values out of range fail here, not on every frame
+        recorded = check_settings(recorded, str(predictions_info_path(args.detections)))
+    CalibParams().updated(recorded)
     return recorded, frame_settings(args, recorded)
 
 
@@ -344,7 +347,8 @@ def run_calibrate(args) -> int:
     try:  # the detector's settings, recorded beside its prediction zip by pnlviz detect
         recorded, settings = _detection_settings(args)
     except (DataError, ValueError) as exc:
-        print(f"error: {predictions_info_path(args.detections)}: {exc}", file=sys.stderr)
+        shown = exc if isinstance(exc, DataError) else f"{predictions_info_path(args.detections)}: {exc}"
+        print(f"error: {shown}", file=sys.stderr)
         return 2
     if recorded:
         print(f"calibration settings of the detector ({predictions_info_path(args.detections).name}): "

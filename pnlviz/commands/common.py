@@ -4,6 +4,7 @@ how batch commands open their dataset and report the files they skip (one line e
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 
@@ -32,6 +33,26 @@ def add_app_data_args(p) -> None:
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE, help="image size for frames without an image")
 
 
+def app_data(args):
+    """``(data, edits)`` of ``serve`` and ``export``: ``--data`` and ``--edits``, or without
+    ``--data`` the bundled sample, whose edits go beside it in a checkout and, installed (where
+    the sample sits inside the package), in the user's state folder
+    (``$XDG_STATE_HOME/pnlviz/sample.edits``, by default ``~/.local/state/pnlviz/sample.edits``)."""
+    import os
+    from pathlib import Path
+
+    from pnlviz.paths import EXAMPLES_DIR, SAMPLE_DIR
+
+    if args.data is not None:
+        return args.data, args.edits
+    edits = args.edits
+    if edits is None and SAMPLE_DIR != (EXAMPLES_DIR / "sample").resolve():
+        state = Path(os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state")
+        edits = state / "pnlviz" / "sample.edits"
+        edits.parent.mkdir(parents=True, exist_ok=True)
+    return SAMPLE_DIR, edits
+
+
 def print_skipped(lines, prefix: str = "skipped: ") -> None:
     """Print problems to stderr, one line each (DataErrors or strings)."""
     for line in lines:
@@ -47,3 +68,14 @@ def open_input_dataset(path):
     print_skipped(ds.rejected)
     ds.require_frames()
     return ds
+
+
+def os_error_line(exc: OSError) -> str:
+    """``OSError`` as one line naming the path: ``"out/x.zip: No space left on device"``."""
+    from pnlviz.data.errors import DataError
+    from pnlviz.data.filekind import os_error_text
+
+    name = exc.filename if exc.filename is not None else "<output>"
+    text = os_error_text(exc) if exc.errno is not None else (str(exc) or type(exc).__name__)
+    return str(DataError(os.fsdecode(name) if isinstance(name, bytes) else str(name), text))
+

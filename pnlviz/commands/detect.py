@@ -203,6 +203,12 @@ def _threads(args) -> int:
 
 
 def run_detect(args) -> int:
+    from pnlviz.detect.default import torch_missing
+
+    if (missing := torch_missing()) is not None:
+        print(f"error: {missing}", file=sys.stderr)
+        return 2
+
     from pnlviz.commands.batch import resume_zip
     from pnlviz.commands.common import open_input_dataset
     from pnlviz.detect.checkpoint import CheckpointError

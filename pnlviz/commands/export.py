@@ -22,7 +22,11 @@ def add_export_parser(sub) -> None:
                                    "Only accepted and corrected frames unless --all.")
     add_app_data_args(p)  # as pnlviz serve takes them
     p.add_argument("--out", required=True, type=Path, help="output folder, or a .zip")
-    p.add_argument("--all", action="store_true", help="export every frame, reviewed or not")
+    p.add_argument("--all", action="store_true", help="export every frame, reviewed or not (unreviewed ones marked so)")
+    p.add_argument("--gate-px", type=float, default=10.0,
+                   help="outlier gate: a visible point farther than this from its frame's camera (pixels at "
+                        "960x540, scaled to the frame) is exported flagged, not as ground truth, unless a hand "
+                        "placed it (default 10)")
     p.add_argument("--no-progress", action="store_true")
     add_cluster_args(p)
     p.set_defaults(func=run_export)
@@ -39,6 +43,7 @@ class ExportJob(BatchJob):
     edits: str
     size: tuple[int, int]
     settings: object
+    gate_px: float = 10.0
 
     def open_state(self):
         from pnlviz.pipeline import FrameReader
@@ -49,7 +54,7 @@ class ExportJob(BatchJob):
     def run_chunk(self, reader, stems: list[str]) -> list:
         from pnlviz.pipeline.export import export_frame
 
-        return [export_frame(reader, stem, self.settings) for stem in stems]
+        return [export_frame(reader, stem, self.settings, gate_px=self.gate_px) for stem in stems]
 
 
 def _interrupted(args, writer, done: int, total: int) -> int:
@@ -70,21 +75,27 @@ def _say_done(args, frames: dict, total: int, cluster: bool) -> None:
         if e["error"]:
             print(f"{'skipped' if stem in unreadable else 'warning'}: {e['error']}", file=sys.stderr)
     which = "frames" if args.all else "accepted/corrected frames"
-    print(f"exported {len(frames) - len(unreadable)} {which} of {total} to {args.out}"
+    flagged = sum(e.get("flagged", 0) for e in frames.values())
+    print(f"exported {len(frames) - len(unreadable)} {which} of {total} to {args.out}; "
+          f"{flagged} points beyond the outlier gate flagged ({args.gate_px:g} px at 960x540)"
           + (" on the dask cluster" if cluster else "")
           + (f" ({len(unreadable)} unreadable or failed, listed in the manifest)" if unreadable else ""))
 
 
 def run_export(args) -> int:
-    from pnlviz import EXAMPLES_DIR
     from pnlviz.commands.batch import run_batch
+    from pnlviz.commands.common import app_data
     from pnlviz.data.outputs import OutputError, check_output
     from pnlviz.pipeline import FrameReader
     from pnlviz.pipeline.export import ExportWriter, export_stems, failed_frame
 
-    data = args.data or EXAMPLES_DIR / "sample"
+    data, args.edits = app_data(args)
+    if not (args.gate_px > 0 and args.gate_px < float("inf")):
+        print(f"error: --gate-px must be a positive number of pixels, got {args.gate_px}", file=sys.stderr)
+        return 2
     try:
-        check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits))
+        check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits),
+                     folder=Path(args.out).suffix.lower() != ".zip")
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -94,8 +105,8 @@ def run_export(args) -> int:
             print(f"warning: {warning}", file=sys.stderr)
         stems = export_stems(reader, args.all)
         job = ExportJob(str(Path(data).resolve()), None if args.detections is None else str(args.detections.resolve()),
-                        str(reader.edits.root.resolve()), tuple(args.size), reader.default_settings())
-        with ExportWriter(reader, args.out, include_all=args.all) as writer:
+                        str(reader.edits.root.resolve()), tuple(args.size), reader.default_settings(), args.gate_px)
+        with ExportWriter(reader, args.out, include_all=args.all, gate_px=args.gate_px) as writer:
             run = run_batch(job, stems, writer.add, args, desc="export", local_state=reader,
                             failed=lambda stem, message: failed_frame(reader, stem, message),
                             progress=not args.no_progress)

@@ -138,9 +138,9 @@ def add_labels_parser(subparsers) -> argparse.ArgumentParser:
 def _check_out(out_dir: Path, data) -> None:
     from pnlviz.data import OutputError, check_output
 
-    check_output(out_dir, datasets=[data])
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputError(f"--out {out_dir}", "is a file: expected a folder for the label files")
+    check_output(out_dir, datasets=[data], folder=True)
 
 
 def run_labels(args) -> int:

@@ -25,6 +25,8 @@ def add_render_parser(sub) -> None:
     p.add_argument("--cameras", required=True, type=Path, help="camera zip or folder (camera_<stem>.json)")
     p.add_argument("--out", required=True, type=Path, help="output video (.mp4)")
     p.add_argument("--fps", type=float, default=None, help="frames per second (default: the video's, else 25)")
+    p.add_argument("--no-top-view", action="store_true",
+                   help="no bird's-eye inset (the camera's footprint on the pitch, bottom right)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_render)
 
@@ -33,6 +35,7 @@ def run_render(args) -> int:
     from pnlviz.commands.common import open_input_dataset, print_skipped
     from pnlviz.data import check_output
     from pnlviz.data.layout import clips
+    from pnlviz.data.atomic import refuse_non_regular
     from pnlviz.data.cameras import read_cameras
 
     if args.out.suffix.lower() not in (".mp4", ".m4v", ".mov"):
@@ -61,6 +64,11 @@ def run_render(args) -> int:
     if not wrote:
         print(f"error: no frame could be read from {args.video or args.data}", file=sys.stderr)
         return 1
+    if not tmp.is_file() or tmp.stat().st_size == 0:
+        print(f"error: {args.out}: the video could not be written (full disk?)", file=sys.stderr)
+        tmp.unlink(missing_ok=True)
+        return 1
+    refuse_non_regular(args.out)
     tmp.replace(args.out)
     print(f"wrote {args.out}: {len(stems) - len(skipped)} frames at {fps:g} fps, the pitch drawn on {drawn}")
     print_skipped(skipped, prefix="  skipped: ")
@@ -76,7 +84,7 @@ def _render_frames(args, ds, cameras: dict, stems: list[str], fps: float, tmp) -
 
     from pnlviz.data import DataError
     from pnlviz.geometry.camera import Camera
-    from pnlviz.viz import cv_text, draw_pitch
+    from pnlviz.viz import cv_text, draw_pitch, inset_top_view
 
     writer = None
     drawn = 0
@@ -91,14 +99,18 @@ def _render_frames(args, ds, cameras: dict, stems: list[str], fps: float, tmp) -
         if writer is None:
             writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (w, h))
             if not writer.isOpened():
-                print(f"error: OpenCV cannot write {args.out} (no mp4 encoder)", file=sys.stderr)
+                print(f"error: OpenCV cannot write {args.out} (no mp4 encoder, or its folder cannot be written)",
+                      file=sys.stderr)
                 return drawn, skipped, None
             size = (w, h)
         if (w, h) != size:
             img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
         cam = cameras.get(stem)
         if cam is not None:
-            draw_pitch(img, Camera.from_soccernet(cam, 960, 540), colour=(80, 255, 255), thickness=2)
+            camera = Camera.from_soccernet(cam, 960, 540)
+            draw_pitch(img, camera, colour=(80, 255, 255), thickness=2)
+            if not args.no_top_view:
+                inset_top_view(img, camera)
             drawn += 1
         else:
             cv2.putText(img, cv_text("no camera"), (12, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 255), 2, cv2.LINE_AA)

@@ -36,27 +36,51 @@ def add_serve_parser(sub) -> None:
 
 def _detector(args):
     """The background detector (in its own process: this one never imports torch), or None."""
-    from pnlviz.detect.default import DEFAULT_MODEL
-    from pnlviz.detect.worker import DetectorProcess
+    from pnlviz.detect.default import DEFAULT_MODEL, torch_missing
+    from pnlviz.detect.worker import DetectorLoadError, DetectorProcess
 
+    missing = torch_missing()
     if args.weights_kp or args.weights_lines or args.weights:
+        if missing:
+            raise DetectorLoadError(missing)
         return DetectorProcess(args.weights_kp, args.weights_lines, threads=args.detector_threads, light=args.weights)
     if not args.no_detect and not args.detections and DEFAULT_MODEL.is_file():
+        if missing:
+            print(f"pnlviz: no background detection ({missing}); frames are calibrated from their labels",
+                  file=sys.stderr)
+            return None
         return DetectorProcess(threads=args.detector_threads)
     return None
 
 
+def _quiet_handshakes() -> None:
+    """A connection that never speaks HTTP (a port scan, a health check, a TLS client) is not an
+    error of the app: websockets logs its failed handshake with three chained tracebacks; drop
+    those records (everything else the library logs is kept)."""
+    import logging
+
+    def keep(record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(("opening handshake failed", "connection rejected"))
+
+    for name in ("websockets.server", "websockets.asyncio.server", "websockets"):
+        logging.getLogger(name).addFilter(keep)
+
+
 def run_serve(args) -> int:
-    from pnlviz import EXAMPLES_DIR
-    from pnlviz.app.bridge import page_url
     from pnlviz.app.guard import is_loopback
     from pnlviz.app.server import PnlvizApp
     from pnlviz.app.state import AppState
+    from pnlviz.commands.common import app_data
     from pnlviz.data.edits import EditsFolderError
     from pnlviz.detect.worker import DetectorLoadError, DetectorProcessError
 
-    data = args.data or EXAMPLES_DIR / "sample"
-    detector = _detector(args)
+    data, args.edits = app_data(args)
+    _quiet_handshakes()
+    try:
+        detector = _detector(args)
+    except DetectorLoadError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     if detector is not None and (not detector.light or args.weights is not None):
         print("pnlviz: loading the detector's checkpoints...", flush=True)
         try:  # a checkpoint that does not fit is an error now, not on the first frame
@@ -82,7 +106,7 @@ def run_serve(args) -> int:
         raise
     if detector is not None and detector.light:
         detector.warm_up()  # torch and the weights load in the detector process while the browser connects
-    urls = app.policy.urls()
+    urls = app.page_urls()  # the canvas at the page's device pixel ratio, never lowered
     state.edits.describe_holder(urls[0])
     print(f"pnlviz: {data} ({len(state.stems)} frames), edits in {state.edits.root}")
     for warning in state.problems + state.edits.warnings:
@@ -92,8 +116,7 @@ def run_serve(args) -> int:
     if not is_loopback(args.host):
         print(f"pnlviz: warning: listening on {args.host}: anyone who can reach this machine and has the token can "
               f"read and edit these labels", file=sys.stderr)
-    pages = [page_url(u) for u in urls]  # the canvas at the page's device pixel ratio, never lowered
-    print(f"pnlviz: open {pages[0]}" + "".join(f"\npnlviz:   or {u}" for u in pages[1:]), flush=True)
+    print(f"pnlviz: open {urls[0]}" + "".join(f"\npnlviz:   or {u}" for u in urls[1:]), flush=True)
     signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as Ctrl+C does: edits folder released
     try:
         while True:

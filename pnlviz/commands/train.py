@@ -15,6 +15,7 @@ the checkpoint and its JSON sidecar. The shipped model is only written with ``--
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -56,6 +57,12 @@ def add_train_parser(subparsers) -> None:
 
 
 def run_train(args) -> int:
+    from pnlviz.detect.default import torch_missing
+
+    if (missing := torch_missing()) is not None:
+        print(f"error: {missing}", file=sys.stderr)
+        return 2
+
     from pnlviz.detect.train import train
     from pnlviz.detect.train_config import DEFAULT_CONFIG_PATH, load_config
 
@@ -73,8 +80,8 @@ def run_train(args) -> int:
                 print(f"error: --{name.replace('_', '-')} must be >= 1", file=sys.stderr)
                 return 2
             setattr(config, attr, int(value))
-    if args.minutes is not None and args.minutes <= 0:
-        print("error: --minutes must be > 0", file=sys.stderr)
+    if args.minutes is not None and not (math.isfinite(args.minutes) and args.minutes > 0):
+        print(f"error: --minutes must be a number > 0, got {args.minutes}", file=sys.stderr)
         return 2
     if _same_file(args.out, DEFAULT_MODEL) and not args.replace_default:
         print(f"error: --out {args.out} is the shipped default model; add --replace-default to overwrite it "
@@ -83,6 +90,9 @@ def run_train(args) -> int:
     if args.init is not None and not args.init.is_file():
         print(f"error: --init {args.init}: no such file", file=sys.stderr)
         return 2
+    from pnlviz.data.outputs import check_writable
+
+    check_writable(args.out)  # a device, FIFO or link at --out, or a read-only folder: refused before training
     problem = _apply_data_args(args, config)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
@@ -91,7 +101,9 @@ def run_train(args) -> int:
         result = train(config, args.out, minutes=args.minutes, progress=not args.no_progress, cache_dir=args.cache,
                        init=args.init)
     except (OSError, ValueError) as exc:  # DataError is a ValueError: a bad dataset or checkpoint
-        print(f"error: {exc}", file=sys.stderr)
+        from pnlviz.commands.common import os_error_line
+
+        print(f"error: {os_error_line(exc) if isinstance(exc, OSError) else exc}", file=sys.stderr)
         return 2
     note = " (stopped by --minutes)" if result.stopped_early else ""
     print(f"trained {result.epochs_done:.2f} epochs, {result.steps} steps in {result.seconds:.0f} s{note}; "
@@ -113,8 +125,8 @@ def _apply_data_args(args, config) -> str | None:
         return f"--data {missing[0]}: no such folder or file"
     share = sum(float(r.get("weight", 1.0)) for r in config.real) or 1.0
     weight = args.data_weight if args.data_weight is not None else share / len(args.data)
-    if weight <= 0:
-        return "--data-weight must be > 0"
+    if not (math.isfinite(weight) and weight > 0):  # a relative weight: any finite positive number
+        return f"--data-weight must be a finite number > 0, got {weight}"
     if args.labels is not None:
         if len(args.data) != 1:
             return "--labels goes with exactly one --data (the dataset the labels were made on)"

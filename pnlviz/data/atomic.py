@@ -12,7 +12,18 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-__all__ = ["atomic_open", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["atomic_open", "atomic_write_bytes", "atomic_write_text", "refuse_non_regular"]
+
+
+def refuse_non_regular(path: str | os.PathLike) -> None:
+    """Raise :class:`~pnlviz.data.outputs.OutputError` when ``path`` exists and is not a regular
+    file: the rename would replace a device node, a FIFO or a symbolic link."""
+    from .filekind import output_problem
+    from .outputs import OutputError
+
+    problem = output_problem(path)
+    if problem:
+        raise OutputError(os.fspath(path), problem)
 
 
 @contextlib.contextmanager
@@ -25,9 +36,13 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb", encoding: str | None 
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_open: mode must be 'w' or 'wb', not {mode!r}")
+    from .filekind import naming
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    refuse_non_regular(path)
+    with naming(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         if mode == "w":
             f = os.fdopen(fd, "w", encoding=encoding or "utf-8", newline="")
@@ -41,7 +56,14 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb", encoding: str | None 
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
+        refuse_non_regular(path)
         os.replace(tmp, path)
+    except OSError as e:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if e.filename is None and e.errno is not None:  # a write on a full disk: name the output
+            raise OSError(e.errno, e.strerror or str(e), os.fspath(path)) from None
+        raise
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)

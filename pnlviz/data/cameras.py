@@ -71,12 +71,34 @@ def camera_zip_order(name: str) -> tuple:
     return natural_key(name if stem is None else stem)
 
 
+#: Physical ranges of the camera values: (low, high, what the range means). Focal lengths and
+#: the principal point are positive pixels (the point inside a frame of at most 100000 px), the
+#: position within a kilometre of the centre spot, angles within two turns, distortion bounded.
+CAMERA_RANGES: dict[str, tuple[float, float, str]] = {
+    "pan_degrees": (-720.0, 720.0, "an angle in degrees"),
+    "tilt_degrees": (-720.0, 720.0, "an angle in degrees"),
+    "roll_degrees": (-720.0, 720.0, "an angle in degrees"),
+    "position_meters": (-1000.0, 1000.0, "metres from the centre spot"),
+    "x_focal_length": (0.0, 1e6, "a focal length in pixels"),
+    "y_focal_length": (0.0, 1e6, "a focal length in pixels"),
+    "principal_point": (0.0, 1e5, "pixels inside the frame"),
+    "radial_distortion": (-100.0, 100.0, "a distortion coefficient"),
+    "tangential_distortion": (-100.0, 100.0, "a distortion coefficient"),
+    "thin_prism_distortion": (-100.0, 100.0, "a distortion coefficient"),
+}
+_OPEN_BELOW = ("x_focal_length", "y_focal_length", "principal_point")
+
+
 def _check_number(value: Any, key: str, source: str) -> None:
     v = as_number(value)
     if v is None:
         raise DataError(source, f"camera key {key!r} must be a number, got {describe(value)}")
     if not math.isfinite(v):
         raise DataError(source, f"camera key {key!r} is not finite ({v})")
+    low, high, meaning = CAMERA_RANGES[key]
+    if v > high or v < low or (v == low and key in _OPEN_BELOW):
+        bounds = f"{'(' if key in _OPEN_BELOW else '['}{low:g}, {high:g}]"
+        raise DataError(source, f"camera key {key!r} = {v:g} is impossible ({meaning}: must lie in {bounds})")
 
 
 def validate_camera_dict(obj: Any, source: str = "<camera>") -> dict:

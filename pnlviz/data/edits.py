@@ -6,6 +6,7 @@ Layout::
                                          "annotation": {SoccerNet annotation},
                                          "keypoints": {"<id>": [x, y] | null},   # pixels; null = not visible
                                          "history": {"undo": [step, ...], "redo": [step, ...]},
+                                         "snapshot": {what was on screen when reviewed},
                                          "updated": <unix time>}
         a step: the fields one user action changed, as they were before it ({"review": null, ...})
     <edits>/frames/<stem>.json.damaged  a file that failed validation, moved aside (kept, never deleted)
@@ -42,14 +43,18 @@ from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.data.atomic import atomic_write_text
 from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
+from pnlviz.data.reading import read_file
+from pnlviz.data.snapshot import edits_digest, validate_snapshot
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
 #: the fields a record may hold; anything else is dropped when it is read
-FIELDS = ("review", "annotation", "keypoints", "history", "updated")
+FIELDS = ("review", "annotation", "keypoints", "history", "snapshot", "updated")
 #: the fields an undo step may restore
 UNDOABLE = ("annotation", "keypoints", "review")
 #: undo steps kept per frame (and per direction)
 HISTORY_LIMIT = 100
+#: seconds within which actions of one merge key are one undo step (:meth:`EditsStore.act`)
+MERGE_S = 2.0
 #: keypoint coordinates are pixels: anything larger is not a position in a frame
 MAX_COORDINATE = 1e6
 #: how far outside the frame a point may be placed, as a fraction of its size (as the
@@ -102,11 +107,13 @@ def validate_keypoint(kid: Any, value: Any, source: str) -> tuple[str, list[floa
 
 
 def check_keypoint_id(kid: Any) -> int:
-    """The id of a keypoint to edit, as a whole number of the catalogue; EditError otherwise."""
-    try:
-        kid = int(kid)
-    except (TypeError, ValueError):
-        raise EditError(f"keypoint id must be a whole number, got {str(kid)[:20]!r}") from None
+    """The id of a keypoint to edit, an integer of the catalogue; EditError otherwise. Nothing is
+    coerced: ``5.5``, ``True`` and ``"7"`` are refused (an id comes from the catalogue as an int)."""
+    import numpy as np
+
+    if isinstance(kid, (bool, np.bool_)) or not isinstance(kid, (int, np.integer)):
+        raise EditError(f"keypoint id must be an integer, got {type(kid).__name__} {str(kid)[:20]!r}")
+    kid = int(kid)
     if kid not in keypoint_ids():
         raise EditError(f"keypoint id {kid} is not in the catalogue (1..73)")
     return kid
@@ -165,6 +172,8 @@ def validate_record(obj: Any, source: str, checked_before: Collection[int] = ())
         if not isinstance(kps, Mapping):
             raise DataError(source, f'"keypoints" must be an object of id -> [x, y] | null, got {describe(kps)}')
         rec["keypoints"] = dict(validate_keypoint(k, v, source) for k, v in kps.items())
+    if obj.get("snapshot") is not None:
+        rec["snapshot"] = validate_snapshot(obj["snapshot"], source)
     history = obj.get("history")
     if history is not None:
         rec["history"] = validate_history(history, source, checked_before)
@@ -196,6 +205,9 @@ def validate_history(obj: Any, source: str, checked_before: Collection[int] = ()
             checked.append({k: values.get(k) for k in step})
         out[side] = checked
     return out
+
+
+_EMPTY_DIGEST = edits_digest({})
 
 
 class _Unchanged(Exception):
@@ -231,6 +243,8 @@ class EditsStore:
         self._locks: dict[str, threading.RLock] = {}
         self._locks_lock = threading.Lock()
         self._lock_file = None
+        #: stem -> (merge key, time, undo steps) of the frame's last action that named a merge key
+        self._merging: dict[str, tuple[object, float, int]] = {}
         if writable:
             self._take_folder()
             self._remove_leftovers()
@@ -292,7 +306,7 @@ class EditsStore:
             return
         for p in sorted(self.frames.glob("*.json")):
             try:
-                data = p.read_bytes()
+                data = read_file(p)  # capped; a FIFO or a device is refused, never read
                 rec = validate_record(json.loads(data), str(p))
             except (OSError, ValueError, RecursionError) as exc:  # DataError and JSONDecodeError are ValueErrors
                 self._damaged(p, exc)
@@ -327,6 +341,12 @@ class EditsStore:
         if "history" in rec:
             out["history"] = {side: list(steps) for side, steps in rec["history"].items()}
         return out
+
+    def digest(self, stem: str) -> str:
+        """The digest of what the frame's record changes (:func:`pnlviz.data.snapshot.edits_digest`),
+        without copying it (records are replaced on a write, never changed in place)."""
+        rec = self._cache.get(stem)
+        return edits_digest(rec) if rec else _EMPTY_DIGEST
 
     def _checked_steps(self, stem: str) -> set[int]:
         """Ids of the undo steps of the frame's record as it is (all checked when it was)."""
@@ -374,11 +394,14 @@ class EditsStore:
             rec.update(changes)
         return self.get(stem)
 
-    def act(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True) -> bool:
+    def act(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True, merge: object = None) -> bool:
         """One user action on one frame: ``change(record)`` under the frame's lock (``corrected``:
         the frame becomes "corrected"), one undo step kept in the record, written at once. False
         when nothing changed (no write, no step); an OSError of the write reaches the caller and
-        nothing changes."""
+        nothing changes. ``merge``: actions with the same key in a row, each within
+        :data:`MERGE_S` of the last and nothing else done on the frame between, are one undo step
+        (the arrow-key nudges of one point)."""
+        now = time.monotonic()
         try:
             with self.edit(stem) as rec:
                 before = {k: rec.get(k) for k in UNDOABLE}
@@ -389,10 +412,31 @@ class EditsStore:
                 if not step:
                     raise _Unchanged
                 history = rec.get("history") or {}
-                rec["history"] = {"undo": (history.get("undo", []) + [step])[-HISTORY_LIMIT:], "redo": []}
+                undo = list(history.get("undo", []))
+                last = self._merging.get(stem)
+                if not (merge is not None and last is not None and last[0] == merge and now - last[1] < MERGE_S
+                        and last[2] == len(undo) and undo):
+                    undo = (undo + [step])[-HISTORY_LIMIT:]
+                rec["history"] = {"undo": undo, "redo": []}
         except _Unchanged:
             return False
+        if merge is not None:
+            self._merging[stem] = (merge, now, len(rec["history"]["undo"]))
+        else:
+            self._merging.pop(stem, None)
         return True
+
+    def keep_review(self, stem: str) -> None:
+        """The frame's review status, set by hand, stays when its edits are undone: the undo and
+        redo steps no longer carry the status the edits set with them (steps left empty go)."""
+        with self.lock(stem):
+            history = (self._cache.get(stem) or {}).get("history")
+            if not history or not any("review" in step for steps in history.values() for step in steps):
+                return
+            with self.edit(stem) as rec:
+                rec["history"] = {side: [{k: v for k, v in step.items() if k != "review"} for step in steps
+                                         if set(step) != {"review"}] for side, steps in history.items()}
+            self._merging.pop(stem, None)
 
     def step(self, stem: str, back: bool = True) -> bool:
         """Take back the frame's last action (``back``), or do again the last one taken back;

@@ -10,7 +10,17 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["DataError", "member_source"]
+__all__ = ["DataError", "member_source", "escape_controls"]
+
+#: Control characters that a terminal acts on (ESC, BEL, CSI...), shown escaped in messages;
+#: tab, newline and carriage return are left to the callers.
+_CONTROLS = {c: f"\\x{c:02x}" for c in [*range(0x00, 0x20), *range(0x7f, 0xa0)] if chr(c) not in "\t\n\r"}
+
+
+def escape_controls(text: str) -> str:
+    """``text`` with terminal control characters shown as ``\\x1b``: a file name holding
+    ``ESC[2J`` never clears the screen it is printed on."""
+    return text.translate(_CONTROLS)
 
 
 def _printable(text: str) -> str:
@@ -22,7 +32,7 @@ def _printable(text: str) -> str:
 
 
 def _one_line(text: object) -> str:
-    return _printable(" ".join(str(text).splitlines()).strip())
+    return escape_controls(_printable(" ".join(str(text).splitlines()).strip()))
 
 
 class DataError(ValueError):
@@ -47,3 +57,10 @@ class DataError(ValueError):
 def member_source(zip_path: str | os.PathLike, member: str) -> str:
     """The ``<file>`` part of an error message for ``member`` inside ``zip_path``."""
     return f"{os.fspath(zip_path)}:{member}"
+
+
+class ArgumentError(ValueError):
+    """A wrong argument of the Python API (:mod:`pnlviz.api`); the message starts with its name.
+    Shown (and importable) as ``pnlviz.ArgumentError``."""
+
+    __module__ = "pnlviz"

@@ -12,7 +12,7 @@ import struct
 from collections.abc import Callable
 
 from .errors import DataError
-from .limits import MAX_IMAGE_PIXELS
+from .limits import MAX_IMAGE_PIXELS, MIN_IMAGE_SIDE
 
 __all__ = ["header_size", "check_pixels"]
 
@@ -85,7 +85,11 @@ def header_size(read: Reader, source: str) -> tuple[int, int]:
 
 
 def check_pixels(width: int, height: int, source: str, limit: int = MAX_IMAGE_PIXELS) -> None:
-    """DataError when a ``width`` x ``height`` image is above ``limit`` pixels (not decoded)."""
+    """DataError when a ``width`` x ``height`` image is above ``limit`` pixels (not decoded), or
+    has a side below :data:`~pnlviz.data.limits.MIN_IMAGE_SIDE`."""
+    if width < MIN_IMAGE_SIDE or height < MIN_IMAGE_SIDE:
+        raise DataError(source, f"image too small: {width}x{height} pixels (a frame needs at least "
+                                f"{MIN_IMAGE_SIDE}x{MIN_IMAGE_SIDE})")
     if width * height > limit:
         raise DataError(source, f"image too large: {width}x{height} pixels ({width * height / 1e6:.0f} megapixels; "
                                 f"the limit is {limit / 1e6:.0f} megapixels)")

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import DataError, member_source
+from .filekind import os_error_text
 from .layout import find_root, is_junk, split_member
 from .reading import bad_name_error, is_utf8
 
@@ -96,12 +97,17 @@ def index_folder(path: Path) -> DatasetIndex:
     """The frames of a folder: at its top level, or inside its single subfolder."""
     root = Path(path)
     for _ in range(2):  # the folder itself, or the single folder inside it
-        subdirs, files = [], []
+        subdirs, files, broken = [], [], []
         with os.scandir(root) as it:
             for entry in it:
                 if entry.name.startswith("."):
                     continue
-                if entry.is_dir():
+                try:
+                    is_dir = entry.is_dir()  # follows a symlink: a loop raises ELOOP
+                except OSError as e:
+                    broken.append(DataError(entry.path, f"cannot read: {os_error_text(e)}: skipped"))
+                    continue
+                if is_dir:
                     if entry.name != CAMERAS_DIR:
                         subdirs.append(entry.path)
                 elif classify(entry.name) is not None:
@@ -111,6 +117,7 @@ def index_folder(path: Path) -> DatasetIndex:
         root = Path(subdirs[0])
     index = DatasetIndex(None, os.fspath(root))
     index._sort(files)
+    index.rejected = sorted(index.rejected + broken, key=str)
     return index
 
 

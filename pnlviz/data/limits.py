@@ -5,7 +5,7 @@ A file over a cap is a one-line :class:`~pnlviz.data.errors.DataError` naming it
 
 from __future__ import annotations
 
-__all__ = ["MAX_JSON_BYTES", "MAX_IMAGE_BYTES", "MAX_IMAGE_PIXELS", "format_bytes"]
+__all__ = ["MAX_JSON_BYTES", "MAX_IMAGE_BYTES", "MAX_IMAGE_PIXELS", "MIN_IMAGE_SIDE", "format_bytes"]
 
 #: Largest JSON file (annotation, camera, predictions, homographies, match info) read, in bytes.
 MAX_JSON_BYTES = 64 * 2**20
@@ -13,6 +13,9 @@ MAX_JSON_BYTES = 64 * 2**20
 MAX_IMAGE_BYTES = 256 * 2**20
 #: Largest image decoded, in pixels (an 8K UHD frame is 33 megapixels).
 MAX_IMAGE_PIXELS = 50_000_000
+#: Smallest image side, in pixels: the rule of a frame the calibration accepts
+#: (:class:`pnlviz.calib.frame.FrameSettings`), so that ``validate`` refuses what calibrate would.
+MIN_IMAGE_SIDE = 2
 
 
 def format_bytes(n: int) -> str:

@@ -12,8 +12,9 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from .errors import DataError
+from .filekind import os_error_text, output_problem
 
-__all__ = ["OutputError", "check_output"]
+__all__ = ["OutputError", "check_output", "check_writable"]
 
 PathLike = str | os.PathLike
 
@@ -35,12 +36,35 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def check_writable(out: PathLike, what: str = "--out", folder: bool = False) -> None:
+    """Raise :class:`OutputError` when ``out`` exists and is not what is written there (a regular
+    file, or a folder with ``folder``): a device node, a FIFO or a symbolic link is never
+    replaced; or when the nearest existing folder above it cannot be written (read-only file
+    system, permission)."""
+    source = f"{what} {os.fspath(out)}"
+    problem = output_problem(out, folder)
+    if problem:
+        raise OutputError(source, problem)
+    parent = Path(os.path.abspath(out))
+    if not (folder and parent.is_dir()):
+        parent = parent.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not os.access(parent, os.W_OK):
+        try:
+            os.statvfs(parent)
+            reason = "read-only file system" if os.statvfs(parent).f_flag & os.ST_RDONLY else "permission denied"
+        except OSError as e:
+            reason = os_error_text(e)
+        raise OutputError(source, f"cannot write in {os.fspath(parent)}: {reason}")
+
+
 def check_output(out: PathLike, *, inputs: Iterable[PathLike | None] = (), datasets: Iterable[PathLike | None] = (),
-                 what: str = "--out") -> None:
+                 what: str = "--out", folder: bool = False) -> None:
     """Raise :class:`OutputError` (a DataError, one line) when ``out`` is one of ``inputs`` (files
     that must not be overwritten), or is, or lies inside, one of ``datasets`` (dataset folders or
-    zips). ``what`` names the output in the message (the option that gave it). None entries are
-    ignored."""
+    zips), or cannot be written (:func:`check_writable`). ``what`` names the output in the message
+    (the option that gave it). None entries are ignored."""
     target = _resolved(out)
     source = f"{what} {os.fspath(out)}"
     for inp in inputs:
@@ -55,3 +79,4 @@ def check_output(out: PathLike, *, inputs: Iterable[PathLike | None] = (), datas
         if root.is_dir() and root in target.parents:
             raise OutputError(source, f"is inside the dataset folder {os.fspath(ds)}: it would become part of "
                                       f"the dataset; write it elsewhere")
+    check_writable(out, what, folder)  # after the checks above, whose messages say more

@@ -131,6 +131,9 @@ def _parse_entries(obj: Any, fields: tuple[str, ...], valid: range, what: str, s
             v = as_number(entry[name])
             if v is None:
                 raise DataError(source, f'"{what}" id {ident}: "{name}" is not a number, got {describe(entry[name])}')
+            if name.startswith("p") and not 0.0 <= v <= 1.0:  # NaN fails too
+                raise DataError(source, f'probability out of range in "{what}" id {ident}: {name} = {v:g} '
+                                        f"(must lie in [0, 1])")
             if not math.isfinite(v):
                 raise DataError(source, f'non-finite value in "{what}" id {ident}: {name} = {v}')
             if not name.startswith("p") and not (lo <= v <= hi):
@@ -279,9 +282,27 @@ def read_predictions_info(path: str | os.PathLike) -> dict:
     """The info written next to prediction zip ``path`` ({} when there is none: a zip from
     PnLCalib or elsewhere). A file that is there but unreadable is a DataError."""
     info = predictions_info_path(path)
-    if not info.is_file():
-        return {}
+    if not os.path.lexists(info) or (info.is_symlink() and not info.exists()):
+        return {}  # a FIFO, a device or a loop there is refused by the read below, never ignored
     obj = parse_json_bytes(read_file_bytes(info), str(info))
     if not isinstance(obj, dict):
         raise DataError(str(info), f"expected a JSON object, got {describe(obj)}")
+    _check_info(obj, str(info))
     return obj
+
+
+def _check_info(obj: dict, source: str) -> None:
+    """The detector's settings in a sidecar, by type and range (the calibration settings are
+    checked by name where they are applied: :mod:`pnlviz.pipeline.settings`)."""
+    for key in ("kp_threshold", "line_threshold"):
+        if key in obj:
+            v = as_number(obj[key])
+            if v is None or not 0.0 <= v <= 1.0:
+                raise DataError(source, f"{key!r} must be a number in [0, 1], got {describe(obj[key])}")
+    if "input_size" in obj:
+        size = obj["input_size"]
+        if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and not isinstance(v, bool)
+                                                                   and 16 <= v <= 16384 for v in size)):
+            raise DataError(source, f"'input_size' must be two whole numbers of 16 to 16384, got {describe(size)}")
+    if "calibration" in obj and not isinstance(obj["calibration"], dict):
+        raise DataError(source, f"'calibration' must be an object of settings, got {describe(obj['calibration'])}")

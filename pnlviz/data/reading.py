@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from typing import IO
 
 from .errors import DataError
+from .filekind import open_regular, require_input
 from .limits import MAX_IMAGE_BYTES, MAX_JSON_BYTES, format_bytes
 
 __all__ = [
@@ -64,6 +65,7 @@ def _reason(e: BaseException) -> str:
 def open_zip(path: str | os.PathLike, not_zip: str = "not a valid .zip archive") -> zipfile.ZipFile:
     """Open a zip archive for reading; any failure is a DataError naming ``path``."""
     source = os.fspath(path)
+    require_input(path, folder=False)
     try:
         return zipfile.ZipFile(path)
     except zipfile.BadZipFile:
@@ -104,8 +106,9 @@ def open_file(path: str | os.PathLike, limit: int, source: str | None = None) ->
     """A file open for reading, after its size was checked against ``limit``; OSError inside the
     ``with`` block becomes ``DataError(source, "cannot read file: ...")``."""
     source = os.fspath(path) if source is None else source
+    fd = open_regular(path, source)  # never blocks on a FIFO, never reads a device
     try:
-        with open(path, "rb") as f:
+        with os.fdopen(fd, "rb") as f:
             size = os.fstat(f.fileno()).st_size
             if size > limit:
                 raise _too_large(source, size, limit)

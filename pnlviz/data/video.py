@@ -18,6 +18,49 @@ from .errors import DataError
 
 __all__ = ["VideoDataset"]
 
+#: First bytes of still images: a JPEG or PNG named .mp4 is not a clip.
+_STILL_IMAGES = {b"\xff\xd8\xff": "a JPEG image", b"\x89PNG": "a PNG image", b"GIF8": "a GIF image",
+                 b"BM": "a BMP image"}
+
+
+def _check_container(path: Path) -> None:
+    """A regular file (a FIFO or device is never opened) that is not a still image."""
+    from .filekind import open_regular
+
+    with os.fdopen(open_regular(path), "rb") as f:
+        head = f.read(16)
+    for magic, what in _STILL_IMAGES.items():
+        if head.startswith(magic):
+            raise DataError(str(path), f"is {what}, not a video")
+    if not head:
+        raise DataError(str(path), "the video file is empty")
+
+
+def _backend(cap) -> str:
+    try:
+        return str(cap.getBackendName()).upper()
+    except Exception:  # an OpenCV without getBackendName
+        return ""
+
+
+def _check_decodes(cap, count: int, source: str) -> None:
+    """The first and the last frame decode (a damaged or truncated video is refused at once, not
+    "calibrated" from its header); releases ``cap``."""
+    import cv2
+
+    try:
+        ok, img = cap.read()
+        if not ok or img is None:
+            raise DataError(source, "the video's first frame cannot be decoded (damaged video or unsupported codec)")
+        if count > 1:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, count - 1)
+            ok, img = cap.read()
+            if not ok or img is None:
+                raise DataError(source, f"the video's last frame ({count}) cannot be decoded (truncated or damaged "
+                                        f"video)")
+    finally:
+        cap.release()
+
 class VideoDataset:
     """The frames of one video file, with the part of :class:`pnlviz.data.Dataset`'s interface the
     batch commands use (stems, frames, images, sizes; no annotations)."""
@@ -26,10 +69,11 @@ class VideoDataset:
         import cv2
 
         self.path = Path(path)
-        if not self.path.is_file():
+        if not self.path.exists():
             raise DataError(str(path), "no such video file")
+        _check_container(self.path)
         cap = cv2.VideoCapture(str(self.path))
-        if not cap.isOpened():
+        if not cap.isOpened() or "IMAGES" in _backend(cap):
             raise DataError(str(path), "OpenCV cannot open this video (unknown format or codec)")
         self.width = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH))
         self.height = int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
@@ -39,9 +83,10 @@ class VideoDataset:
             count = 0
             while cap.grab():
                 count += 1
-        cap.release()
         if count <= 0 or self.width <= 0 or self.height <= 0:
+            cap.release()
             raise DataError(str(path), "the video has no frames")
+        _check_decodes(cap, count, str(path))
         self.name = self.path.stem
         self._stems = tuple(f"{self.name}-IMG_{i + 1:05d}" for i in range(count))
         self._index = {s: i for i, s in enumerate(self._stems)}

@@ -27,6 +27,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
+from .atomic import refuse_non_regular
+from .filekind import names_path, naming
 from .errors import DataError, member_source
 from .reading import is_utf8
 
@@ -88,8 +90,10 @@ class _TempOutput:
         self.keep_partial = keep_partial
         if self.path.is_dir():
             raise DataError(os.fspath(self.path), "is a folder: expected a file name for the output")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._tmp = self._new_temp()
+        refuse_non_regular(self.path)
+        with naming(self.path):
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._tmp = self._new_temp()
         self.closed = False
 
     def _new_temp(self) -> str:
@@ -103,6 +107,7 @@ class _TempOutput:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(self._tmp, 0o666 & ~umask)  # mkstemp gives 0600; the output gets the usual mode
+        refuse_non_regular(self.path)
         os.replace(self._tmp, self.path)
         self.closed = True
 
@@ -110,6 +115,7 @@ class _TempOutput:
         with contextlib.suppress(OSError):
             os.unlink(self._tmp)
 
+    @names_path
     def close(self) -> Path:
         raise NotImplementedError
 
@@ -156,6 +162,7 @@ class ZipStream(_TempOutput):
     def __len__(self) -> int:
         return len(self.names)
 
+    @names_path
     def add(self, name: str, data: str | bytes) -> None:
         """Write one member now. A name that cannot be stored (not UTF-8, already written) raises
         DataError and writes nothing; the zip stays usable."""
@@ -180,6 +187,7 @@ class ZipStream(_TempOutput):
             with contextlib.suppress(OSError):
                 os.unlink(journal_path(self.path))
 
+    @names_path
     def close(self) -> Path:
         """Finish the zip, put its members in ``key`` order, and move it over ``path``."""
         self._zip.close()
@@ -229,6 +237,7 @@ class LineStream(_TempOutput):
     def __len__(self) -> int:
         return len(self._keys)
 
+    @names_path
     def add(self, line: str, key: Any = 0) -> None:
         """Write ``line`` (a newline is added; it must not hold one)."""
         if "\n" in line or "\r" in line:
@@ -237,6 +246,7 @@ class LineStream(_TempOutput):
         self._file.flush()
         self._keys.append(key)
 
+    @names_path
     def close(self) -> Path:
         """Finish the file, put its lines in key order, and move it over ``path``."""
         self._file.close()

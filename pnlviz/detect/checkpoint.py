@@ -11,7 +11,9 @@ tensors, never a raw ``RuntimeError`` from ``torch``.
 
 from __future__ import annotations
 
+import errno
 import os
+import shutil
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -163,12 +165,21 @@ def load_checkpoint(
 
 def save_checkpoint(model: nn.Module, path: str | os.PathLike[str]) -> Path:
     """Write ``model.state_dict()`` (a plain state dict) to ``path`` atomically."""
+    from pnlviz.data.atomic import refuse_non_regular
+
     path = Path(path)
+    refuse_non_regular(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
-        torch.save(model.state_dict(), tmp)
+        try:
+            torch.save(model.state_dict(), tmp)
+        except RuntimeError as exc:  # torch reports a failed write (a full disk) as a RuntimeError
+            free = shutil.disk_usage(path.parent).free
+            reason = "No space left on device" if free < 2**20 else str(exc).strip().splitlines()[0][:120]
+            raise OSError(errno.ENOSPC if free < 2**20 else errno.EIO, reason, str(path)) from None
+        refuse_non_regular(path)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -6,8 +6,23 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from pnlviz.paths import ASSETS_DIR
+
+#: how to get the networks where PyTorch is missing (the base install calibrates without it)
+DETECT_EXTRA = "pip install 'pnlviz[detect]'"
+
+
+def torch_missing() -> str | None:
+    """None when PyTorch can be imported; else the one line that says how to get the networks."""
+    import importlib.util
+
+    if importlib.util.find_spec("torch") is None:
+        return f"the keypoint and line networks need PyTorch, which is not installed: {DETECT_EXTRA}"
+    return None
+
+
 #: The light default model (``pnlviz train``), used when no weights are given.
-DEFAULT_MODEL = Path(__file__).resolve().parents[2] / "assets" / "models" / "light.pt"
+DEFAULT_MODEL = ASSETS_DIR / "models" / "light.pt"
 
 
 def sidecar_path(weights: str | Path) -> Path:

@@ -306,6 +306,9 @@ def _train_loop(net: LightNet, sources: list[Source], config: TrainConfig, budge
             for g in opt.param_groups:
                 g["lr"] = config.lr_final + (config.lr - config.lr_final) * cosine
             loss = loss_fn(net, x, kp_t, kp_m, ln_t, ln_m, config.loss)
+            if not math.isfinite(float(loss.detach())):  # stop before the weights turn NaN: no checkpoint
+                raise ValueError(f"training diverged: the loss is {float(loss.detach())} at step {run.steps + 1} "
+                                 f"(epoch {epoch + 1}); no checkpoint written (check sigma, lr and the data)")
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

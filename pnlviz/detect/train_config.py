@@ -8,9 +8,11 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from pnlviz.paths import ASSETS_DIR
+
 __all__ = ["DEFAULT_CONFIG_PATH", "TrainConfig", "load_config", "resolve_path"]
 
-DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / "assets" / "models" / "light_config.json"
+DEFAULT_CONFIG_PATH = ASSETS_DIR / "models" / "light_config.json"
 
 
 @dataclass
@@ -67,6 +69,7 @@ class TrainConfig:
         cfg = cls(**kw)
         if "input_size" not in d and "size" in data:
             cfg.input_size = cfg.size
+        check_config(cfg)
         return cfg
 
     def to_dict(self) -> dict:
@@ -79,9 +82,56 @@ class TrainConfig:
         return out
 
 
+#: numeric fields: (whole number, low, high); every value must lie in [low, high]
+_RANGES: dict[str, tuple[bool, float, float]] = {
+    "data_seed": (True, 0, 2**32 - 1), "frames": (True, 0, 10**7), "data_weight": (False, 0.0, 1e6),
+    "epochs": (True, 1, 10**6), "lr": (False, 1e-12, 10.0), "lr_final": (False, 0.0, 10.0),
+    "weight_decay": (False, 0.0, 10.0), "batch_size": (True, 1, 4096), "sigma": (False, 0.05, 100.0),
+    "kp_threshold": (False, 0.0, 1.0), "line_threshold": (False, 0.0, 1.0), "seed": (True, 0, 2**32 - 1),
+    "threads": (True, 1, 1024), "epoch_frames": (True, 1, 10**8),
+}
+_SIZES = ("size", "input_size")
+_SIDE = (16, 4096)
+
+
+def _range_problem(name: str, value, whole: bool, low: float, high: float) -> str | None:
+    import math
+
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (whole and not float(value).is_integer()):
+        return f"{name} must be {'a whole number' if whole else 'a number'}, got {value!r}"[:100]
+    if not math.isfinite(value) or not low <= value <= high:
+        return f"{name} = {value!r} is out of range ({low:g} to {high:g})"
+    return None
+
+
+def check_config(cfg: TrainConfig) -> None:
+    """ValueError naming the first field of ``cfg`` of the wrong type or out of range (a sigma of
+    0 makes every target NaN; an input size of 0 cannot be resized to)."""
+    for name, (whole, low, high) in _RANGES.items():
+        value = getattr(cfg, name)
+        if value is None and name == "epoch_frames":
+            continue
+        problem = _range_problem(name, value, whole, low, high)
+        if problem:
+            raise ValueError(problem)
+    for name in _SIZES:
+        size = getattr(cfg, name)
+        if len(size) != 2 or not all(_SIDE[0] <= v <= _SIDE[1] for v in size):
+            raise ValueError(f"{name} = {list(size)} is out of range (two sides of {_SIDE[0]} to {_SIDE[1]} pixels)")
+    if cfg.loss not in ("focal", "mse"):
+        raise ValueError(f"loss must be focal or mse, got {cfg.loss!r}"[:100])
+    for name in ("calibration", "augment"):
+        if not isinstance(getattr(cfg, name), dict):
+            raise ValueError(f"{name} must be an object, got {getattr(cfg, name)!r}"[:100])
+    if not isinstance(cfg.real, list):
+        raise ValueError(f"real must be a list of sources, got {cfg.real!r}"[:100])
+
+
 def load_config(path: str | Path | None = None) -> TrainConfig:
+    from pnlviz.data.reading import read_file
+
     path = Path(path) if path is not None else DEFAULT_CONFIG_PATH
-    cfg = TrainConfig.from_dict(json.loads(Path(path).read_text()))
+    cfg = TrainConfig.from_dict(json.loads(read_file(path)))  # capped; a FIFO or device refused
     cfg.base_dir = str(Path(path).resolve().parent)
     return cfg
 

@@ -361,26 +361,32 @@ class ExportedFrames:
     """Labels exported from the app (``keypoints/<stem>.json`` and ``annotations/<stem>.json`` of a
     ``pnlviz export`` folder or zip) with the images of ``images`` (the dataset the app served).
     The keypoints are taken as corrected (moved points where the annotator put them, hidden ones
-    absent), the annotation's lines give the line targets; the left-right disambiguation is
+    and those the outlier gate flagged absent), the annotation's lines give the line targets; the
+    left-right disambiguation is
     decided on a homography fitted to the ground keypoints, as for every training target."""
 
     def __init__(self, export: str | os.PathLike, images: str | os.PathLike, *,
                  exclude: list[str] | None = None) -> None:
         import json
-        import zipfile
 
         from pnlviz.data import open_dataset
         from pnlviz.data.errors import DataError
 
+        from pnlviz.data.reading import open_zip, read_file, read_zip_member
+
         export = Path(export)
         files: dict[str, bytes] = {}
         if export.is_file():
-            with zipfile.ZipFile(export) as z:
-                files = {n: z.read(n) for n in z.namelist() if n.endswith(".json")}
+            with open_zip(export, not_zip="not a pnlviz export (not a valid .zip archive)") as z:
+                files = {n: read_zip_member(z, n, f"{export}:{n}") for n in z.namelist() if n.endswith(".json")}
         elif export.is_dir():
-            files = {str(p.relative_to(export).as_posix()): p.read_bytes() for p in export.rglob("*.json")}
+            files = {str(p.relative_to(export).as_posix()): read_file(p) for p in export.glob("*/*.json")}
+            files.update({p.name: read_file(p) for p in export.glob("*.json")})
         else:
             raise DataError(str(export), "no such export folder or zip")
+        if not any(n.rsplit("/", 1)[-1].startswith("manifest") for n in files):
+            raise DataError(str(export), "no manifest: not a complete pnlviz export (an interrupted export?); "
+                                         "export again and train on the finished one")
         self.dataset = open_dataset(images)
         skip = set(exclude or ())
         self.stems: list[str] = []
@@ -395,7 +401,9 @@ class ExportedFrames:
             try:
                 kp = json.loads(files[name])
                 size = tuple(int(v) for v in kp["image_size"])
-                points = {int(k): (float(v["x"]), float(v["y"])) for k, v in kp["keypoints"].items()}
+                # points the export's outlier gate flagged are not ground truth: left out
+                points = {int(k): (float(v["x"]), float(v["y"])) for k, v in kp["keypoints"].items()
+                          if not v.get("flagged")}
             except (ValueError, KeyError, TypeError) as exc:
                 raise DataError(f"{export}/{name}", f"not a pnlviz keypoint label file ({exc})") from None
             ann = files.get(f"annotations/{stem}.json")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pnlviz import ASSETS_DIR
+from pnlviz.paths import ASSETS_DIR
 from pnlviz.field.names import CIRCLE_CLASSES, IGNORED_CLASSES, STRAIGHT_CLASSES
 
 DEFAULT_MODEL_PATH = ASSETS_DIR / "field_model" / "soccer_pitch.json"

@@ -280,6 +280,19 @@ class Camera:
         s = np.where(s > 0, s, np.nan)
         return self.C + s[:, None] * d
 
+    def image_to_pitch(self, uv: np.ndarray) -> np.ndarray:
+        """Where on the pitch (the ground plane z = 0, metres, SoccerNet's centre-origin frame) the
+        pixels ``uv`` (N, 2) of this image are: (N, 2), lens distortion undone; NaN for a pixel
+        whose ray does not meet the ground in front of the camera (above the horizon). The point
+        a player stands on is the bottom middle of the player's box."""
+        return self.back_project_to_ground(uv)[:, :2]
+
+    def homography(self) -> np.ndarray:
+        """3x3 homography from the ground plane (X, Y, 1) in metres to pixels, without lens
+        distortion (:meth:`image_to_pitch` undoes the lens too). Its inverse maps pixels to the
+        pitch."""
+        return self.ground_homography()
+
     def in_image(self, uv: np.ndarray) -> np.ndarray:
         uv = np.asarray(uv)
         return (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)

@@ -5,15 +5,20 @@ writes (locally or on a cluster's workers) and the app's export button downloads
 Layout (a folder or a zip):
 
 * ``annotations/<stem>.json``: SoccerNet line annotation, with the corrected line points;
-* ``keypoints/<stem>.json``: keypoint labels, ``{"image_size": [W, H], "keypoints": {"id": {"x",
-  "y", "visible", "set"}}}`` in pixels, corrected keypoints included (hidden ones left out);
+* ``keypoints/<stem>.json``: keypoint labels, ``{"image_size": [W, H], "reviewed": bool, "review":
+  status, "keypoints": {"id": {"x", "y", "visible", "set", "provenance", "residual", "flagged"}}}``
+  in pixels, corrected keypoints included (hidden ones left out); ``provenance``: annotation,
+  detection or hand; ``residual``: px to the frame's exported camera; ``flagged``: beyond the
+  outlier gate (:mod:`pnlviz.pipeline.snapshot`), not ground truth;
 * ``cameras/camera_<stem>.json``: the calibrated camera at 960x540 (SoccerNet format);
 * ``coco_keypoints.json``: COCO keypoints, one "pitch" instance per frame with the 73 keypoints
-  (v = 2 inside the image, 1 labelled outside it, 0 absent);
+  (v = 2 inside the image, 1 labelled outside it, 0 absent or flagged by the gate);
 * ``manifest.json``: what each exported frame carries and what was changed (names, not paths:
   the export does not say where the server's files live).
 
-Only accepted and corrected frames are exported unless ``include_all``. A frame whose files
+Only accepted and corrected frames are exported unless ``include_all``; a reviewed frame exports
+what its review recorded (its snapshot), whatever the reader's detections, and unreviewed ones
+(``include_all``) are calibrated from the reader's inputs and marked ``"reviewed": false``. A frame whose files
 cannot be read is listed in the manifest with its error and gets no label files (an empty label
 file would say "no keypoints", which is not what is known).
 """
@@ -23,17 +28,18 @@ from __future__ import annotations
 import json
 import time
 import zipfile
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pnlviz.conventions import EVAL_SIZE
 from pnlviz.data import atomic_write_bytes
 from pnlviz.data.annotations import annotation_to_json
 from pnlviz.data.jsonio import dumps
 from pnlviz.data.zipwriter import ZipStream
-from pnlviz.field.model import FieldModel
+from pnlviz.data.errors import DataError
+from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.pipeline.reader import FrameReader, Settings
+from pnlviz.pipeline.snapshot import GATE_PX, REVIEWED, FrameLabels, gate, inside, reviewed_labels, view_labels
 from pnlviz.pipeline.view import FrameView, frame_view
 
 N_KEYPOINTS = 73
@@ -49,10 +55,6 @@ class FrameExport:
     files: dict[str, bytes] = field(default_factory=dict)
     coco_image: dict | None = None
     coco_annotation: dict | None = None
-
-
-#: the frame's view, when the caller has it computed already (the app's views on screen)
-ViewOf = Callable[[str], FrameView]
 
 
 def export_stems(reader: FrameReader, include_all: bool = False) -> list[str]:
@@ -76,40 +78,61 @@ def failed_frame(reader: FrameReader, stem: str, message: str) -> FrameExport:
                               "exported": False})
 
 
-def export_frame(reader: FrameReader, stem: str, settings: Settings | None = None, model: FieldModel | None = None,
-                 view: FrameView | None = None) -> FrameExport:
-    """The frame's export, calibrated with ``settings`` (default: the reader's); ``view``: the
-    frame's view under those settings when the caller has it already."""
+def _frame_labels(reader: FrameReader, stem: str, record: dict, settings: Settings | None, model: FieldModel,
+                  view: FrameView | None) -> FrameLabels:
+    """What the frame exports: a reviewed frame what its review recorded, another its view."""
+    if record.get("review") in REVIEWED:
+        return reviewed_labels(reader, stem, record, model)
     view = view or frame_view(reader, stem, settings or reader.default_settings(), model)
-    W, H = view.size
-    entry = {**edits_entry(reader, stem), "calibrated": bool(view.result is not None and view.result.ok),
-             "error": view.error}
-    if view.annotation is None and view.observations is None and view.error:  # unreadable: no labels
+    if view.annotation is None and view.observations is None and view.error:  # unreadable
+        return FrameLabels(view.size, {}, None, view.error, "unreviewed", error=view.error)
+    return view_labels(view, record, model)
+
+
+def export_frame(reader: FrameReader, stem: str, settings: Settings | None = None, model: FieldModel | None = None,
+                 view: FrameView | None = None, gate_px: float = GATE_PX) -> FrameExport:
+    """The frame's export: a reviewed frame's labels as reviewed (:func:`reviewed_labels`),
+    another's calibrated with ``settings`` (default: the reader's; ``view``: the frame's view
+    under them when the caller has it). Points beyond the outlier gate (``gate_px`` at 960x540)
+    are flagged, not exported as visible ground truth."""
+    model = model or load_field_model()
+    record = reader.edits.get(stem) if reader.edits is not None else {}
+    fl = _frame_labels(reader, stem, record, settings, model, view)
+    W, H = fl.size
+    flagged = gate(fl, gate_px)
+    entry = {**edits_entry(reader, stem), "calibrated": fl.camera is not None, "error": fl.error,
+             "labels": fl.basis, "flagged": len(flagged)}
+    try:
+        ann = reader.annotation(stem, record)
+    except DataError as exc:
+        ann, entry["error"] = None, entry["error"] or str(exc)
+    if ann is None and not fl.labels and entry["error"]:  # unreadable: no labels
         entry["exported"] = False
         return FrameExport(stem, entry)
     entry["exported"] = True
     files = {}
-    if view.annotation is not None:
-        files[f"annotations/{stem}.json"] = dumps(annotation_to_json(view.annotation)).encode()
+    if ann is not None:
+        files[f"annotations/{stem}.json"] = dumps(annotation_to_json(ann)).encode()
     kps = {}
-    obs = view.observations
-    if obs is not None:
-        for kid, (x, y), s in zip(obs.kp_ids, obs.kp_xy, obs.kp_sets):
-            inside = bool(0 <= x < W and 0 <= y < H)
-            kps[str(int(kid))] = {"x": float(x), "y": float(y), "visible": inside, "set": str(s)}
-    files[f"keypoints/{stem}.json"] = dumps({"image_size": [W, H], "keypoints": kps}).encode()
-    if entry["calibrated"]:
-        files[f"cameras/camera_{stem}.json"] = dumps(view.result.camera.scaled(*EVAL_SIZE).to_soccernet()).encode()
+    for kid, label in fl.labels.items():
+        kps[str(kid)] = {"x": label.x, "y": label.y, "visible": inside(label, fl.size), "set": label.set,
+                         "provenance": label.provenance, "residual": label.residual, "flagged": kid in flagged}
+    reviewed = fl.basis != "unreviewed"
+    files[f"keypoints/{stem}.json"] = dumps({"image_size": [W, H], "reviewed": reviewed, "review": record.get("review"),
+                                             "keypoints": kps}).encode()
+    if fl.camera is not None:
+        files[f"cameras/camera_{stem}.json"] = dumps(fl.camera).encode()
     flat = [0.0] * (3 * N_KEYPOINTS)
     for key, k in kps.items():
         i = int(key) - 1
-        flat[3 * i:3 * i + 3] = [k["x"], k["y"], 2 if k["visible"] else 1]
+        # COCO v: 2 visible ground truth, 1 labelled outside the image, 0 flagged by the gate
+        flat[3 * i:3 * i + 3] = [k["x"], k["y"], 0 if k["flagged"] else 2 if k["visible"] else 1]
     image_id = reader.index_of(stem) + 1  # the frame's place in the dataset: the same whatever is exported
     frame = reader.ds.frame(stem)
     image = {"id": image_id, "file_name": Path(frame.image_path).name if frame.has_image else None,
-             "stem": stem, "width": W, "height": H}
+             "stem": stem, "width": W, "height": H, "reviewed": reviewed}
     annotation = {"id": image_id, "image_id": image_id, "category_id": 1, "keypoints": flat,
-                  "num_keypoints": sum(1 for k in kps.values() if k["visible"])}
+                  "num_keypoints": sum(1 for i in range(N_KEYPOINTS) if flat[3 * i + 2] == 2)}
     return FrameExport(stem, entry, files, image, annotation)
 
 
@@ -121,11 +144,12 @@ class ExportWriter:
     export leaves no zip), or None (:meth:`close` returns the files, for the app's download).
     """
 
-    def __init__(self, reader: FrameReader, out: Path | None, include_all: bool = False):
+    def __init__(self, reader: FrameReader, out: Path | None, include_all: bool = False, gate_px: float = GATE_PX):
         self.out = None if out is None else Path(out)
         self._order = {s: i for i, s in enumerate(reader.stems)}
         self.manifest = {"source": reader.data.resolve().name, "edits": reader.edits.root.name,
-                         "exported": time.strftime("%Y-%m-%dT%H:%M:%S"), "include_all": include_all, "frames": {}}
+                         "exported": time.strftime("%Y-%m-%dT%H:%M:%S"), "include_all": include_all,
+                         "gate_px_at_960x540": float(gate_px), "flagged": 0, "frames": {}}
         self._parts: list[tuple[int, str, dict, dict | None, dict | None]] = []
         self.files: dict[str, bytes] = {}
         self._zip = None
@@ -152,6 +176,7 @@ class ExportWriter:
                                 "skeleton": []}]}
         for _, stem, entry, image, annotation in sorted(self._parts, key=lambda p: p[0]):
             self.manifest["frames"][stem] = entry
+            self.manifest["flagged"] += entry.get("flagged", 0)
             if image is not None:
                 coco["images"].append(image)
                 coco["annotations"].append(annotation)
@@ -175,12 +200,12 @@ class ExportWriter:
 
 
 def export_files(reader: FrameReader, include_all: bool = False, settings: Settings | None = None,
-                 model: FieldModel | None = None, view_of: ViewOf | None = None) -> dict[str, bytes]:
-    """``{relative path: content}`` of the export (see the module docstring); the frames are
-    calibrated with ``settings`` (default: the reader's), or their views come from ``view_of``."""
-    with ExportWriter(reader, None, include_all) as writer:
+                 model: FieldModel | None = None, gate_px: float = GATE_PX) -> dict[str, bytes]:
+    """``{relative path: content}`` of the export (see the module docstring); unreviewed frames
+    are calibrated with ``settings`` (default: the reader's)."""
+    with ExportWriter(reader, None, include_all, gate_px) as writer:
         for stem in export_stems(reader, include_all):
-            writer.add(export_frame(reader, stem, settings, model, view_of(stem) if view_of else None))
+            writer.add(export_frame(reader, stem, settings, model, gate_px=gate_px))
         return writer.close()
 
 
@@ -195,13 +220,13 @@ def read_export_zip(path: Path) -> tuple[dict[str, bytes], dict]:
 
 
 def write_export(reader: FrameReader, out: Path, include_all: bool = False, settings: Settings | None = None,
-                 parts: Iterable[FrameExport] | None = None) -> dict[str, dict]:
+                 parts: Iterable[FrameExport] | None = None, gate_px: float = GATE_PX) -> dict[str, dict]:
     """Write the export to a folder, or to a zip when ``out`` ends in .zip; ``parts``: the frames'
     exports when computed elsewhere (a cluster), else computed here with ``settings``. Returns the
     manifest's frames (stem -> entry; ``entry["exported"]`` False for unreadable frames)."""
     if parts is None:
-        parts = (export_frame(reader, stem, settings) for stem in export_stems(reader, include_all))
-    with ExportWriter(reader, out, include_all) as writer:
+        parts = (export_frame(reader, stem, settings, gate_px=gate_px) for stem in export_stems(reader, include_all))
+    with ExportWriter(reader, out, include_all, gate_px) as writer:
         for part in parts:
             writer.add(part)
         writer.close()

@@ -19,8 +19,9 @@ from pathlib import Path
 from pnlviz.calib.calibrate import CalibParams
 from pnlviz.calib.frame import SOURCES, FrameInputs, FrameSettings
 from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
-from pnlviz.data import DataError, open_dataset, read_predictions, read_predictions_info
+from pnlviz.data import DataError, open_dataset, predictions_info_path, read_predictions, read_predictions_info
 from pnlviz.data.annotations import parse_annotation
+from pnlviz.pipeline.settings import check_settings
 from pnlviz.data.edits import EditsStore, default_edits_dir
 from pnlviz.geometry.camera import Camera
 
@@ -100,8 +101,9 @@ class FrameReader:
             raise DataError(str(data), "no frames (expected <stem>.jpg / <stem>.json files)")
         predictions = read_predictions(detections) if detections else None
         recorded = (read_predictions_info(detections).get("calibration") if detections else None)
-        settings = dict(recorded or detector_settings or {})
-        CalibParams().updated(settings)  # unknown names fail here, not on the first frame
+        source = str(predictions_info_path(detections)) if recorded else "detector settings"
+        settings = check_settings(recorded or detector_settings or {}, source)  # fails here, not on a frame
+        CalibParams().updated(settings)
         store = EditsStore(edits or default_edits_dir(data), writable=writable)
         return cls(ds, predictions=predictions, edits=store, size=size, detection_settings=settings, data=data)
 

@@ -1,0 +1,209 @@
+"""pnlviz's Python API: the few functions a program calls, checked at the door (an error names
+the argument that is wrong), over the engine the app and the commands use.
+
+World frame: SoccerNet's, metres, origin at the centre spot, x along the pitch (towards the
+right goal), y across it (positive towards the main camera's side), z down (the crossbar is at
+z = -2.44). Pixels: x to the right, y down, (0, 0) the centre of the top-left pixel.
+
+>>> import pnlviz
+>>> world = pnlviz.keypoints()
+>>> world[45]  # the left penalty mark
+(-41.5, 0.0, 0.0)
+>>> cam = pnlviz.Camera.from_look_at((0.0, 45.0, -15.0), (0.0, 0.0, 0.0), hfov_deg=60, width=1280, height=720)
+>>> pixels = {k: cam.project([xyz])[0][0] for k, xyz in world.items()}
+>>> pixels = {k: uv for k, uv in pixels.items() if cam.in_image(uv[None])[0]}  # the keypoints in view
+>>> len(pixels)
+18
+>>> result = pnlviz.calibrate(pixels, image_size=(1280, 720))
+>>> result.ok, round(result.camera.hfov_deg, 2)
+(True, 60.0)
+>>> feet = result.camera.project([(10.0, 5.0, 0.0)])[0]  # a player's feet in the image
+>>> [round(float(v), 3) for v in result.camera.image_to_pitch(feet)[0]]
+[10.0, 5.0]
+>>> pnlviz.calibrate({99: (1.0, 2.0)}, image_size=(1280, 720))
+Traceback (most recent call last):
+...
+pnlviz.ArgumentError: keypoints[99]: no such keypoint id (1-73: see pnlviz.keypoints())
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pnlviz.data.errors import ArgumentError
+from pnlviz.geometry.camera import Camera
+
+__all__ = ["ArgumentError", "Calibration", "Camera", "calibrate", "detect", "keypoint_names", "keypoints", "open_dataset",
+           "top_view"]
+
+
+def keypoints() -> dict[int, tuple[float, float, float]]:
+    """Every keypoint of PnLCalib's catalogue: ``{id: (x, y, z)}`` in the world frame (metres);
+    ids 1-73 (their names: ``pnlviz.keypoint_names()``, their picture: ``docs/keypoint_map.png``)."""
+    from pnlviz.field.model import load_field_model
+
+    model = load_field_model()
+    return {int(k): tuple(float(v) for v in model.keypoints[int(k)].xyz) for k in model.keypoint_ids}
+
+
+def keypoint_names() -> dict[int, str]:
+    """``{id: name}``: a distinct name in words for every keypoint id."""
+    from pnlviz.field.model import load_field_model
+
+    return dict(load_field_model().keypoint_names())
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The camera of one frame and the evidence for it. ``camera``: None when the calibration
+    failed, and then ``reason`` says why (``reason_code``: a short code); ``point_residuals``
+    ``{id: px}`` and ``line_residuals`` ``{class: px}`` (its farthest point) under the camera;
+    ``inliers``: the keypoint ids the voted camera agreed with; ``pnl_lines``: the lines and circles
+    the PnL refinement used."""
+
+    camera: Camera | None
+    reason: str | None = None
+    reason_code: str | None = None
+    point_residuals: dict[int, float] = field(default_factory=dict)
+    line_residuals: dict[str, float] = field(default_factory=dict)
+    inliers: tuple[int, ...] = ()
+    pnl_lines: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.camera is not None
+
+
+def _image_size(image_size) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in image_size)
+        ok = all(float(v) == int(v) for v in image_size)
+    except (TypeError, ValueError, OverflowError):
+        raise ArgumentError(f"image_size: expected (width, height) in pixels, got {image_size!r}") from None
+    if not ok or not (16 <= w <= 16384 and 16 <= h <= 16384):
+        raise ArgumentError(f"image_size: expected two whole numbers of pixels in 16..16384, got {image_size!r}")
+    return w, h
+
+
+def _pixel(value, where: str) -> tuple[float, float]:
+    try:
+        arr = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ArgumentError(f"{where}: expected a pixel (x, y), got {value!r}") from None
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
+        raise ArgumentError(f"{where}: expected a finite pixel (x, y), got {value!r}")
+    return float(arr[0]), float(arr[1])
+
+
+def _keypoints_arg(keypoints, model) -> dict[int, tuple[float, float]]:
+    if keypoints is None:
+        return {}
+    if not isinstance(keypoints, Mapping):
+        raise ArgumentError(f"keypoints: expected a mapping {{id: (x, y)}}, got {type(keypoints).__name__}")
+    out = {}
+    for k, v in keypoints.items():
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)):
+            raise ArgumentError(f"keypoints: ids are whole numbers 1-73, got {k!r}")
+        if int(k) not in model.keypoints:
+            raise ArgumentError(f"keypoints[{k}]: no such keypoint id (1-73: see pnlviz.keypoints())")
+        out[int(k)] = _pixel(v, f"keypoints[{k}]")
+    return out
+
+
+def _lines_arg(lines, model) -> dict[str, np.ndarray]:
+    if lines is None:
+        return {}
+    if not isinstance(lines, Mapping):
+        raise ArgumentError(f"lines: expected a mapping {{class name: (M, 2) pixels}}, got {type(lines).__name__}")
+    from pnlviz.field.names import IGNORED_CLASSES
+
+    known = set(model.lines) | set(model.circles)
+    out = {}
+    for name, pts in lines.items():
+        if name in IGNORED_CLASSES:  # SoccerNet's own, which no calibration uses ("Line unknown"...)
+            continue
+        if name not in known:
+            raise ArgumentError(f"lines[{name!r}]: not a SoccerNet class; one of {sorted(known)}")
+        try:
+            arr = np.asarray(pts, dtype=float)
+        except (TypeError, ValueError):
+            raise ArgumentError(f"lines[{name!r}]: expected (M, 2) pixels") from None
+        if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2 or not np.all(np.isfinite(arr)):
+            raise ArgumentError(f"lines[{name!r}]: expected (M, 2) finite pixels with M >= 2, got shape {arr.shape}")
+        out[str(name)] = arr
+    return out
+
+
+def calibrate(keypoints: Mapping[int, Sequence[float]] | None = None,
+              lines: Mapping[str, Sequence[Sequence[float]]] | None = None, *, image_size: Sequence[int],
+              pnl: bool = True, alpha: float | None = None) -> Calibration:
+    """Calibrate one frame from what is seen in it.
+
+    ``keypoints``: ``{id: (x, y)}`` pixels of catalogue keypoints (ids 1-73, see
+    :func:`keypoints`). ``lines``: ``{SoccerNet class name: (M, 2) pixels on it}`` (straight lines
+    and circles, e.g. ``"Side line top"``, ``"Circle central"``); keypoints where annotated lines
+    meet are derived from them, as PnLCalib does. ``image_size``: (width, height) of the image
+    the pixels are in. ``pnl``: the point-and-line refinement; ``alpha``: its weight of lines
+    against points (default the paper's). Never raises on geometry: a frame that cannot be
+    calibrated comes back with ``camera`` None and the reason."""
+    from pnlviz.calib.calibrate import CalibParams
+    from pnlviz.calib.calibrate import calibrate as calibrate_frame
+    from pnlviz.calib.inputs import observations_from_annotation
+    from pnlviz.calib.observations import Observations
+    from pnlviz.field.model import load_field_model
+
+    model = load_field_model()
+    w, h = _image_size(image_size)
+    kps = _keypoints_arg(keypoints, model)
+    pixel_lines = _lines_arg(lines, model)
+    if alpha is not None and not (isinstance(alpha, (int, float)) and math.isfinite(alpha) and 0 <= alpha <= 1):
+        raise ArgumentError(f"alpha: expected a number in [0, 1], got {alpha!r}")
+    params = CalibParams(pnl=bool(pnl)) if alpha is None else CalibParams(pnl=bool(pnl), alpha=float(alpha))
+    scale = np.array([w - 1, h - 1], float)
+    derived, _ = observations_from_annotation({k: v / scale for k, v in pixel_lines.items()}, w, h, model=model)
+    points = {int(k): tuple(xy) for k, xy in zip(derived.kp_ids, derived.kp_xy)}
+    sets = {int(k): str(s) for k, s in zip(derived.kp_ids, derived.kp_sets)}
+    points.update(kps)  # a keypoint given wins over one derived from the lines
+    for k in kps:
+        sets.pop(k, None)
+    obs = Observations.from_keypoints(w, h, points, sets, lines=derived.lines, circles=derived.circles, model=model)
+    res = calibrate_frame(obs, params, model)
+    return Calibration(res.camera, res.failure, res.failure_code, dict(res.point_residuals),
+                       dict(res.line_residuals), tuple(int(k) for k in res.inliers), tuple(res.pnl_lines))
+
+
+def open_dataset(path: str | Path):
+    """A dataset folder or zip (SoccerNet layout: ``<stem>.jpg`` with ``<stem>.json``), indexed
+    lazily: ``len(ds)``, ``ds.stems``, ``ds.image(stem)`` (BGR), ``ds.annotation(stem)``."""
+    from pnlviz.data import open_dataset as open_data
+
+    p = Path(path)
+    if not p.exists():
+        raise ArgumentError(f"path: {p} does not exist")
+    return open_data(p)
+
+
+def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: float = 0.1) -> dict:
+    """Keypoints and lines of one BGR image (H, W, 3) uint8: ``{"keypoints": {id: (x, y, score)},
+    "lines": {class name: [(x1, y1), (x2, y2)]}}`` in its pixels (what :func:`calibrate` takes);
+    the same as ``pnlviz.detect(image)``. Needs ``pip install 'pnlviz[detect]'`` (PyTorch)."""
+    from pnlviz.detect.image import detect_image
+
+    return detect_image(image, weights, threshold=threshold)
+
+
+def top_view(camera: Camera | None = None, *, points=None, keypoints=None, px_per_m: float = 8.0) -> np.ndarray:
+    """A bird's-eye view of the pitch (BGR uint8): the camera's footprint and position, image
+    ``points`` (N, 2) put on the ground (players' feet) and image ``keypoints`` ``{id: (x, y)}``."""
+    from pnlviz.viz import top_view as draw
+
+    if camera is not None and not isinstance(camera, Camera):
+        raise ArgumentError(f"camera: expected a pnlviz.Camera, got {type(camera).__name__}")
+    if not (isinstance(px_per_m, (int, float)) and 1 <= px_per_m <= 64):
+        raise ArgumentError(f"px_per_m: expected a number in 1..64, got {px_per_m!r}")
+    return draw(camera, points=points, keypoints=keypoints, px_per_m=float(px_per_m))

@@ -1,0 +1,340 @@
+"""Triage over the whole dataset: a small summary of every frame's calibration (calibrated or
+why not, worst and median residual, JaC@5), what the filters, the counts and the sorts use, and
+the background pass that detects (when a detector is there) and calibrates every frame once,
+keeping only those summaries in memory.
+
+Both are cached on disk in the edits folder's ``cache/`` (safe to delete): ``summaries.jsonl``
+(one summary per line, the last line of a frame wins) and ``detections.jsonl`` (the detector's
+results, one frame per line, read back on demand through an index of offsets: a 23,000-frame
+dataset keeps offsets in memory, not detections). A pass that was stopped resumes where it was:
+a frame whose summary still matches its settings, its edits and whether it has detections is
+not calibrated again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pnlviz.data import DataError
+from pnlviz.data.predictions import parse_predictions, predictions_to_json
+
+CACHE_DIR = "cache"
+
+
+@dataclass(frozen=True)
+class FrameSummary:
+    """What triage keeps of a frame's view: ``ok`` (it has a camera), why not (``failure``), its
+    largest and median residual (px; 0 without any), JaC@5 against its annotation (None without),
+    and the ``token`` of the inputs it was computed from (:func:`summary_token`)."""
+
+    stem: str
+    ok: bool
+    failure: str | None
+    worst: float
+    median: float
+    jac5: float | None
+    token: str
+
+    @property
+    def error(self) -> float:
+        """The clip strip's error: the median residual, ``inf`` without a camera."""
+        return self.median if self.ok else math.inf
+
+
+def summary_token(settings, digest: str, has_detections: bool) -> str:
+    """What a summary depends on: the settings, the frame's edits (their ``digest``,
+    :func:`pnlviz.data.snapshot.edits_digest`), whether it has detections."""
+    return f"{settings.source}|{int(settings.pnl)}|{settings.alpha:g}|{digest}|{int(has_detections)}"
+
+
+def same_inputs(token: str, other: str) -> bool:
+    """Two tokens with the same settings and edits (whether detections came since aside): a
+    summary stays shown until the frame is calibrated again, never discarded."""
+    return token.rsplit("|", 1)[0] == other.rsplit("|", 1)[0]
+
+
+def summarize(view, token: str) -> FrameSummary:
+    """A frame's view (:class:`pnlviz.pipeline.view.FrameView`) as a summary."""
+    result = view.result
+    ok = result is not None and result.ok
+    r = list(result.point_residuals.values()) + list(result.line_residuals.values()) if ok else []
+    failure = None if ok else (view.error or (result.failure if result is not None else "nothing to calibrate from"))
+    return FrameSummary(view.stem, ok, failure, float(max(r)) if r else 0.0, float(np.median(r)) if r else 0.0,
+                        view.jac.get(5) if ok else None, token)
+
+
+class _JsonLines:
+    """An append-only file of JSON lines (``None`` path: memory only, for a read-only folder)."""
+
+    def __init__(self, path: Path | None):
+        self.path = path
+        self._lock = threading.Lock()
+        if path is not None and path.is_file() and path.stat().st_size:
+            with open(path, "rb+") as f:  # a line torn by a crash is ended, so the next one starts clean
+                f.seek(-1, os.SEEK_END)
+                if f.read(1) != b"\n":
+                    f.write(b"\n")
+
+    def rewrite(self, objects) -> None:
+        """The file with these lines only (atomically), e.g. the latest line of each frame."""
+        if self.path is None:
+            return
+        from pnlviz.data.atomic import atomic_write_text
+
+        with self._lock:
+            atomic_write_text(self.path, "".join(json.dumps(o, separators=(",", ":")) + "\n" for o in objects))
+
+    def lines(self):
+        """(offset, length, object) of each valid line; a torn last line (a crash) is skipped."""
+        if self.path is None or not self.path.is_file():
+            return
+        offset = 0
+        with open(self.path, "rb") as f:
+            for raw in f:
+                try:
+                    yield offset, len(raw), json.loads(raw)
+                except ValueError:
+                    pass
+                offset += len(raw)
+
+    def append(self, obj: dict) -> tuple[int, int] | None:
+        if self.path is None:
+            return None
+        data = (json.dumps(obj, separators=(",", ":"), allow_nan=False) + "\n").encode()
+        with self._lock:
+            with open(self.path, "ab") as f:
+                offset = f.seek(0, os.SEEK_END)
+                f.write(data)
+        return offset, len(data)
+
+    def read(self, offset: int, length: int) -> dict:
+        with self._lock, open(self.path, "rb") as f:
+            f.seek(offset)
+            return json.loads(f.read(length))
+
+
+class DetectionCache:
+    """The detector's results by stem, on disk (``detections.jsonl``), a few kept in memory: a
+    mapping as :class:`pnlviz.pipeline.FrameReader` looks detections up (``get``, ``in``)."""
+
+    def __init__(self, path: Path | None, keep: int = 64):
+        self._file = _JsonLines(path)
+        self._where: dict[str, tuple[int, int]] = {}
+        self._recent: OrderedDict[str, object] = OrderedDict()
+        self._memory: dict[str, object] = {}  # without a file (read-only edits folder)
+        self._keep = keep
+        self._lock = threading.Lock()
+        for offset, length, obj in self._file.lines():
+            if isinstance(obj, dict) and isinstance(obj.get("stem"), str):
+                self._where[obj["stem"]] = (offset, length)
+
+    def __contains__(self, stem) -> bool:
+        return stem in self._where or stem in self._memory
+
+    def __len__(self) -> int:
+        return len(set(self._where) | set(self._memory))
+
+    def __setitem__(self, stem: str, pred) -> None:
+        where = self._file.append({"stem": stem, "detections": predictions_to_json(pred)})
+        with self._lock:
+            if where is None:
+                self._memory[stem] = pred
+            else:
+                self._where[stem] = where
+                self._remember(stem, pred)
+
+    def _remember(self, stem: str, pred) -> None:
+        self._recent[stem] = pred
+        self._recent.move_to_end(stem)
+        while len(self._recent) > self._keep:
+            self._recent.popitem(last=False)
+
+    def get(self, stem, default=None):
+        with self._lock:
+            if stem in self._memory:
+                return self._memory[stem]
+            if stem in self._recent:
+                return self._recent[stem]
+            where = self._where.get(stem)
+        if where is None:
+            return default
+        try:
+            pred = parse_predictions(self._file.read(*where)["detections"], str(self._file.path))
+        except (OSError, ValueError, KeyError, DataError):
+            return default
+        with self._lock:
+            self._remember(stem, pred)
+        return pred
+
+    def __getitem__(self, stem):
+        pred = self.get(stem)
+        if pred is None:
+            raise KeyError(stem)
+        return pred
+
+
+class SummaryStore:
+    """Every frame's latest summary (in memory: small) and its file (``summaries.jsonl``)."""
+
+    def __init__(self, path: Path | None):
+        self._file = _JsonLines(path)
+        self._by_stem: dict[str, FrameSummary] = {}
+        n = 0
+        for _, _, obj in self._file.lines():
+            n += 1
+            try:
+                s = FrameSummary(**obj)
+            except TypeError:
+                continue
+            self._by_stem[s.stem] = s
+        if n > 2 * len(self._by_stem) + 100:  # mostly superseded lines: keep the latest of each frame
+            self._file.rewrite(asdict(s) for s in self._by_stem.values()
+                               if all(not isinstance(v, float) or math.isfinite(v) for v in asdict(s).values()))
+
+    def get(self, stem: str) -> FrameSummary | None:
+        return self._by_stem.get(stem)
+
+    def put(self, summary: FrameSummary) -> None:
+        if self._by_stem.get(summary.stem) == summary:
+            return
+        self._by_stem[summary.stem] = summary
+        obj = asdict(summary)
+        if not all(isinstance(v, (str, bool, type(None))) or math.isfinite(v) for v in obj.values()):
+            return  # not kept on disk: computed again next time
+        self._file.append(obj)
+
+    def __len__(self) -> int:
+        return len(self._by_stem)
+
+
+def cache_paths(edits_root: Path, writable: bool) -> tuple[Path | None, Path | None]:
+    """Where the summaries and the detections are kept (None, None for a read-only folder)."""
+    if not writable:
+        return None, None
+    folder = Path(edits_root) / CACHE_DIR
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder / "summaries.jsonl", folder / "detections.jsonl"
+
+
+@dataclass
+class PassProgress:
+    """Where the background pass is: frames done of ``total``, detected, without a camera."""
+
+    total: int
+    done: int = 0
+    detected: int = 0
+    failed: int = 0
+    started: float = 0.0
+    finished: bool = False
+
+    def text(self) -> str:
+        dt = time.perf_counter() - self.started
+        head = "triage done" if self.finished else "triage (background)"
+        return (f"{head}: {self.done}/{self.total} frames calibrated, {self.failed} without a camera"
+                + (f", {self.detected} detected" if self.detected else "") + f" · {dt:.0f} s")
+
+
+def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None], every: int = 10) -> PassProgress:
+    """Detect (when the state has a detector) and calibrate every frame of the triage's state
+    under its default settings, keeping summaries only; frames whose summary is up to date are
+    skipped. ``say``: the progress line, every ``every`` frames and at the end."""
+    state = triage.state
+    progress = PassProgress(len(state.stems), started=time.perf_counter())
+    for i, stem in enumerate(state.stems):
+        if stop.is_set():
+            return progress
+        if state.needs_detection(stem):
+            try:
+                state.run_detector(stem)
+                progress.detected += 1
+            except Exception:  # noqa: BLE001 - a frame the detector fails on is calibrated without
+                pass
+        summary = triage.store.get(stem) if triage.up_to_date(stem) else triage.calibrate(stem)
+        progress.done += 1
+        progress.failed += not summary.ok
+        if i % every == 0 or i == len(state.stems) - 1:
+            say(progress.text())
+        time.sleep(0)
+    progress.finished = True
+    say(progress.text())
+    return progress
+
+
+
+
+class Triage:
+    """The summaries of a state's frames (:class:`pnlviz.app.state.AppState`), kept up to date
+    as views are computed, and the background pass. ``writable``: keep them on disk (the edits
+    folder's ``cache/``); the detector's results go there too (:class:`DetectionCache`)."""
+
+    def __init__(self, state, writable: bool):
+        self.state = state
+        summaries, detections = cache_paths(state.edits.root, writable)
+        self.store = SummaryStore(summaries)
+        if state.detector is not None:
+            state.reader.detected = DetectionCache(detections)
+        self.progress: PassProgress | None = None
+
+    def has_detections(self, stem: str) -> bool:
+        reader = self.state.reader
+        return reader.predictions is not None and (stem in reader.predictions or stem in reader.detected)
+
+    def token(self, stem: str, settings=None) -> str:
+        return summary_token(settings or self.state.default_settings, self.state.edits.digest(stem),
+                             self.has_detections(stem))
+
+    def note(self, view) -> FrameSummary | None:
+        """Keep the summary of a view just computed under the default settings."""
+        if view.settings != self.state.default_settings:
+            return None
+        summary = summarize(view, self.token(view.stem))
+        self.store.put(summary)
+        return summary
+
+    def lookup(self, stem: str, settings=None) -> FrameSummary | None:
+        """The frame's summary under ``settings``: the stored one while the frame's edits are the
+        same (detections that came since aside) for the default settings, else of its view if
+        computed."""
+        settings = settings or self.state.default_settings
+        if settings != self.state.default_settings:  # other settings: the views computed under them
+            view = self.state.cached_view(stem, settings)
+            return summarize(view, "") if view is not None else None
+        summary = self.store.get(stem)  # noted whenever a view under the default settings is computed
+        return summary if summary is not None and same_inputs(summary.token, self.token(stem)) else None
+
+    def summaries(self, settings=None) -> dict[str, FrameSummary]:
+        """Every frame's summary that is known (see :meth:`lookup`), by stem."""
+        out = {}
+        for stem in self.state.stems:
+            s = self.lookup(stem, settings)
+            if s is not None:
+                out[stem] = s
+        return out
+
+    def up_to_date(self, stem: str) -> bool:
+        summary = self.store.get(stem)
+        return summary is not None and summary.token == self.token(stem)
+
+    def run(self, stop: threading.Event, say: Callable[[str], None]) -> PassProgress:
+        """The background pass (:func:`run_pass`)."""
+        self.progress = run_pass(self, stop, say)
+        return self.progress
+
+    def calibrate(self, stem: str) -> FrameSummary:
+        """The frame calibrated under the default settings, its summary kept (the view is not)."""
+        view = self.state.view(stem, keep=False)
+        return self.note(view) or summarize(view, self.token(stem))
+
+
+__all__ = ["DetectionCache", "FrameSummary", "PassProgress", "SummaryStore", "Triage", "cache_paths", "run_pass",
+           "same_inputs", "summarize", "summary_token"]

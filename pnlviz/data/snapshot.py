@@ -1,0 +1,93 @@
+"""A review snapshot: what the annotator saw when a frame was reviewed, kept in the frame's edit
+record (``"snapshot"``), so that an export needs the data and the edits folder alone.
+
+Layout::
+
+    {"settings": {"source": "annotation"|"detections"|"both", "pnl": bool, "alpha": float},
+     "detection_settings": {CalibParams field: value},   # the detector's, as they applied
+     "detections": {PnLCalib frame object} | null,       # the detections used, if any
+     "size": [W, H],                                     # the frame's pixels
+     "edits": "<digest of the record's annotation and keypoints>",
+     "labels": {"<id>": {"x", "y", "set", "provenance": "annotation"|"detection"|"hand",
+                         "residual": px | null}},        # pixels of the frame
+     "camera": {SoccerNet camera at 960x540} | null,
+     "failure": "why no camera" | null}
+
+Pure format: building one from a frame's view is :mod:`pnlviz.pipeline.snapshot`'s job.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from pnlviz.data.errors import DataError
+from pnlviz.data.jsonio import as_number, describe
+from pnlviz.data.predictions import parse_predictions
+
+PROVENANCES = ("annotation", "detection", "hand")
+SNAPSHOT_SOURCES = ("annotation", "detections", "both")
+
+
+def edits_digest(record: Mapping) -> str:
+    """A digest of what a record changes in a frame (its annotation and keypoint edits): a
+    snapshot holds the one it was taken with, so a record changed since is told apart."""
+    edit = {k: record.get(k) for k in ("annotation", "keypoints")}
+    return hashlib.sha1(json.dumps(edit, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:16]
+
+
+def _number(value: Any, what: str, source: str, optional: bool = False) -> float | None:
+    if value is None and optional:
+        return None
+    v = as_number(value)
+    if v is None or not math.isfinite(v):
+        raise DataError(source, f"snapshot: {what} must be a finite number, got {describe(value)}")
+    return v
+
+
+def _labels(obj: Any, source: str) -> dict:
+    if not isinstance(obj, Mapping):
+        raise DataError(source, f'snapshot: "labels" must be an object of id -> label, got {describe(obj)}')
+    out = {}
+    for key, label in obj.items():
+        if not str(key).isdigit() or not 1 <= int(key) <= 73:
+            raise DataError(source, f"snapshot: keypoint id {str(key)[:20]!r} is not in the catalogue (1..73)")
+        if not isinstance(label, Mapping) or label.get("provenance") not in PROVENANCES:
+            raise DataError(source, f"snapshot: label {key} needs x, y, set and a provenance of "
+                                    f"{', '.join(PROVENANCES)}, got {describe(label)}")
+        out[str(int(key))] = {"x": _number(label.get("x"), f"label {key} x", source),
+                              "y": _number(label.get("y"), f"label {key} y", source),
+                              "set": str(label.get("set", ""))[:8], "provenance": label["provenance"],
+                              "residual": _number(label.get("residual"), f"label {key} residual", source, True)}
+    return out
+
+
+def validate_snapshot(obj: Any, source: str) -> dict:
+    """A checked copy of a review snapshot (see the module docstring); DataError otherwise."""
+    if not isinstance(obj, Mapping):
+        raise DataError(source, f"a snapshot must be a JSON object, got {describe(obj)}")
+    settings = obj.get("settings")
+    if not isinstance(settings, Mapping) or settings.get("source") not in SNAPSHOT_SOURCES:
+        raise DataError(source, f'snapshot: "settings" needs a source of {", ".join(SNAPSHOT_SOURCES)}')
+    size = obj.get("size")
+    if not isinstance(size, list) or len(size) != 2 or not all(isinstance(v, int) and v >= 2 for v in size):
+        raise DataError(source, f'snapshot: "size" must be [W, H], got {describe(size)}')
+    ds = obj.get("detection_settings") or {}
+    if not isinstance(ds, Mapping):
+        raise DataError(source, f'snapshot: "detection_settings" must be an object, got {describe(ds)}')
+    detections = obj.get("detections")
+    if detections is not None:
+        parse_predictions(detections, source)
+    camera = obj.get("camera")
+    if camera is not None and not isinstance(camera, Mapping):
+        raise DataError(source, f'snapshot: "camera" must be a SoccerNet camera object, got {describe(camera)}')
+    failure = obj.get("failure")
+    return {"settings": {"source": settings["source"], "pnl": bool(settings.get("pnl", True)),
+                         "alpha": _number(settings.get("alpha", 0.6), "alpha", source)},
+            "detection_settings": dict(ds), "detections": detections, "size": list(size),
+            "edits": str(obj.get("edits", ""))[:64], "labels": _labels(obj.get("labels") or {}, source),
+            "camera": None if camera is None else dict(camera),
+            "failure": None if failure is None else str(failure)[:500]}

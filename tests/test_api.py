@@ -1,0 +1,147 @@
+"""The Python API (``pnlviz.calibrate``, ``pnlviz.Camera``, ``pnlviz.top_view``...): exact round
+trips on known cameras, and errors that name the argument."""
+
+import numpy as np
+import pytest
+
+import pnlviz
+from pnlviz import ArgumentError
+
+
+def cameras():
+    plain = pnlviz.Camera.from_look_at((-10.0, 50.0, -18.0), (5.0, 0.0, 0.0), hfov_deg=45, width=1920, height=1080,
+                                       roll_deg=1.5)
+    lens = pnlviz.Camera.from_look_at((20.0, 60.0, -25.0), (-10.0, 3.0, 0.0), hfov_deg=70, width=1280, height=720,
+                                      k1=-0.18)
+    return [plain, lens]
+
+
+@pytest.mark.parametrize("cam", cameras(), ids=["no k1", "k1"])
+def test_image_to_pitch_undoes_project_to_a_millimetre(cam):
+    gx, gy = np.meshgrid(np.linspace(-52.5, 52.5, 43), np.linspace(-34, 34, 29))
+    ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    uv, _ = cam.project(ground)
+    xc = cam.to_camera(ground)
+    r2 = np.sum((xc[:, :2] / xc[:, 2:]) ** 2, axis=1)
+    # in the image, and where the lens is one-to-one (beyond r^2 = 1 / (3 |k1|) a strong barrel
+    # lens folds points far outside the view back in)
+    seen = cam.in_image(np.nan_to_num(uv, nan=-1.0)) & (xc[:, 2] > 0) & (r2 * 3 * abs(cam.radial[0]) < 1)
+    assert seen.sum() > 100  # the grid is well inside the view
+    back = cam.image_to_pitch(uv[seen])
+    assert np.max(np.abs(back - ground[seen, :2])) < 1e-3
+    # the homography maps the ground to the pixels the lens would give without distortion
+    H = cam.homography()
+    h = np.c_[ground[seen, :2], np.ones(seen.sum())] @ H.T
+    np.testing.assert_allclose(h[:, :2] / h[:, 2:], cam.project(ground[seen], distort=False)[0], atol=1e-6)
+
+
+def test_a_pixel_above_the_horizon_is_nowhere_on_the_pitch():
+    cam = cameras()[0]
+    assert np.all(np.isnan(cam.image_to_pitch([[960.0, -5000.0]])))
+
+
+def test_calibrate_recovers_the_camera_the_keypoints_came_from():
+    cam = cameras()[0]
+    world = pnlviz.keypoints()
+    uv, _ = cam.project(np.array(list(world.values())))
+    pixels = {k: p for k, p in zip(world, uv) if cam.in_image(np.nan_to_num(p[None], nan=-1.0))[0]}
+    res = pnlviz.calibrate(pixels, image_size=(int(cam.width), int(cam.height)))
+    assert res.ok and res.reason is None
+    assert np.linalg.norm(res.camera.C - cam.C) < 0.05
+    assert abs(res.camera.fx / cam.fx - 1) < 1e-3
+    assert max(res.point_residuals.values()) < 0.1
+
+
+def test_calibrate_from_lines_alone():
+    cam = cameras()[0]
+    model_lines = {}
+    from pnlviz.field.model import load_field_model
+
+    for name, pts in load_field_model().sample_polylines(1.0, 0.5).items():
+        uv, _ = cam.project(pts)
+        uv = uv[cam.in_image(np.nan_to_num(uv, nan=-1.0))]
+        if len(uv) >= 2:
+            model_lines[name] = uv
+    res = pnlviz.calibrate(lines=model_lines, image_size=(1920, 1080))
+    assert res.ok, res.reason
+    assert np.linalg.norm(res.camera.C - cam.C) < 0.5
+
+
+def test_a_frame_that_cannot_be_calibrated_says_why():
+    res = pnlviz.calibrate({1: (10.0, 10.0), 2: (500.0, 12.0)}, image_size=(1280, 720))
+    assert res.camera is None and res.reason and not res.ok
+
+
+@pytest.mark.parametrize("kwargs, named", [
+    (dict(keypoints={99: (1, 2)}, image_size=(1280, 720)), "keypoints[99]"),
+    (dict(keypoints={True: (1, 2)}, image_size=(1280, 720)), "keypoints"),
+    (dict(keypoints={"7": (1, 2)}, image_size=(1280, 720)), "keypoints"),
+    (dict(keypoints={7: (1, float("nan"))}, image_size=(1280, 720)), "keypoints[7]"),
+    (dict(keypoints={7: (1, 2, 3)}, image_size=(1280, 720)), "keypoints[7]"),
+    (dict(keypoints=[(1, 2)], image_size=(1280, 720)), "keypoints"),
+    (dict(lines={"Side line north": [(0, 0), (1, 1)]}, image_size=(1280, 720)), "lines['Side line north']"),
+    (dict(lines={"Side line top": [(0, 0)]}, image_size=(1280, 720)), "lines['Side line top']"),
+    (dict(image_size=(0, 720)), "image_size"),
+    (dict(image_size=(1280.5, 720)), "image_size"),
+    (dict(image_size="1280x720"), "image_size"),
+    (dict(image_size=(1280, 720), alpha=2.0), "alpha"),
+])
+def test_bad_arguments_are_named(kwargs, named):
+    with pytest.raises(ArgumentError) as err:
+        pnlviz.calibrate(**kwargs)
+    assert str(err.value).startswith(named)
+
+
+def test_the_top_view_shades_what_the_camera_sees():
+    cam = cameras()[0]
+    px_per_m = 8.0
+    view = pnlviz.top_view(cam, points=[[960.0, 900.0]], px_per_m=px_per_m)
+    plain = pnlviz.top_view(None, px_per_m=px_per_m)
+    assert view.shape == plain.shape and view.dtype == np.uint8
+    # the ground under the image centre is shaded; a corner of the pitch far behind the view is not
+    centre = cam.image_to_pitch([[960.0, 540.0]])[0]
+
+    def at(xy):
+        x, y = ((np.asarray(xy) + [52.5 + 6, 34 + 6]) * px_per_m).astype(int)
+        return view[y, x].astype(int), plain[y, x].astype(int)
+
+    shaded, bare = at(centre)
+    assert np.abs(shaded - bare).sum() > 60
+    outside = [-55.0, -36.0] if cam.project([[-55.0, -36.0, 0.0]])[0][0][0] < 0 else [55.0, -36.0]
+    assert not cam.in_image(np.nan_to_num(cam.project([[*outside, 0.0]])[0], nan=-1.0))[0]
+    shaded, bare = at(outside)
+    assert np.abs(shaded - bare).sum() == 0
+    # the player's feet: a red disc where image_to_pitch puts them
+    feet = cam.image_to_pitch([[960.0, 900.0]])[0]
+    b, g, r = at(feet)[0]
+    assert r > 150 and g < 120 and b < 120
+
+
+def test_top_view_arguments_are_named():
+    with pytest.raises(ArgumentError, match="^camera"):
+        pnlviz.top_view({"x_focal_length": 1})
+    with pytest.raises(ArgumentError, match="^px_per_m"):
+        pnlviz.top_view(None, px_per_m=0)
+
+
+def test_open_dataset_names_a_missing_path(tmp_path):
+    with pytest.raises(ArgumentError, match="^path"):
+        pnlviz.open_dataset(tmp_path / "nothing")
+    ds = pnlviz.open_dataset(pnlviz.SAMPLE_DIR)
+    assert len(ds.stems) == len({p.stem for p in pnlviz.SAMPLE_DIR.glob("*.*") if p.suffix in (".jpg", ".json")}) > 30
+
+
+def test_detect_finds_what_calibrate_takes():
+    pytest.importorskip("torch")
+    import cv2
+
+    image = cv2.imread(str(pnlviz.SAMPLE_DIR / "00000.jpg"))
+    found = pnlviz.detect(image)
+    assert len(found["keypoints"]) >= 4
+    assert all(0 <= x < image.shape[1] and 0 <= y < image.shape[0] and 0.1 <= p <= 1
+               for x, y, p in found["keypoints"].values())
+    res = pnlviz.calibrate({k: (x, y) for k, (x, y, _) in found["keypoints"].items()}, found["lines"],
+                           image_size=image.shape[1::-1])
+    assert res.ok, res.reason
+    with pytest.raises(ArgumentError, match="^image"):
+        pnlviz.detect(image[:, :, 0])
