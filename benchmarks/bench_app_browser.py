@@ -1,7 +1,7 @@
 """What the hand sees in the app, measured in the page: headless Chromium (software WebGL on this
 machine) driving ``pnlviz serve``'s app with real mouse and keyboard events.
 
-    python benchmarks/bench_app_browser.py [--frames 300] [--drags 30] [--steps 30]
+    python benchmarks/bench_app_browser.py [--frames 300] [--drags 30] [--steps 30] [--gestures 10]
 
 * drag release -> overlay: a keypoint is dragged with the mouse and released; the time from the
   page's ``pointerup`` to the first frame the canvas draws with the overlays as they end up
@@ -11,6 +11,10 @@ machine) driving ``pnlviz serve``'s app with real mouse and keyboard events.
   overlay sent -> drawn).
 * next frame -> image: ``n`` pressed; the time from the page's ``keydown`` to the first frame
   the canvas draws with the next frame's pixels and overlays as they end up.
+* pan and zoom: left drags on the image (10 moves each) and wheel gestures (5 notches each); the
+  server's camera pushes per move and per notch (the page pans and zooms by itself: goal 0, one
+  push at the end of each gesture) and the time from the input event to the animation frame that
+  draws the page's transform (the bridge notes it in ``requestAnimationFrame``).
 
 How: Chromium's screencast hands over every frame it composites, with its time; the page notes
 when the event happened (same clock); once the scene has settled, the first frame after the
@@ -45,6 +49,7 @@ EVENTS = """() => {
   window.__events = [];
   window.addEventListener("pointerup", () => window.__events.push(["up", Date.now()]), true);
   window.addEventListener("keydown", () => window.__events.push(["key", Date.now()]), true);
+  window.addEventListener("wheel", (e) => window.__events.push(["wheel", e.timeStamp]), true);
 }"""
 
 
@@ -105,11 +110,68 @@ def percentiles(values) -> str:
             f"({len(v)} events" + (f", {missed} not seen" if missed else "") + ")")
 
 
+def idle(page, control, timeout: float = 30.0) -> None:
+    """Wait until the page draws the server's latest view and has drawn two frames since (a
+    gesture starts on a page that is not busy drawing)."""
+    deadline = time.time() + timeout
+    while time.time() < deadline and page.evaluate("() => window.__pnlvizBridge.base") != control.version:
+        time.sleep(0.05)
+    page.evaluate("() => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)))")
+    time.sleep(0.3)
+
+
+def pan_and_zoom(page, session, box, n: int):
+    """``n`` pans (10 mouse moves each, from a spot with no point near) and ``n`` wheel zooms (5
+    notches each): for each kind, (steps, camera pushes during the steps, pushes after them, the
+    page's input -> frame latencies in ms)."""
+    control = session.view_control
+    out = []
+    for kind in ("pan", "zoom"):
+        steps = during = after = 0
+        page.evaluate("() => { window.__pnlvizBridge.latency = []; }")
+        for i in range(n):
+            session.queue.enqueue(control.fit)
+            session.flush()
+            idle(page, control)
+            view, canvas = control.view2d, np.array(control.canvas)
+            pts = [nd.uv for nd in session.workspace.points.values() if len(nd.keys)]
+            pts = np.concatenate(pts) if pts else np.zeros((0, 2))
+            screen = view.to_screen(pts, tuple(canvas)) if len(pts) else np.zeros((0, 2))
+            spots = [(x, y) for y in range(200, int(canvas[1]) - 200, 20) for x in range(200, int(canvas[0]) - 250, 20)
+                     if not len(screen) or np.min(np.hypot(*(screen - [x, y]).T)) > 40]
+            x, y = box["x"] + spots[i % len(spots)][0], box["y"] + spots[i % len(spots)][1]
+            pushes = control.pushes
+            page.mouse.move(x, y)
+            if kind == "pan":
+                page.mouse.down()
+                for k in range(1, 11):
+                    page.mouse.move(x + 5 * k, y + 3 * k)
+                    time.sleep(0.03)
+            else:
+                for k in range(5):
+                    page.mouse.wheel(0, -100 if i % 2 == 0 else 100)
+                    time.sleep(0.03)
+            now = control.pushes - pushes  # while the hand moved (the wheel waits 120 ms idle)
+            if kind == "pan":
+                page.mouse.up()
+            time.sleep(1.0)
+            session.flush()
+            steps += 10 if kind == "pan" else 5
+            during, after = during + now, after + control.pushes - pushes - now
+        out.append((steps, during, after, page.evaluate("() => window.__pnlvizBridge.latency")))
+    wheel = np.array([t for k, t in page.evaluate("() => window.__events") if k == "wheel"])
+    gaps = np.diff(wheel)[np.diff(wheel) < 900]  # between the notches of a gesture (gestures are > 1 s apart)
+    print(f"wheel notches arrived {np.median(gaps):.0f} ms apart (median); {np.mean(gaps > 120):.0%} of the gaps "
+          f"were over the 120 ms that end a gesture (the page was busy drawing)")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=300, help="synthetic frames in the set served")
     ap.add_argument("--drags", type=int, default=30)
     ap.add_argument("--steps", type=int, default=30, help="'next frame' presses")
+    ap.add_argument("--gestures", type=int, default=10, help="pans and wheel zooms, each")
     ap.add_argument("--data", type=Path, help="serve this folder instead of making a synthetic set")
     ap.add_argument("--hide", nargs="*", default=[], help="overlay layers to switch off (e.g. ids ghosts)")
     args = ap.parse_args()
@@ -128,7 +190,8 @@ def main() -> None:
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=shutil.which("chromium"), args=FLAGS)
             page = browser.new_page(viewport={"width": 1600, "height": 900})
-            page.goto(app.url)
+            page.add_init_script(f"({EVENTS})()")  # before the page's bridge, which keeps a pan's release
+            page.goto(app.page_url)
             page.get_by_text("review:").first.wait_for(timeout=60_000)
             deadline = time.time() + 20
             while time.time() < deadline and not (app.tabs() and app.tabs()[0].view_control.css_canvas):
@@ -142,7 +205,6 @@ def main() -> None:
                   + page.evaluate("() => { const gl = document.createElement('canvas').getContext('webgl');"
                                   "const i = gl.getExtension('WEBGL_debug_renderer_info');"
                                   "return i ? gl.getParameter(i.UNMASKED_RENDERER_WEBGL) : 'unknown'; }"))
-            page.evaluate(EVENTS)
             cast = Screencast(page)
             box = max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
 
@@ -182,11 +244,15 @@ def main() -> None:
                 cast.wait(0.3)
                 page.keyboard.press("n")
                 steps.append(cast.visible_after("key", (x - 200, y - 100, 400, 200), settle=1.0))
+            pans, zooms = pan_and_zoom(page, session, box, args.gestures)
             print(f"drag release -> overlay (live preview, as the app runs): {percentiles(live)}")
             print(f"drag release -> overlay (no preview: release -> save -> recalibrate -> send -> draw): "
                   f"{percentiles(round_trip)}")
             print(f"next frame -> image: {percentiles(steps)}")
             print(f"server-side recalibration of the last drag: {session.editor.last_recalibration_ms:.0f} ms")
+            for name, (steps, during, after, latency) in (("pan (mouse move)", pans), ("zoom (wheel notch)", zooms)):
+                print(f"{name}: server camera pushes per step {during / max(1, steps):.2f} ({during} during {steps} "
+                      f"steps; {after} at the gestures' ends); input -> frame drawn: {percentiles(latency)}")
             browser.close()
         app.stop()
         app.state.close()

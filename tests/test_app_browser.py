@@ -48,7 +48,7 @@ def open_page(browser, app, text, n: int = 1):
     """A page on the app, once ``text`` shows in the panel and the page's bridge has reported
     the canvas (so that image pixels can be found on screen); ``n``: it is the n-th tab."""
     page = browser.new_page(viewport={"width": 1400, "height": 900})
-    page.goto(app.url)
+    page.goto(app.page_url)  # the URL the server prints: no reload for the device pixel ratio
     wait_for_text(page, text)
     session = tab(app, n)
     wait_until(lambda: session.view_control.css_canvas is not None)

@@ -15,6 +15,7 @@ import pytest
 
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app import cards
+from pnlviz.app.bridge import Gesture
 from pnlviz.app.editing import Drag, EditTrail
 from pnlviz.app.frameorder import FrameOrder, visible_order
 from pnlviz.app.modes import DragMode, DragPhase, Filter, Mode, PointKind, Selection, Sort, labels
@@ -169,9 +170,13 @@ def test_the_view_is_clamped_to_the_zoom_limits_and_the_frame():
     control.zoom_by(1e-9)
     assert np.isclose(control.view2d.zoom, MIN_ZOOM_OF_FIT * fit.zoom)
     control.fit()
+    # a drag of the image viser reports (the page pans by itself): the view moves once, on release
     control.pan(DragPhase.START, (0.5, 0.5), (0.5, 0.5))
-    control.pan(DragPhase.UPDATE, (0.5, 0.5), (0.6, 0.5))  # a tenth of the canvas to the right
+    control.pan(DragPhase.UPDATE, (0.5, 0.5), (0.6, 0.5))
+    assert control.view2d == fit  # nothing while the hand moves
+    control.pan(DragPhase.END, (0.5, 0.5), (0.6, 0.5))  # a tenth of the canvas to the right
     np.testing.assert_allclose(control.view2d.cu, fit.cu - 0.1 * control.canvas[0] / fit.zoom)
+    control.pan(DragPhase.START, (0.5, 0.5), (0.5, 0.5))
     control.pan(DragPhase.END, (0.5, 0.5), (50.0, -50.0))  # far off: the frame's centre stays on screen
     assert (control.view2d.cu, control.view2d.cv) == (-0.5, 539.5)
     control.native()
@@ -200,6 +205,43 @@ def test_camera_echoes_are_ignored_and_an_orbit_is_put_back():
     np.testing.assert_allclose([control.view2d.cu, control.view2d.cv, control.view2d.zoom], [200.0, 100.0, 2.0])
     np.testing.assert_allclose(client.camera.position, moved)
     assert client.camera.position[2] < PLANE_Z and tuple(client.camera.up_direction) == (0.0, -1.0, 0.0)
+
+
+def test_a_page_gesture_moves_the_camera_once_to_where_the_page_showed():
+    """The page zoomed by 2 around canvas point (300, 200) and panned by (40, -30) CSS px: one
+    camera push lands on the view the page showed (the pixel under the pointer stays under it),
+    announced with its answer; a gesture made on an older view, or sent again, moves nothing."""
+    client = FakeClient()
+    control, _, _ = view_control(client)
+    told = []
+    control.on_push = lambda answer, applied: told.append((answer, applied, control.version))
+    before, pushes = control.view2d, control.pushes
+    p = np.array([300.0, 200.0])
+    under = before.to_pixel(p, control.canvas)  # the image pixel at the pointer
+    s, t = 2.0, (1 - 2.0) * p + [40.0, -30.0]  # zoom around p, then the pan
+    control.gesture(Gesture(1, control.version, s, tuple(t)))
+    assert control.pushes == pushes + 1 and told[-1] == (1, True, control.version)
+    np.testing.assert_allclose(control.view2d.zoom, 2 * before.zoom)
+    np.testing.assert_allclose(control.view2d.to_pixel(p + [40.0, -30.0], control.canvas), under, atol=1e-9)
+    np.testing.assert_allclose(client.camera.position, control.view2d.camera(control.workspace.plane,
+                                                                              control.canvas[1])[0])
+    after = control.view2d
+    control.gesture(Gesture(1, control.version, 3.0, (0.0, 0.0)))  # the same gesture again: ignored
+    control.gesture(Gesture(2, control.version - 1, 3.0, (0.0, 0.0)))  # made on an older view: refused
+    assert control.view2d == after and control.pushes == pushes + 1 and told[-1][:2] == (2, False)
+    control.gesture(Gesture(3, control.version, 1e4, (0.0, 0.0)))  # beyond the zoom limit: clamped
+    assert control.view2d.zoom == MAX_ZOOM and told[-1][:2] == (3, True)
+
+
+def test_bridge_messages_carry_the_page_gesture():
+    control, _, _ = view_control(FakeClient())
+    zoom = control.view2d.zoom
+    d = {"kind": "pointer", "n": 1, "log_zoom": 0.0, "x": 0.5, "y": 0.5, "nudge": [0, 0],
+         "view": [1, control.version, 1.5, 0.0, 0.0]}
+    control.bridge_message(json.dumps(d))
+    control.bridge_message(json.dumps(d | {"n": 2}))  # a later message still carrying it: once
+    np.testing.assert_allclose(control.view2d.zoom, 1.5 * zoom)
+    assert control.gesture_seen == 1
 
 
 def test_bridge_messages_zoom_nudge_and_resize_once_each():

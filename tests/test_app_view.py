@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from pnlviz import EXAMPLES_DIR
-from pnlviz.app.bridge import bridge_html, parse_pointer
-from pnlviz.app.view2d import FOV_Y, MAX_ZOOM, PLANE_Z, ImagePlane, View2D, declutter, snap
+from pnlviz.app.bridge import Gesture, bridge_html, page_url, parse_pointer
+from pnlviz.app.pagesync import page_data
+from pnlviz.app.view2d import FOV_Y, MAX_ZOOM, MIN_ZOOM_OF_FIT, PLANE_Z, ImagePlane, View2D, declutter, snap
 
 CANVAS = (1276, 900)
 
@@ -135,6 +136,32 @@ def test_bridge_messages_are_read_and_anything_else_is_refused():
     for bad in ("", "{", "[1]", _msg(kind="other"), _msg(n=-1), _msg(log_zoom="nan"), _msg(log_zoom=1e9),
                 _msg(nudge=[1]), _msg(nudge=[10 ** 8, 0]), _msg(x=None), "x" * 500, None, 12):
         assert parse_pointer(bad) is None, bad
+
+
+def test_a_bridge_message_carries_a_checked_gesture():
+    g = parse_pointer(_msg(view=[4, 7, 2.0, -12.5, 30.0])).gesture
+    assert g == Gesture(4, 7, 2.0, (-12.5, 30.0))
+    assert parse_pointer(_msg()).gesture is None and parse_pointer(_msg(view=None)).gesture is None
+    for bad in ([4, 7, 2.0, 1.0], [4, 7, 0.0, 0, 0], [4, 7, "nan", 0, 0], [-1, 7, 2.0, 0, 0], [4, 7, 2.0, 1e9, 0],
+                "x", [4, 7, 2.0, None, 0]):
+        assert parse_pointer(_msg(view=bad)) is None, bad
+
+
+def test_the_page_url_fixes_the_device_pixel_ratio_and_keeps_the_token():
+    assert page_url("http://127.0.0.1:8080/") == "http://127.0.0.1:8080/?fixedDpr=1"
+    assert page_url("http://h:1/?token=ab&fixedDpr=0.75", 2) == "http://h:1/?token=ab&fixedDpr=2"
+
+
+def test_the_page_is_told_the_view_and_where_points_can_be_grabbed():
+    plane = ImagePlane(960, 540)
+    html = page_data(5, 3, True, View2D(480.0, 270.0, 2.0), (1000, 800), plane, 8.0,
+                     np.array([[10.0, 20.0], [np.nan, 1.0], [30.25, 40.0]]))
+    assert 'id="pnlviz-view"' in html and 'data-v="5"' in html and 'data-answer="3"' in html
+    assert 'data-applied="1"' in html and 'data-view="480.0000,270.0000,2"' in html
+    assert 'data-points="10.0,20.0,30.2,40.0"' in html and 'data-canvas="1000,800"' in html  # the NaN one left out
+    fit = View2D.fit(plane, (1000, 800)).zoom
+    assert f'data-limits="{MIN_ZOOM_OF_FIT * fit:.6g},32,960,540"' in html
+    assert "data-view" not in page_data(0, -1, False, None, (1000, 800), None, 0.0, np.zeros((0, 2)))
 
 
 def test_the_bridge_element_carries_the_script_and_a_clean_input_id():

@@ -1,8 +1,25 @@
 // pnlviz's pointer bridge: the few things viser's client does not do for the image view.
 //
-// - The mouse wheel and the + / - keys zoom around the pointer (viser's camera dollies towards the
-//   centre of the view). In the image view the wheel is taken before the camera controls see it;
-//   the zoom is sent to the server, which moves the camera (pnlviz.app.bridge).
+// - Pan and zoom at display rate, in the page. The wheel, + and - zoom around the pointer, and a
+//   plain left drag on the image (or the dark frame around it) pans it: the bridge moves the
+//   viewer's canvas with a CSS transform (translate and scale of the element holding the WebGL
+//   canvas; its parent clips it, so nothing covers the panel) at once, and sends nothing while the
+//   hand moves. When the gesture ends (the wheel idle for 120 ms, the button released) it sends the
+//   whole transform once, with the version of the view it was made on; the server moves the
+//   camera there in one push and answers, in the same message batch as the camera, with the new
+//   version (#pnlviz-view, pnlviz.app.pagesync). The bridge takes its transform off when that
+//   answer arrives, so the real render replaces the CSS one in the same frame. A gesture ended
+//   while the previous one is still unanswered is sent when the answer comes (rebased on it).
+// - Pan or point drag? The server lists the grabbable points and the view in #pnlviz-view; a
+//   press within the grab radius of one is left to viser (a point drag: a ring drawn here follows
+//   the pointer at display rate while the server moves the point and recalibrates; the ring goes
+//   when the server's points arrive after the release). Any other plain left press is a pan
+//   candidate: its pointer moves are kept from viser, so viser never starts a drag; past 3 px it
+//   is a pan (viser's pending click is cancelled with a pointercancel), else the release goes on
+//   to viser as a click (select, deselect; shift+click places, and is never taken).
+// - The canvas at the device pixel ratio: viser lowers its resolution on a slow machine unless the
+//   URL carries ?fixedDpr=<ratio> (read when the page starts), so a page whose URL carries
+//   another ratio (or none) reloads once with its own window.devicePixelRatio.
 // - The arrow keys nudge the selected point by one image pixel (ten with shift) instead of turning
 //   the camera.
 // - Every <label for="..."> points at its input (viser labels inputs whose elements carry no id).
@@ -11,18 +28,43 @@
 //   an empty text (typing 45 finds 45, not 345); a key pressed on a checkbox, a button or a
 //   closed dropdown goes to the window's hotkeys (viser's hotkeys ignore every <input>).
 //
-// The server talks to it through the attributes of an element of its own (#pnlviz-bridge:
-// data-input, the uuid of the text field it writes to; data-mode, "image" or "3d"), and it talks
-// to the server by writing JSON into that text field, which viser sends like a typed value.
-// GUI values are throttled (the latest one wins), so what it sends is cumulative: the total
-// log-zoom and nudge so far, where the pointer is, and the canvas size in CSS pixels.
+// The server talks to it through the attributes of elements of its own (#pnlviz-bridge:
+// data-input, the uuid of the text field it writes to; data-mode, "image" or "3d"; #pnlviz-view:
+// the view, see pnlviz/app/pagesync.py), and it talks to the server by writing JSON into that text
+// field, which viser sends like a typed value. GUI values are throttled (the latest one wins), so
+// what it sends is cumulative: the total nudge so far, the last gesture (until it is answered),
+// where the pointer is, and the canvas size in CSS pixels.
+// window.__pnlvizBridge exposes its state (gestures sent, input-to-frame latencies) to tests.
 (() => {
   const config = () => {
     const el = document.getElementById("pnlviz-bridge");
     return el ? { input: el.dataset.input, mode: el.dataset.mode } : null;
   };
   if (window.__pnlvizBridge) return; // one bridge per page, whatever re-renders the panel
-  const state = { logZoom: 0.0, nudgeX: 0, nudgeY: 0, seq: 0, x: 0.5, y: 0.5, over: false };
+
+  // ---- the device pixel ratio: once per tab, the page reloads with its own in the URL
+  const dpr = String(window.devicePixelRatio || 1);
+  const params = new URLSearchParams(window.location.search);
+  if (params.get("fixedDpr") !== dpr) {
+    if (sessionStorage.getItem("pnlviz-dpr") !== dpr) { // never in a loop
+      sessionStorage.setItem("pnlviz-dpr", dpr);
+      params.set("fixedDpr", dpr);
+      window.__pnlvizBridge = { reloading: true };
+      window.location.replace(`${window.location.pathname}?${params}${window.location.hash}`);
+      return;
+    }
+  } else {
+    sessionStorage.removeItem("pnlviz-dpr");
+  }
+
+  const IDENTITY = { s: 1.0, tx: 0.0, ty: 0.0 };
+  const state = {
+    logZoom: 0.0, nudgeX: 0, nudgeY: 0, seq: 0, x: 0.5, y: 0.5, over: false,
+    T: { ...IDENTITY }, // the CSS transform on the canvas, over the view of version `base`
+    base: -1, k: 0, sent: null, dirty: false, // the gesture in the air (unanswered), one waiting
+    wheelTimer: null, idleMs: 120, press: null, point: null, swallowClick: false,
+    view: null, gestures: 0, latency: [], pendingInputs: [], rafPending: false,
+  };
   window.__pnlvizBridge = state;
 
   // the viewer's canvas: the largest one on the page (viser draws text into small ones too)
@@ -32,6 +74,21 @@
       if (!best || c.clientWidth * c.clientHeight > best.clientWidth * best.clientHeight) best = c;
     }
     return best;
+  };
+  // the WebGL canvas (three.js marks it; a 2D overlay of the same size sits over it): `target`,
+  // its react-three-fiber wrapper, is moved by the transform; `clip`, the wrapper's parent (overflow
+  // hidden, the canvas's size), holds it still and clips it
+  const glCanvas = () => {
+    let best = null;
+    for (const c of document.querySelectorAll("canvas[data-engine]")) {
+      if (!best || c.clientWidth * c.clientHeight > best.clientWidth * best.clientHeight) best = c;
+    }
+    return best;
+  };
+  const stage = () => {
+    const canvas = glCanvas();
+    if (!canvas || !canvas.parentElement || !canvas.parentElement.parentElement) return null;
+    return { canvas, target: canvas.parentElement, clip: canvas.parentElement.parentElement };
   };
 
   const field = () => {
@@ -52,10 +109,12 @@
     if (!input) return;
     state.seq += 1;
     const canvas = viewCanvas();
+    const g = state.sent;
     const message = JSON.stringify({
       kind: "pointer", n: state.seq, log_zoom: state.logZoom, x: state.x, y: state.y,
       nudge: [state.nudgeX, state.nudgeY],
       canvas: canvas ? [canvas.clientWidth, canvas.clientHeight] : null,
+      view: g ? [g.k, g.base, g.s, g.tx, g.ty] : null,
     });
     Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set.call(input, message);
     input.dispatchEvent(new Event("input", { bubbles: true }));
@@ -69,31 +128,296 @@
     const area = (c) => c.clientWidth * c.clientHeight;
     return view && area(target) >= 0.5 * area(view) ? target : null;
   };
+  // where an event is on the canvas as it stands (CSS px from its top-left corner, untransformed)
+  const local = (event) => {
+    const st = stage();
+    if (!st) return null;
+    const box = st.clip.getBoundingClientRect();
+    return [event.clientX - box.left, event.clientY - box.top, box.width, box.height];
+  };
   const track = (event) => {
     const canvas = canvasOf(event.target);
     state.over = canvas !== null;
-    if (!canvas) return;
-    const box = canvas.getBoundingClientRect();
-    state.x = (event.clientX - box.left) / box.width;
-    state.y = (event.clientY - box.top) / box.height;
+    const p = canvas ? local(event) : null;
+    if (!p) return;
+    state.x = p[0] / p[2];
+    state.y = p[1] / p[3];
   };
   window.addEventListener("pointermove", track, { capture: true, passive: true });
+  const imageMode = () => {
+    const cfg = config();
+    return !!cfg && cfg.mode === "image";
+  };
 
-  const ARROWS = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, -1], ArrowDown: [0, 1] };
-  const zoomBy = (logFactor) => {
-    state.logZoom += logFactor;
+  // ---- the view as the server last told it (#pnlviz-view)
+  const readView = () => {
+    const el = document.getElementById("pnlviz-view");
+    if (!el) return null;
+    const d = el.dataset;
+    const nums = (t) => (t ? t.split(",").map(Number) : []);
+    return {
+      v: Number(d.v), answer: Number(d.answer), applied: d.applied === "1", view: nums(d.view),
+      limits: nums(d.limits), canvas: nums(d.canvas), reach: Number(d.reach || 0),
+      pointsText: d.points || "", points: nums(d.points),
+    };
+  };
+
+  // ---- the CSS transform: a canvas point p shows what the render has at (p - t) / s
+  const isIdentity = (T) => Math.abs(T.s - 1) < 1e-9 && Math.abs(T.tx) < 1e-6 && Math.abs(T.ty) < 1e-6;
+  const applyTransform = () => {
+    const st = stage();
+    if (!st) return;
+    const T = state.T;
+    if (isIdentity(T)) {
+      st.target.style.transform = "";
+      st.clip.style.background = "";
+    } else {
+      st.target.style.transformOrigin = "0 0";
+      st.target.style.transform = `translate(${T.tx}px, ${T.ty}px) scale(${T.s})`;
+      st.clip.style.background = "rgb(38, 40, 46)"; // what the server shows around the frame
+    }
+  };
+  // keep the transform within what the server allows: the zoom limits, the frame's centre on screen
+  const clamp = (T) => {
+    const d = state.view;
+    if (!d || d.view.length !== 3 || d.limits.length !== 4 || d.canvas.length !== 2) return T;
+    const [cu, cv, z] = d.view;
+    const [zmin, zmax, W, H] = d.limits;
+    const s = Math.min(Math.max(T.s, zmin / z), zmax / z);
+    const fix = (c, t, C, size) => {
+      const centre = c + ((1 - s) * C / 2 - t) / (s * z);
+      const kept = Math.min(Math.max(centre, -0.5), size - 0.5);
+      return (1 - s) * C / 2 - (kept - c) * s * z;
+    };
+    return { s, tx: fix(cu, T.tx, d.canvas[0], W), ty: fix(cv, T.ty, d.canvas[1], H) };
+  };
+  // an input moved the canvas: when the frame with the transform starts, its latency is noted
+  const frameDrawn = (timeStamp) => {
+    state.pendingInputs.push(timeStamp);
+    if (state.rafPending) return;
+    state.rafPending = true;
+    requestAnimationFrame(() => {
+      const now = performance.now();
+      for (const t of state.pendingInputs) state.latency.push(now - t);
+      if (state.latency.length > 2000) state.latency.splice(0, state.latency.length - 2000);
+      state.pendingInputs = [];
+      state.rafPending = false;
+    });
+  };
+  const zoomAt = (logFactor, p, timeStamp) => {
+    const T = state.T;
+    const s = clamp({ ...T, s: T.s * Math.exp(logFactor) }).s;
+    const f = s / T.s;
+    state.T = clamp({ s, tx: f * (T.tx - p[0]) + p[0], ty: f * (T.ty - p[1]) + p[1] });
+    applyTransform();
+    frameDrawn(timeStamp);
+    clearTimeout(state.wheelTimer);
+    state.wheelTimer = setTimeout(() => {
+      state.wheelTimer = null;
+      endGesture();
+    }, state.idleMs);
+  };
+  // a gesture ended: its whole transform goes to the server, once (later if one is in the air)
+  const endGesture = () => {
+    if (state.wheelTimer !== null || (state.press && state.press.panning)) return; // not over yet
+    if (state.sent) {
+      state.dirty = true;
+      return;
+    }
+    state.dirty = false;
+    if (isIdentity(state.T) || state.base < 0) return;
+    state.k += 1;
+    state.sent = { k: state.k, base: state.base, ...state.T };
+    state.gestures += 1;
     send();
   };
+  // the server's answer: the render now shows the view the transform was sent for
+  let seen = "";
+  const onView = () => {
+    if (!imageMode() && !isIdentity(state.T)) {
+      state.T = { ...IDENTITY };
+      applyTransform();
+    }
+    const el = document.getElementById("pnlviz-view");
+    const key = el ? [el.dataset.v, el.dataset.answer, el.dataset.view, el.dataset.points, el.dataset.reach].join("|") : "";
+    if (key === seen) return;
+    seen = key;
+    const d = readView();
+    if (!d || !Number.isFinite(d.v)) return;
+    const old = state.view;
+    state.view = d;
+    const g = state.sent;
+    if (g && d.answer >= g.k) {
+      // what is left of the transform over the new render (the hand may have gone on)
+      state.T = d.applied && d.answer === g.k ? {
+        s: state.T.s / g.s, tx: state.T.tx - (state.T.s / g.s) * g.tx, ty: state.T.ty - (state.T.s / g.s) * g.ty,
+      } : { ...IDENTITY };
+      state.sent = null;
+      state.base = d.v;
+      applyTransform();
+      if (state.dirty) endGesture();
+    } else if (d.v !== state.base) {
+      state.base = d.v; // the server moved the view (fit, a frame of another size): its view rules
+      if (!g) {
+        state.T = { ...IDENTITY };
+        applyTransform();
+      }
+    }
+    if (state.ring && state.ring.released && (!old || old.pointsText !== d.pointsText)) hideRing();
+  };
+
+  // ---- pan, or a point drag: told apart on the press
+  const screenOf = (u, v) => {
+    const d = state.view;
+    const [cu, cv, z] = d.view;
+    const T = state.T;
+    return [T.s * (d.canvas[0] / 2 + (u - cu) * z) + T.tx, T.s * (d.canvas[1] / 2 + (v - cv) * z) + T.ty];
+  };
+  const pointAt = (p) => {
+    const d = state.view;
+    if (!d || d.view.length !== 3 || d.canvas.length !== 2) return undefined; // not known: viser decides
+    const reach = Math.max(4, d.reach) * state.T.s;
+    let best = null;
+    let bestD = reach;
+    for (let i = 0; i + 1 < d.points.length; i += 2) {
+      const q = screenOf(d.points[i], d.points[i + 1]);
+      const dist = Math.hypot(q[0] - p[0], q[1] - p[1]);
+      if (dist <= bestD) {
+        best = q;
+        bestD = dist;
+      }
+    }
+    return best;
+  };
+  const plainLeft = (e) => e.button === 0 && !e.shiftKey && !e.ctrlKey && !e.altKey && !e.metaKey;
+  window.addEventListener(
+    "pointerdown",
+    (event) => {
+      state.swallowClick = false;
+      if (state.press) finishPress(); // its release never came (the window lost the pointer)
+      if (!imageMode() || !plainLeft(event) || !canvasOf(event.target)) return;
+      const p = local(event);
+      if (!p) return;
+      const point = pointAt(p);
+      if (point === undefined) return;
+      if (point) {
+        state.point = { id: event.pointerId, x0: event.clientX, y0: event.clientY, at: point, box: [p[0], p[1]] };
+        return;
+      }
+      state.press = { id: event.pointerId, x0: event.clientX, y0: event.clientY, x: event.clientX, y: event.clientY,
+                      panning: false };
+    },
+    { capture: true },
+  );
+  const cancelViser = (pointerId) => {
+    // viser's pending click or drag on the image: called off (it saw no move, so it started nothing)
+    state.cancelling = true;
+    try {
+      window.dispatchEvent(new PointerEvent("pointercancel", { pointerId, isPrimary: true }));
+    } finally {
+      state.cancelling = false;
+    }
+  };
+  window.addEventListener(
+    "pointermove",
+    (event) => {
+      const press = state.press;
+      if (press && event.pointerId === press.id && !(event.buttons & 1)) finishPress(); // released unseen
+      else if (press && event.pointerId === press.id) {
+        event.stopImmediatePropagation(); // viser sees no move: no drag of the image starts
+        if (!press.panning && Math.max(Math.abs(event.clientX - press.x0), Math.abs(event.clientY - press.y0)) > 3) {
+          press.panning = true;
+          cancelViser(press.id);
+        }
+        if (press.panning) {
+          const T = state.T;
+          state.T = clamp({ s: T.s, tx: T.tx + event.clientX - press.x, ty: T.ty + event.clientY - press.y });
+          applyTransform();
+          frameDrawn(event.timeStamp);
+        }
+        press.x = event.clientX;
+        press.y = event.clientY;
+        return;
+      }
+      const pt = state.point;
+      if (pt && event.pointerId === pt.id) {
+        const dx = event.clientX - pt.x0;
+        const dy = event.clientY - pt.y0;
+        if (state.ring || Math.max(Math.abs(dx), Math.abs(dy)) > 3) {
+          showRing(event.clientX - pt.box[0] + pt.at[0], event.clientY - pt.box[1] + pt.at[1]);
+          frameDrawn(event.timeStamp);
+        }
+      }
+    },
+    { capture: true },
+  );
+  // a pan's press is over: its gesture goes to the server; true if it was a pan
+  const finishPress = () => {
+    const press = state.press;
+    state.press = null;
+    if (press && press.panning) endGesture();
+    return !!(press && press.panning);
+  };
+  window.addEventListener("blur", () => finishPress());
+  const released = (event) => {
+    if (state.cancelling) return;
+    const press = state.press;
+    if (press && event.pointerId === press.id && finishPress()) {
+      event.stopImmediatePropagation(); // viser's click was called off at the start of the pan
+      state.swallowClick = event.type === "pointerup";
+    }
+    const pt = state.point;
+    if (pt && event.pointerId === pt.id) {
+      state.point = null;
+      if (state.ring) {
+        state.ring.released = true; // it goes when the server's points come (or after a while)
+        setTimeout(hideRing, 1500);
+      }
+    }
+  };
+  window.addEventListener("pointerup", released, { capture: true });
+  window.addEventListener("pointercancel", released, { capture: true });
+  window.addEventListener(
+    "click",
+    (event) => {
+      if (!state.swallowClick) return;
+      state.swallowClick = false;
+      event.stopImmediatePropagation();
+    },
+    { capture: true },
+  );
+  // the ring that follows the hand while a point is dragged (the server's point follows later)
+  const showRing = (x, y) => {
+    if (!state.ring) {
+      const el = document.createElement("div");
+      el.id = "pnlviz-drag-ring";
+      el.style.cssText = "position:fixed;width:22px;height:22px;margin:-13px 0 0 -13px;border:2px solid #fff;" +
+        "border-radius:50%;box-shadow:0 0 0 1px #000, inset 0 0 0 1px #000;pointer-events:none;z-index:1000";
+      document.body.appendChild(el);
+      state.ring = { el, released: false };
+    }
+    state.ring.el.style.left = `${x}px`;
+    state.ring.el.style.top = `${y}px`;
+  };
+  const hideRing = () => {
+    if (state.ring && state.ring.released) {
+      state.ring.el.remove();
+      state.ring = null;
+    }
+  };
+
+  const ARROWS = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, -1], ArrowDown: [0, 1] };
   window.addEventListener(
     "wheel",
     (event) => {
-      const cfg = config();
-      if (!cfg || cfg.mode !== "image" || !canvasOf(event.target)) return;
+      if (!imageMode() || !canvasOf(event.target)) return;
       event.preventDefault();
       event.stopImmediatePropagation();
       track(event);
+      const p = local(event);
+      if (!p) return;
       const lines = event.deltaMode === 1 ? 16 : event.deltaMode === 2 ? 400 : 1;
-      zoomBy(-0.0015 * event.deltaY * lines); // one notch (100 px) ~ x1.16
+      zoomAt(-0.0015 * event.deltaY * lines, p, event.timeStamp); // one notch (100 px) ~ x1.16
     },
     { capture: true, passive: false },
   );
@@ -170,13 +494,17 @@
         send();
         return;
       }
+      if (event.key !== "+" && event.key !== "=" && event.key !== "-" && event.key !== "_") return;
       if (!state.over) {
         state.x = 0.5;
         state.y = 0.5;
       }
-      if (event.key === "+" || event.key === "=") zoomBy(Math.log(Math.SQRT2));
-      else if (event.key === "-" || event.key === "_") zoomBy(-Math.log(Math.SQRT2));
-      else return;
+      const st = stage();
+      if (st) {
+        const box = st.clip.getBoundingClientRect();
+        const up = event.key === "+" || event.key === "=";
+        zoomAt((up ? 1 : -1) * Math.log(Math.SQRT2), [state.x * box.width, state.y * box.height], event.timeStamp);
+      }
       event.preventDefault();
     },
     { capture: true },
@@ -199,7 +527,11 @@
     }
   };
   mendLabels();
-  new MutationObserver(mendLabels).observe(document.body, { childList: true, subtree: true });
+  onView();
+  new MutationObserver(() => {
+    mendLabels();
+    onView(); // the server's view: an answer takes the transform off before this frame is drawn
+  }).observe(document.body, { childList: true, subtree: true, attributes: true, attributeFilter: ["data-v", "data-points", "data-answer"] });
   // the canvas size in CSS pixels (the screen pixels a zoom is measured in; viser reports the
   // drawing buffer's, which shrinks when it lowers the resolution on a slow machine)
   const watchCanvas = () => {

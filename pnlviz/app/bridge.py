@@ -1,5 +1,10 @@
 """The server's side of the pointer bridge (``bridge.js``, run in the page): the panel element that
-loads it and tells it the mode, and the checked reading of what it sends.
+loads it and tells it the mode, the checked reading of what it sends, and the URL a page opens.
+
+Pan and zoom happen in the page: the bridge moves the canvas with a CSS transform at display rate
+and sends one message at the end of the gesture (:class:`Gesture`: the transform, relative to the
+view the page was showing); the server applies it with one camera push and answers with the view
+(:mod:`pnlviz.app.pagesync`), and the bridge takes its transform off when that answer arrives.
 
 viser has no wheel event and no hotkey for + and -; the bridge takes them in the page and writes a
 small JSON message into a text field of the panel (hidden), which viser delivers like any typed
@@ -22,6 +27,7 @@ import json
 import math
 from dataclasses import dataclass
 from importlib import resources
+from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from pnlviz.app.modes import Mode
 
@@ -40,11 +46,33 @@ def bridge_html(input_uuid: str, mode: Mode | str) -> str:
             f'<img alt="" src="data:," style="display:none" onerror="eval(atob(\'{code}\'))">')
 
 
+def page_url(url: str, dpr: float = 1.0) -> str:
+    """``url`` with viser's ``fixedDpr`` parameter: the canvas drawn at that device pixel ratio
+    instead of one lowered when the machine is slow (the bridge reloads a page once with its own
+    ratio when the URL carries another)."""
+    parts = urlsplit(url)
+    query = [(k, v) for k, v in parse_qsl(parts.query, keep_blank_values=True) if k != "fixedDpr"]
+    return urlunsplit(parts._replace(query=urlencode(query + [("fixedDpr", f"{dpr:g}")])))
+
+
+@dataclass(frozen=True)
+class Gesture:
+    """A pan and zoom done in the page: ``k`` its sequence number, ``base`` the version of the view
+    it was made on (:attr:`pnlviz.app.viewcontrol.ViewControl.version`), and the CSS transform
+    it left on the canvas: a canvas point ``p`` (CSS pixels) shows what was at ``(p - t) / s``."""
+
+    k: int
+    base: int
+    s: float
+    t: tuple[float, float]
+
+
 @dataclass(frozen=True)
 class PointerMessage:
     """The bridge's state: ``n`` its sequence number, ``log_zoom`` the total log-zoom asked for so
     far, (``x``, ``y``) the pointer as fractions of the canvas, ``nudge`` the total arrow-key
-    nudge so far (image pixels, x and y), ``canvas`` the canvas size in CSS pixels (None: unknown)."""
+    nudge so far (image pixels, x and y), ``canvas`` the canvas size in CSS pixels (None: unknown),
+    ``gesture`` the last pan and zoom done in the page (None: none yet)."""
 
     n: int
     log_zoom: float
@@ -52,11 +80,24 @@ class PointerMessage:
     y: float
     nudge: tuple[int, int]
     canvas: tuple[int, int] | None = None
+    gesture: Gesture | None = None
+
+
+def _gesture(value) -> Gesture | None:
+    """A gesture field ``[k, base, s, tx, ty]``; ValueError when malformed."""
+    if value is None:
+        return None
+    k, base, s, tx, ty = value  # ValueError / TypeError when not five
+    g = Gesture(int(k), int(base), float(s), (float(tx), float(ty)))
+    if g.k < 0 or not all(math.isfinite(v) for v in (g.s, *g.t)) or not 1e-4 <= g.s <= 1e4 \
+            or max(abs(g.t[0]), abs(g.t[1])) > 1e7:
+        raise ValueError("gesture out of range")
+    return g
 
 
 def parse_pointer(text: str) -> PointerMessage | None:
     """A bridge message, or None for anything that is not a well-formed one."""
-    if not isinstance(text, str) or not text or len(text) > 400:
+    if not isinstance(text, str) or not text or len(text) > 600:
         return None
     try:
         d = json.loads(text)
@@ -69,6 +110,7 @@ def parse_pointer(text: str) -> PointerMessage | None:
         nx, ny = (int(v) for v in d.get("nudge", (0, 0)))
         canvas = d.get("canvas")
         canvas = (int(canvas[0]), int(canvas[1])) if canvas is not None else None
+        gesture = _gesture(d.get("view"))
     except (KeyError, IndexError, TypeError, ValueError, OverflowError):
         return None
     if canvas is not None and not (1 <= canvas[0] <= 20000 and 1 <= canvas[1] <= 20000):
@@ -77,4 +119,4 @@ def parse_pointer(text: str) -> PointerMessage | None:
         return None
     if max(abs(nx), abs(ny)) > 10 ** 7:
         return None
-    return PointerMessage(n, log_zoom, min(max(x, 0.0), 1.0), min(max(y, 0.0), 1.0), (nx, ny), canvas)
+    return PointerMessage(n, log_zoom, min(max(x, 0.0), 1.0), min(max(y, 0.0), 1.0), (nx, ny), canvas, gesture)

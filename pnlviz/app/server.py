@@ -16,6 +16,7 @@ import threading
 
 import viser
 
+from pnlviz.app.bridge import page_url
 from pnlviz.app.guard import AccessPolicy, guarded_viser_server
 from pnlviz.app.session import Session
 from pnlviz.app.state import AppState
@@ -55,6 +56,16 @@ class PnlvizApp:
     def url(self) -> str:
         """The URL a browser on this machine opens (with the token when one is needed)."""
         return self.policy.urls()[0]
+
+    @property
+    def page_url(self) -> str:
+        """:attr:`url` with the canvas at a fixed device pixel ratio (``?fixedDpr=1``; a page on
+        another ratio reloads once with its own, see :func:`pnlviz.app.bridge.page_url`)."""
+        return page_url(self.url)
+
+    def page_urls(self) -> list[str]:
+        """Every URL a browser can open (:meth:`AccessPolicy.urls`), as :attr:`page_url` is."""
+        return [page_url(u) for u in self.policy.urls()]
 
     # ------------------------------------------------------------------ tabs
     def _connect(self, client: viser.ClientHandle) -> None:

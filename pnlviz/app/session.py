@@ -23,6 +23,7 @@ from pnlviz.app.drawing import Painter
 from pnlviz.app.editing import Editor
 from pnlviz.app.frameorder import FrameOrder, visible_order
 from pnlviz.app.modes import Filter, Mode, Sort, labels
+from pnlviz.app.pagesync import PageSync
 from pnlviz.app.panels import Panels
 from pnlviz.app.playback import ClipPlayer
 from pnlviz.app.scene import OVERVIEW, Scene3D, behind_camera
@@ -66,6 +67,10 @@ class Session:
         self.scene3d = Scene3D(scene, nodes)
         self.panels = Panels(self)
         self.panels.set_order(len(self.frames.order), self.index)
+        #: the image view as the page's bridge needs it (pans and zooms in the page: pnlviz.app.pagesync)
+        self.page = PageSync(gui, self.workspace, self.view_control) if client is not None else None
+        if self.page is not None:
+            self.workspace.on_points = self.page.sync
         if client is not None:
             client.camera.on_update(self.view_control.on_camera)
             client.scene.configure_default_lights(True, cast_shadow=False)  # no shadow pass on every frame

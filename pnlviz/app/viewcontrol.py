@@ -6,6 +6,12 @@ size here.
 
 The view itself is pure (:class:`pnlviz.app.view2d.View2D`); this part holds the tab's current
 one, clamps what it is asked for, and sends the camera (without a browser, nothing is sent).
+
+Pan and zoom are done in the page at display rate (``bridge.js`` moves the canvas with a CSS
+transform) and arrive here once per gesture (:meth:`ViewControl.gesture`): no camera is pushed
+while the hand moves. Each push gets a new :attr:`ViewControl.version` and is announced to the
+page with it (``on_push``, in the same atomic message batch as the camera), which is how the page
+knows when the real render replaces its transform.
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from pnlviz.app.bridge import parse_pointer
+from pnlviz.app.bridge import Gesture, parse_pointer
 from pnlviz.app.modes import DragPhase, Mode
 from pnlviz.app.view2d import FOV_Y, PLANE_Z, View2D
 
@@ -47,6 +53,11 @@ class ViewControl:
         self.bridge_seen = (-1, 0.0, (0, 0))  # (n, log_zoom, nudge) of the last bridge message
         self._pushed_at = -math.inf
         self._pan_from: View2D | None = None
+        #: the view's version (one more on every camera push), how many pushes were sent, the last
+        #: page gesture handled, and who announces a push to the page: ``on_push(answer, applied)``
+        self.version = self.pushes = 0
+        self.gesture_seen = -1
+        self.on_push: Callable[[int | None, bool], None] | None = None
 
     @property
     def in_image(self) -> bool:
@@ -55,16 +66,32 @@ class ViewControl:
 
     # ------------------------------------------------------------------ what the user asks for
     def pan(self, phase: DragPhase, start, now) -> None:
-        """A drag on the image (screen fractions ``start`` -> ``now``): the image follows the hand."""
+        """A drag on the image that viser reported (screen fractions ``start`` -> ``now``): the
+        page pans by itself, so this comes only when its bridge took the press for one on a point
+        (or is not loaded); the image moves once, at the release, by what the hand moved."""
         if not self.in_image:
             return
         if phase is DragPhase.START or self._pan_from is None:
             self._pan_from = self.view2d
-        base = self._pan_from
+        if phase is not DragPhase.END:
+            return
+        base, self._pan_from = self._pan_from, None
         d = (np.asarray(now, float) - np.asarray(start, float)) * self.canvas
         self.push(base.panned(d[0] / base.zoom, d[1] / base.zoom))
-        if phase is DragPhase.END:
-            self._pan_from = None
+
+    def gesture(self, g: Gesture) -> None:
+        """A pan and zoom the page did (a CSS transform on the view of version ``g.base``): the
+        camera goes where the page showed, in one push, and the page is answered either way."""
+        if g.k <= self.gesture_seen:
+            return
+        self.gesture_seen = g.k
+        if not self.in_image or g.base != self.version:
+            if self.on_push is not None:  # not applied: the page takes its transform off
+                self.on_push(g.k, False)
+            return
+        v, canvas = self.view2d, np.asarray(self.canvas, float)
+        centre = np.array([v.cu, v.cv]) + ((1.0 - g.s) * canvas / 2 - np.asarray(g.t)) / (g.s * v.zoom)
+        self.push(View2D(float(centre[0]), float(centre[1]), v.zoom * g.s), answer=g.k)
 
     def zoom_by(self, factor: float, at_screen=None) -> None:
         """Zoom by ``factor`` around a canvas point (pixels; default: the centre)."""
@@ -100,6 +127,8 @@ class ViewControl:
         if msg.canvas is not None and msg.canvas != self.css_canvas:
             self.css_canvas = msg.canvas
             self.resized(msg.canvas)
+        if msg.gesture is not None:
+            self.gesture(msg.gesture)
         if msg.log_zoom != log_zoom:
             self.zoom_by(math.exp(float(np.clip(msg.log_zoom - log_zoom, -3.0, 3.0))),
                          (msg.x * self.canvas[0], msg.y * self.canvas[1]))
@@ -139,8 +168,9 @@ class ViewControl:
             cam.look_at = pose["look_at"]
 
     # ------------------------------------------------------------------ the browser camera
-    def push(self, view: View2D) -> None:
-        """Put the browser camera on ``view`` (clamped to what the image view allows)."""
+    def push(self, view: View2D, answer: int | None = None) -> None:
+        """Put the browser camera on ``view`` (clamped to what the image view allows); ``answer``:
+        the page gesture it applies, announced with the new version in the same message batch."""
         plane = self.workspace.plane
         if plane is None:
             return
@@ -158,6 +188,10 @@ class ViewControl:
             cam.position = position
             cam.look_at = look_at
             cam.near, cam.far = 0.25 * d, 2.0 * d + 1.0
+            self.version += 1
+            self.pushes += 1
+            if self.on_push is not None:
+                self.on_push(answer, answer is not None)
 
     def _keep(self, view: View2D) -> None:
         """``view`` is what the tab shows now."""
@@ -206,6 +240,8 @@ class ViewControl:
             self.push(clamped)
             return
         self._keep(view)
+        if self.on_push is not None:  # viser's own controls moved it: the page's bridge is told
+            self.on_push(None, False)
 
     def resized(self, canvas: tuple[int, int]) -> None:
         """The canvas changed size: the same part of the frame stays in view."""

@@ -267,6 +267,7 @@ class Workspace:
         self._label_uv: dict[object, np.ndarray] = {}
         self._label_rank: dict[object, int] = {}
         self.selected: Selection | None = None
+        self.on_points: Callable[[], None] | None = None  # the points or their grab size changed
 
     # ------------------------------------------------------------------ the frame
     def show_image(self, key: tuple, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> bool:
@@ -404,6 +405,8 @@ class Workspace:
         self.pins = ({k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}, observed)
         self._show_pins()
         self._show_selection()
+        if self.on_points is not None:
+            self.on_points()
 
     def _show_pins(self) -> None:
         """A box around each pinned keypoint, black, orange where the camera cannot agree with it."""

@@ -106,7 +106,7 @@ def run_serve(args) -> int:
         raise
     if detector is not None and detector.light:
         detector.warm_up()  # torch and the weights load in the detector process while the browser connects
-    urls = app.policy.urls()
+    urls = app.page_urls()  # the canvas at the page's device pixel ratio, never lowered
     state.edits.describe_holder(urls[0])
     print(f"pnlviz: {data} ({len(state.stems)} frames), edits in {state.edits.root}")
     for warning in state.problems + state.edits.warnings:

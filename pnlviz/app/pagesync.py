@@ -1,0 +1,83 @@
+"""What the page's pointer bridge (``bridge.js``) is told of a tab's image view, so that it can pan
+and zoom the canvas by itself at display rate and tell a pan from a point drag on the press.
+
+A hidden element of the tab's panel, ``#pnlviz-view``, carries in its data attributes:
+
+* ``data-v``: the view's version (:attr:`pnlviz.app.viewcontrol.ViewControl.version`, one more
+  on every camera push); ``data-answer``: the last page gesture handled, ``data-applied``: 1 if
+  the camera went where the page showed, 0 if it was refused (the page takes its transform off);
+* ``data-view``: the image pixel at the canvas centre and the zoom (CSS px per image px);
+  ``data-canvas``: the canvas in CSS px the server computes with; ``data-limits``: the zoom
+  limits and the frame size (the page keeps its transform within what the server would allow);
+* ``data-reach``: the screen radius (CSS px) within which a press grabs a point, and
+  ``data-points``: every grabbable point, image pixels ``x,y,x,y,...`` (a press within reach of
+  one is left to viser: a point drag; any other plain left press on the canvas is a pan).
+
+A push announces itself inside the camera's atomic message batch
+(:meth:`pnlviz.app.viewcontrol.ViewControl.push`), so the page gets the new version with the
+new camera. Only what changed is sent.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pnlviz.app.view2d import MAX_ZOOM, MIN_ZOOM_OF_FIT, View2D
+from pnlviz.app.workspace import GRAB_PX
+
+
+def page_data(version: int, answer: int, applied: bool, view: View2D | None, canvas: tuple[int, int],
+              plane, reach: float, points: np.ndarray) -> str:
+    """The ``#pnlviz-view`` element for these values (``plane``: the frame's
+    :class:`pnlviz.app.view2d.ImagePlane`, None before the first frame)."""
+    attrs = {"v": str(int(version)), "answer": str(int(answer)), "applied": "1" if applied else "0",
+             "canvas": f"{int(canvas[0])},{int(canvas[1])}"}
+    if view is not None and plane is not None:
+        fit = View2D.fit(plane, canvas).zoom
+        attrs["view"] = f"{view.cu:.4f},{view.cv:.4f},{view.zoom:.6g}"
+        attrs["limits"] = f"{MIN_ZOOM_OF_FIT * fit:.6g},{max(MAX_ZOOM, fit):.6g},{plane.W},{plane.H}"
+        attrs["reach"] = f"{reach:.2f}"
+        pts = np.asarray(points, float).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        attrs["points"] = ",".join(f"{v:.1f}" for v in pts.ravel())
+    body = " ".join(f'data-{k}="{v}"' for k, v in attrs.items())
+    return f'<div id="pnlviz-view" style="display:none" {body}></div>'
+
+
+class PageSync:
+    """The ``#pnlviz-view`` element of one tab (``gui``: the tab's panel), kept up to date with its
+    ``workspace`` (the points) and its ``control`` (:class:`pnlviz.app.viewcontrol.ViewControl`)."""
+
+    def __init__(self, gui, workspace, control):
+        self.workspace, self.control = workspace, control
+        self.answer, self.applied = -1, False
+        self._content = ""
+        self.updates = 0  # times the element was sent
+        self.handle = gui.add_html(self._data())
+        control.on_push = self.pushed
+
+    def pushed(self, answer: int | None, applied: bool) -> None:
+        """The camera was pushed (or a gesture refused): the page is told, in the same batch."""
+        if answer is not None:
+            self.answer, self.applied = answer, applied
+        self.sync()
+
+    def sync(self) -> None:
+        """Send the element if anything in it changed (the view, the points)."""
+        content = self._data()
+        if content != self._content:
+            self._content = content
+            self.handle.content = content
+            self.updates += 1
+
+    def _data(self) -> str:
+        ws, control = self.workspace, self.control
+        view = control.view2d
+        plane = ws.plane
+        reach = GRAB_PX * ws.world_per_px / plane.scale * view.zoom if view is not None and plane is not None else 0.0
+        nodes = [n for n in ws.points.values() if n.keys and len(n.uv)]
+        points = np.concatenate([n.uv for n in nodes]) if nodes else np.zeros((0, 2))
+        return page_data(control.version, self.answer, self.applied, view, control.canvas, plane, reach, points)
+
+
+__all__ = ["PageSync", "page_data"]
