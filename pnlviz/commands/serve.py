@@ -67,7 +67,6 @@ def _quiet_handshakes() -> None:
 
 
 def run_serve(args) -> int:
-    from pnlviz.app.guard import is_loopback
     from pnlviz.app.server import PnlvizApp
     from pnlviz.app.state import AppState
     from pnlviz.commands.common import app_data
@@ -106,6 +105,23 @@ def run_serve(args) -> int:
         raise
     if detector is not None and detector.light:
         detector.warm_up()  # torch and the weights load in the detector process while the browser connects
+    _announce(args, data, state, app)
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as Ctrl+C does: edits folder released
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        print("pnlviz: stopped", file=sys.stderr)
+    finally:
+        app.stop()
+        state.close()
+    return 0
+
+
+def _announce(args, data, state, app) -> None:
+    """Say what is served, where its edits go, the warnings, and the addresses to open."""
+    from pnlviz.app.guard import is_loopback
+
     urls = app.page_urls()  # the canvas at the page's device pixel ratio, never lowered
     state.edits.describe_holder(urls[0])
     print(f"pnlviz: {data} ({len(state.stems)} frames), edits in {state.edits.root}")
@@ -117,16 +133,6 @@ def run_serve(args) -> int:
         print(f"pnlviz: warning: listening on {args.host}: anyone who can reach this machine and has the token can "
               f"read and edit these labels", file=sys.stderr)
     print(f"pnlviz: open {urls[0]}" + "".join(f"\npnlviz:   or {u}" for u in urls[1:]), flush=True)
-    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as Ctrl+C does: edits folder released
-    try:
-        while True:
-            time.sleep(1.0)
-    except KeyboardInterrupt:
-        print("pnlviz: stopped", file=sys.stderr)
-    finally:
-        app.stop()
-        state.close()
-    return 0
 
 
 def _interrupt(signum, frame) -> None:
