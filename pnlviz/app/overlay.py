@@ -26,6 +26,7 @@ SET_RGB = {"Kp": (230, 40, 40), "Kpe": (255, 220, 0), "Kp1": (30, 120, 255), "Kp
            "Kp3": (60, 200, 60)}
 INITIAL_RGB = (0, 200, 255)  # cyan-blue: pitch through the voted camera, before PnL
 REFINED_RGB = (255, 220, 60)  # amber: pitch through the final camera
+CASING_RGB = (30, 24, 0)  # a dark edge under the amber pitch: it stays visible on the white markings
 REFERENCE_RGB = (255, 80, 255)  # magenta: pitch through a known camera (synthetic ground truth)
 RESIDUAL_RGB = (255, 0, 0)
 DETECTED_RGB = (255, 255, 255)  # white: detected line extremities
@@ -171,6 +172,8 @@ def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldMod
             seg["initial_pitch"] = _pitch(res.initial_camera, W, H, model, INITIAL_RGB)
         if layers.refined_pitch:
             seg["refined_pitch"] = _pitch(res.camera, W, H, model, REFINED_RGB)
+            pitch = seg["refined_pitch"]
+            seg["refined_pitch_casing"] = Segments(pitch.points, np.tile(np.uint8(CASING_RGB), (len(pitch), 1)))
     line_points = Markers()
     if view.annotation:
         names = list(view.annotation)

@@ -29,7 +29,7 @@ FOV_Y = math.radians(30.0)
 MAX_ZOOM = 32.0
 MIN_ZOOM_OF_FIT = 0.25
 #: how far in front of the image each overlay layer floats (scene units; the camera is >= 0.4 away)
-LAYER_DEPTH = {"grab": 0.0005, "pitch": 0.001, "lines": 0.0015, "residuals": 0.002, "ghosts": 0.0025,
+LAYER_DEPTH = {"grab": 0.0005, "casing": 0.0008, "pitch": 0.001, "lines": 0.0015, "residuals": 0.002, "ghosts": 0.0025,
                "keypoints": 0.003, "selection": 0.0035}
 
 

@@ -26,7 +26,7 @@ from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter
 DISC_PX, RIM_PX, GRAB_PX, RING_PX = 4.5, 6.0, 8.0, 11.0
 PIN_BOX_PX = 8.5  #: screen pixels: half the side of the box around a pinned keypoint
 #: screen thickness of each layer's lines
-THICKNESS = {"refined_pitch": 2.0, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
+THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
              "detected_lines": 2.0, "residuals": 1.5}
 BACKDROP_RGB = (38, 40, 46)
 BACKDROP_MARGIN = 6.0  # the dark frame around the image: this many image widths (heights) each side
@@ -385,7 +385,7 @@ class Workspace:
                 if handle is not None:
                     update_changed(handle, visible=False)
                 continue
-            pts = plane.world(seg.points, "residuals" if name == "residuals" else "pitch")
+            pts = plane.world(seg.points, {"residuals": "residuals", "refined_pitch_casing": "casing"}.get(name, "pitch"))
             cols = line_colors[name] if line_colors and name in line_colors else np.repeat(seg.colors[:, None], 2, 1)
             if handle is None:
                 self._lines[name] = self.scene.add_line_segments(f"{self.root}/lines/{name}", pts, cols,
