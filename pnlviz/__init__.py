@@ -15,7 +15,9 @@ from pnlviz.api import (  # noqa: E402
     ArgumentError,
     Calibration,
     Camera,
+    ClipCalibration,
     calibrate,
+    calibrate_clip,
     keypoint_names,
     keypoints,
     open_dataset,
@@ -23,4 +25,4 @@ from pnlviz.api import (  # noqa: E402
 )
 
 __all__ = ["ASSETS_DIR", "EXAMPLES_DIR", "REPO_ROOT", "SAMPLE_DIR", "ArgumentError", "Calibration", "Camera",
-           "calibrate", "detect", "keypoint_names", "keypoints", "open_dataset", "top_view"]
+           "ClipCalibration", "calibrate", "calibrate_clip", "detect", "keypoint_names", "keypoints", "open_dataset", "top_view"]

@@ -38,8 +38,8 @@ import numpy as np
 from pnlviz.data.errors import ArgumentError
 from pnlviz.geometry.camera import Camera
 
-__all__ = ["ArgumentError", "Calibration", "Camera", "calibrate", "detect", "keypoint_names", "keypoints", "open_dataset",
-           "top_view"]
+__all__ = ["ArgumentError", "Calibration", "Camera", "ClipCalibration", "calibrate", "calibrate_clip", "detect",
+           "keypoint_names", "keypoints", "open_dataset", "top_view"]
 
 
 def keypoints() -> dict[int, tuple[float, float, float]]:
@@ -151,19 +151,37 @@ def calibrate(keypoints: Mapping[int, Sequence[float]] | None = None,
     the pixels are in. ``pnl``: the point-and-line refinement; ``alpha``: its weight of lines
     against points (default the paper's). Never raises on geometry: a frame that cannot be
     calibrated comes back with ``camera`` None and the reason."""
-    from pnlviz.calib.calibrate import CalibParams
     from pnlviz.calib.calibrate import calibrate as calibrate_frame
-    from pnlviz.calib.inputs import observations_from_annotation
-    from pnlviz.calib.observations import Observations
     from pnlviz.field.model import load_field_model
 
     model = load_field_model()
     w, h = _image_size(image_size)
-    kps = _keypoints_arg(keypoints, model)
-    pixel_lines = _lines_arg(lines, model)
-    if alpha is not None and not (isinstance(alpha, (int, float)) and math.isfinite(alpha) and 0 <= alpha <= 1):
+    obs = _observations(keypoints, lines, w, h, model)
+    res = calibrate_frame(obs, _params(pnl, alpha), model)
+    return Calibration(res.camera, res.failure, res.failure_code, dict(res.point_residuals),
+                       dict(res.line_residuals), tuple(int(k) for k in res.inliers), tuple(res.pnl_lines))
+
+
+def _params(pnl, alpha):
+    from pnlviz.calib.calibrate import CalibParams
+
+    if alpha is not None and (isinstance(alpha, bool) or not isinstance(alpha, (int, float))
+                              or not math.isfinite(alpha) or not 0 <= alpha <= 1):
         raise ArgumentError(f"alpha: expected a number in [0, 1], got {alpha!r}")
-    params = CalibParams(pnl=bool(pnl)) if alpha is None else CalibParams(pnl=bool(pnl), alpha=float(alpha))
+    return CalibParams(pnl=bool(pnl)) if alpha is None else CalibParams(pnl=bool(pnl), alpha=float(alpha))
+
+
+def _observations(keypoints, lines, w: int, h: int, model, where: str = ""):
+    """The observations of a frame from the API's ``keypoints`` and ``lines`` (checked; ``where``
+    prefixes the argument names in errors, e.g. ``frames[3].``)."""
+    from pnlviz.calib.inputs import observations_from_annotation
+    from pnlviz.calib.observations import Observations
+
+    try:
+        kps = _keypoints_arg(keypoints, model)
+        pixel_lines = _lines_arg(lines, model)
+    except ArgumentError as exc:
+        raise ArgumentError(f"{where}{exc}") from None
     scale = np.array([w - 1, h - 1], float)
     derived, _ = observations_from_annotation({k: v / scale for k, v in pixel_lines.items()}, w, h, model=model)
     points = {int(k): tuple(xy) for k, xy in zip(derived.kp_ids, derived.kp_xy)}
@@ -171,10 +189,42 @@ def calibrate(keypoints: Mapping[int, Sequence[float]] | None = None,
     points.update(kps)  # a keypoint given wins over one derived from the lines
     for k in kps:
         sets.pop(k, None)
-    obs = Observations.from_keypoints(w, h, points, sets, lines=derived.lines, circles=derived.circles, model=model)
-    res = calibrate_frame(obs, params, model)
-    return Calibration(res.camera, res.failure, res.failure_code, dict(res.point_residuals),
-                       dict(res.line_residuals), tuple(int(k) for k in res.inliers), tuple(res.pnl_lines))
+    return Observations.from_keypoints(w, h, points, sets, lines=derived.lines, circles=derived.circles, model=model)
+
+
+@dataclass(frozen=True)
+class ClipCalibration:
+    """A clip's cameras, one per frame (None: no camera), each from its shot's broadcast camera
+    (one position and lens per shot, pan, tilt and zoom per frame), and the shots (lists of frame
+    indices)."""
+
+    cameras: tuple[Camera | None, ...]
+    shots: tuple[tuple[int, ...], ...]
+
+
+def calibrate_clip(frames: Sequence[Mapping], *, image_size: Sequence[int], pnl: bool = True) -> ClipCalibration:
+    """Calibrate the frames of a video clip in time order, as ``pnlviz calibrate --temporal``
+    does: each frame on its own, then the clip cut into shots and one broadcast camera fitted per
+    shot. ``frames``: one mapping per frame with ``"keypoints"`` and/or ``"lines"`` as
+    :func:`calibrate` takes them (an empty mapping: nothing seen)."""
+    from pnlviz.calib.calibrate import calibrate as calibrate_frame
+    from pnlviz.calib.temporal import calibrate_clip as solve_clip
+    from pnlviz.field.model import load_field_model
+
+    model = load_field_model()
+    w, h = _image_size(image_size)
+    if isinstance(frames, (str, bytes, Mapping)) or not isinstance(frames, Sequence):
+        raise ArgumentError(f"frames: expected a sequence of mappings, one per frame, got {type(frames).__name__}")
+    params = _params(pnl, None)
+    observations, cameras = [], []
+    for i, frame in enumerate(frames):
+        if not isinstance(frame, Mapping) or set(frame) - {"keypoints", "lines"}:
+            raise ArgumentError(f"frames[{i}]: expected a mapping with 'keypoints' and/or 'lines', got {frame!r:.60}")
+        obs = _observations(frame.get("keypoints"), frame.get("lines"), w, h, model, where=f"frames[{i}].")
+        observations.append(obs if obs.n_keypoints or obs.lines or obs.circles else None)
+        cameras.append(calibrate_frame(obs, params, model).camera if observations[-1] is not None else None)
+    result = solve_clip(observations, cameras, (w, h), model=model)
+    return ClipCalibration(tuple(result.cameras), tuple(tuple(int(t) for t in shot) for shot in result.shots))
 
 
 def open_dataset(path: str | Path):

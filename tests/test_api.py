@@ -145,3 +145,27 @@ def test_detect_finds_what_calibrate_takes():
     assert res.ok, res.reason
     with pytest.raises(ArgumentError, match="^image"):
         pnlviz.detect(image[:, :, 0])
+
+
+def test_calibrate_clip_fits_one_broadcast_camera_per_shot():
+    """A camera panning across the pitch over 10 frames (one position, one lens): the clip's cameras
+    come back on the truth, as one shot."""
+    world = pnlviz.keypoints()
+    truth = [pnlviz.Camera.from_look_at((0.0, 55.0, -20.0), (x, 0.0, 0.0), hfov_deg=40, width=1280, height=720)
+             for x in np.linspace(-20, 20, 10)]
+    frames = []
+    for cam in truth:
+        uv, _ = cam.project(np.array(list(world.values())))
+        frames.append({"keypoints": {k: p for k, p in zip(world, uv)
+                                     if cam.in_image(np.nan_to_num(p[None], nan=-1.0))[0]}})
+    frames[4] = {}  # a frame where nothing was seen
+    clip = pnlviz.calibrate_clip(frames, image_size=(1280, 720))
+    assert clip.shots == (tuple(range(10)),)
+    assert clip.cameras[4] is None
+    for t, cam in enumerate(clip.cameras):
+        if cam is not None:
+            assert np.linalg.norm(cam.C - truth[t].C) < 0.5 and abs(cam.fx / truth[t].fx - 1) < 0.01
+    with pytest.raises(ArgumentError, match=r"^frames\[1\]\.keypoints\[99\]"):
+        pnlviz.calibrate_clip([{}, {"keypoints": {99: (1, 2)}}], image_size=(1280, 720))
+    with pytest.raises(ArgumentError, match=r"^frames\[0\]"):
+        pnlviz.calibrate_clip([{"points": {}}], image_size=(1280, 720))
