@@ -169,3 +169,15 @@ def test_calibrate_clip_fits_one_broadcast_camera_per_shot():
         pnlviz.calibrate_clip([{}, {"keypoints": {99: (1, 2)}}], image_size=(1280, 720))
     with pytest.raises(ArgumentError, match=r"^frames\[0\]"):
         pnlviz.calibrate_clip([{"points": {}}], image_size=(1280, 720))
+
+
+def test_the_api_reference_page_is_current():
+    """docs/api.md is written from the docstrings by scripts/api_reference.py: a docstring changed
+    without the page written again fails here."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "api_reference.py"
+    run = subprocess.run([sys.executable, str(script), "--check"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
