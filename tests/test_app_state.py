@@ -380,3 +380,18 @@ def test_the_views_and_images_go_when_the_last_tab_leaves(data, serve):
     app.close_session(b)
     assert st._cache == {} and st._images == {} and st._previews == {}
     assert st.view("00000").result.ok  # and they come back when asked for
+
+
+def test_the_panel_shows_the_frame_from_above(data, serve):
+    """The bird's-eye view under the calibration card: the camera's footprint on the pitch, and
+    another frame's camera gives another footprint."""
+    from pnlviz.viz import top_view
+
+    app = serve(data)
+    tab = app.session()
+    tab.goto(app.state.find("00000"))
+    first = tab.panels.top_view.image.copy()
+    plain = top_view(None, px_per_m=3.0)[:, :, ::-1]
+    assert first.shape == plain.shape and np.abs(first.astype(int) - plain).sum(axis=2).astype(bool).mean() > 0.05
+    tab.goto(app.state.find("00001"))
+    assert (tab.panels.top_view.image != first).any()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 
 from pnlviz.app import cards
@@ -17,7 +18,9 @@ from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
 from pnlviz.app.panels import LAYERS
 from pnlviz.app.state import FrameView
 from pnlviz.app.workspace import update_changed
-from pnlviz.viz import blank_canvas
+from pnlviz.viz import blank_canvas, top_view
+
+TOP_PX_PER_M = 3.0  # the bird's-eye view in the panel: about 350 px wide
 
 
 class Painter:
@@ -149,7 +152,21 @@ class Painter:
         self.show_points_list(view)
         self.show_selected()
         self.show_progress()
+        self.show_top_view(view)
         tab.clip.show()
+
+    def show_top_view(self, view: FrameView) -> None:
+        """The bird's-eye view under the frame's card: its camera's footprint and its keypoints put
+        on the pitch (drawn again only when the camera or the keypoints change)."""
+        p = self.tab.panels
+        cam = view.camera
+        obs = view.observations
+        kps = {int(k): tuple(xy) for k, xy in zip(obs.kp_ids, obs.kp_xy)} if obs is not None and cam else {}
+        key = (None if cam is None else cam.to_soccernet()["position_meters"] + list(cam.R.ravel()) + [cam.fx],
+               sorted(kps.items()))
+        if key != getattr(self, "_top_key", None):
+            self._top_key = key
+            p.top_view.image = cv2.cvtColor(top_view(cam, keypoints=kps, px_per_m=TOP_PX_PER_M), cv2.COLOR_BGR2RGB)
 
     def show_points_list(self, view: FrameView) -> None:
         rows = cards.point_rows(self.overlay, self.hidden_ids(view.stem))

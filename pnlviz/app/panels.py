@@ -171,6 +171,7 @@ class Panels:
     def _calibration_folder(self, gui, settings, sources) -> None:
         with gui.add_folder("Calibration"):
             self.card = gui.add_markdown("")
+            self.top_view = gui.add_image(np.zeros((8, 8, 3), np.uint8), format="jpeg", jpeg_quality=85)
             self.pnl = gui.add_checkbox("PnL refinement", initial_value=settings.pnl)
             self.alpha = gui.add_slider("alpha (lines vs points)", min=0.0, max=1.0, step=0.05,
                                         initial_value=settings.alpha)
