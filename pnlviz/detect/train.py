@@ -233,6 +233,13 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
     if config.threads:
         torch.set_num_threads(int(config.threads))
     torch.set_flush_denormal(True)  # tiny heatmap gradients otherwise hit slow denormal arithmetic
+    try:
+        return _train(config, out, minutes, progress, cache_dir, log, cache, init)
+    finally:
+        torch.set_flush_denormal(False)  # back to torch's default for the rest of the process, whatever happened
+
+
+def _train(config: TrainConfig, out: Path, minutes, progress, cache_dir, log, cache, init) -> TrainResult:
     _seed_everything(config.seed)
     t_render = time.perf_counter()
     sources = build_sources(config, cache=cache, cache_dir=cache_dir, progress=progress)
@@ -250,7 +257,6 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
         log(f"starting from {init}")
     net.train()
     run = _train_loop(net, sources, config, None if minutes is None else float(minutes) * 60.0, progress, log)
-    torch.set_flush_denormal(False)  # back to torch's default for the rest of the process
     net.eval()
     out.parent.mkdir(parents=True, exist_ok=True)
     save_checkpoint(net, out)
