@@ -95,14 +95,19 @@ def check(export: Path, gate_px: float) -> dict:
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--gate-px", type=float, default=10.0)
+def work_folder(ap: argparse.ArgumentParser, prefix: str) -> tuple[argparse.Namespace, Path]:
+    """The arguments (``--keep`` added) and the folder to work in, once the real frames are there."""
     ap.add_argument("--keep", type=Path, help="work here (kept) instead of a temporary folder")
     args = ap.parse_args()
     if not IMAGES.is_dir():
         raise SystemExit(f"needs {IMAGES} (the real WC14 test-half images)")
-    tmp = args.keep or Path(tempfile.mkdtemp(prefix="pnlviz-gate-"))
+    return args, args.keep or Path(tempfile.mkdtemp(prefix=prefix))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gate-px", type=float, default=10.0)
+    args, tmp = work_folder(ap, "pnlviz-gate-")
     try:
         frames, preds, export = tmp / "frames", tmp / "preds.zip", tmp / "export"
         n = resized(IMAGES, frames)

@@ -16,13 +16,12 @@ import argparse
 import resource
 import shutil
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_gate import IMAGES, SIZE, resized  # noqa: E402
+from bench_gate import IMAGES, SIZE, resized, work_folder  # noqa: E402
 
 from pnlviz.app.frameorder import visible_order  # noqa: E402
 from pnlviz.app.modes import Filter, Sort  # noqa: E402
@@ -39,12 +38,7 @@ def opened(frames: Path, edits: Path) -> AppState:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--keep", type=Path, help="work here (kept) instead of a temporary folder")
-    args = ap.parse_args()
-    if not IMAGES.is_dir():
-        raise SystemExit(f"needs {IMAGES} (the real WC14 test-half images)")
-    tmp = args.keep or Path(tempfile.mkdtemp(prefix="pnlviz-triage-"))
+    args, tmp = work_folder(argparse.ArgumentParser(description=__doc__.splitlines()[0]), "pnlviz-triage-")
     try:
         frames, edits = tmp / "frames", tmp / "frames.edits"
         shutil.rmtree(edits, ignore_errors=True)

@@ -32,6 +32,7 @@ class Painter:
         self.tab = tab
         self.layers = Layers()
         self.opacity = 1.0
+        self._top_key: tuple | None = None  # what the panel's bird's-eye view was drawn from
         self.shown: FrameView | None = None
         self.overlay: Overlay | None = None
         self.drawn = 0
@@ -162,9 +163,8 @@ class Painter:
         cam = view.camera
         obs = view.observations
         kps = {int(k): tuple(xy) for k, xy in zip(obs.kp_ids, obs.kp_xy)} if obs is not None and cam else {}
-        key = (None if cam is None else cam.to_soccernet()["position_meters"] + list(cam.R.ravel()) + [cam.fx],
-               sorted(kps.items()))
-        if key != getattr(self, "_top_key", None):
+        key = (None if cam is None else (cam.C.tobytes(), cam.R.tobytes(), cam.fx, cam.fy), sorted(kps.items()))
+        if key != self._top_key:
             self._top_key = key
             p.top_view.image = cv2.cvtColor(top_view(cam, keypoints=kps, px_per_m=TOP_PX_PER_M), cv2.COLOR_BGR2RGB)
 

@@ -127,8 +127,7 @@ class Editor:
     def set_place_id(self, value) -> None:
         """A choice in the picker ("45 · penalty mark left")."""
         panels = self.tab.panels
-        current = panels.kp_choices[[choice_id(c) for c in panels.kp_choices].index(self.place_id)]
-        self.place_id = choice_id(panels.choice(panels.kp_id, panels.kp_choices, current))
+        self.place_id = choice_id(panels.choice(panels.kp_id, panels.kp_choices, panels.choice_of(self.place_id)))
         panels.kp_map.image = panels.map_of(self.place_id)
         self.tab.painter.show_selected()
 

@@ -249,9 +249,13 @@ class Panels:
             self._maps[key] = picker_map(self.session.state.model, kid)
         return self._maps[key]
 
+    def choice_of(self, kid: int) -> str:
+        """The picker's option of keypoint ``kid`` ("45 · penalty mark left")."""
+        return self.kp_choices[[choice_id(c) for c in self.kp_choices].index(kid)]
+
     def show_place_id(self, kid: int) -> None:
         """The picker and its map on ``kid``."""
-        self.session.queue.set_value(self.kp_id, self.kp_choices[[choice_id(c) for c in self.kp_choices].index(kid)])
+        self.session.queue.set_value(self.kp_id, self.choice_of(kid))
         self.kp_map.image = self.map_of(kid)
 
     # ------------------------------------------------------------------ values from the browser

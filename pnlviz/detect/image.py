@@ -3,12 +3,13 @@ default model (or a given one), pixels out in the form :func:`pnlviz.calibrate` 
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
 
 from pnlviz.data.errors import ArgumentError
-from pnlviz.detect.default import torch_missing
+from pnlviz.detect.default import DEFAULT_MODEL, torch_missing
 from pnlviz.field.names import LINE_ID_TO_CLASS
 
 
@@ -25,12 +26,20 @@ def detect_image(image: np.ndarray, weights: str | Path | None = None, *, thresh
                             f"{arr.dtype} {arr.shape}")
     if isinstance(threshold, bool) or not (isinstance(threshold, (int, float)) and 0 <= threshold <= 1):
         raise ArgumentError(f"threshold: expected a score in [0, 1], got {threshold!r}")
-    from pnlviz.detect.run import Detector
-
-    detector = Detector.from_weights(None, None, light=None if weights is None else Path(weights))
-    pred = detector.detect([arr])[0]
+    path = DEFAULT_MODEL if weights is None else Path(weights).resolve()
+    stamp = (path.stat().st_size, path.stat().st_mtime_ns) if path.is_file() else None
+    pred = _detector(None if weights is None else str(path), stamp).detect([arr])[0]
     h, w = arr.shape[:2]
     kps = {int(k): (float(x), float(y), float(p)) for k, (x, y, p) in pred.keypoints_px(w, h).items() if p >= threshold}
     lines = {LINE_ID_TO_CLASS[int(k)]: [(float(x1), float(y1)), (float(x2), float(y2))]
              for k, (x1, y1, p1, x2, y2, p2) in pred.lines_px(w, h).items() if min(p1, p2) >= threshold}
     return {"keypoints": kps, "lines": lines}
+
+
+@functools.lru_cache(maxsize=2)
+def _detector(weights: str | None, stamp: tuple | None):
+    """The detector of ``weights`` (None: the light default model), loaded once per process and
+    again when the file changes (``stamp``: its size and modification time)."""
+    from pnlviz.detect.run import Detector
+
+    return Detector.from_weights(None, None, light=None if weights is None else Path(weights))
