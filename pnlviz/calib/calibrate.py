@@ -97,7 +97,8 @@ class CalibParams:
         unknown = sorted(set(overrides) - known)
         if unknown:
             raise ValueError(f"unknown calibration setting(s) {unknown}; known: {sorted(known)}")
-        changes: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()}  # JSON lists
+        # JSON gives lists where the fields hold tuples
+        changes: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()}
         return replace(self, **changes)
 
 

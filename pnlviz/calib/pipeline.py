@@ -189,10 +189,11 @@ def vote(cands: list[Candidate], kind: Kind, params) -> Candidate | None:
     obs = kind.data.obs
     tau = params.px(params.vote_tau, obs.width)
     taus = getattr(kind, "vote_taus", None) if obs.pins.any() else None  # per-observation bounds with pins
+    pin_tau = params.px(params.pin_vote_px, obs.width)
     residuals = kind.scorer(cands[0].estimate)
     for c in cands:
         r = residuals(c.estimate)
-        c.score = truncated_score(r, tau if taus is None else taus(len(r), tau, params.px(params.pin_vote_px, obs.width)))
+        c.score = truncated_score(r, tau if taus is None else taus(len(r), tau, pin_tau))
     return best(cands)
 
 
