@@ -208,7 +208,9 @@ class FrameResult:
 
     def matching(self, threshold: float) -> Matching:
         """The labelling the evaluator keeps at ``threshold``."""
-        return self.mirror if self.scores[float(threshold)].mirrored else self.direct
+        m = self.mirror if self.scores[float(threshold)].mirrored else self.direct
+        assert m is not None  # a frame with scores has both matchings
+        return m
 
 
 def _score(direct: Matching, mirror: Matching, threshold: float) -> ThresholdScore:
@@ -275,7 +277,7 @@ def _mean_like_evaluator(values: list[float | None], empty: list[bool] | None = 
     accuracy), so a float32 mean unless an empty frame makes it float64. NaN for no value."""
     items = [(0.0 if (empty and e) else np.float32(v)) for v, e in zip(values, empty or [False] * len(values))
              if v is not None]
-    return float(np.mean(items)) if items else float("nan")
+    return float(np.mean(np.asarray(items))) if items else float("nan")  # the array np.mean makes of them
 
 
 @dataclass
