@@ -100,8 +100,8 @@ def validate_keypoint(kid: Any, value: Any, source: str) -> tuple[str, list[floa
         return str(int(text)), None
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise DataError(source, f"keypoint {text}: expected [x, y] or null, got {describe(value)}")
-    xy = [as_number(v) for v in value]
-    if any(v is None or not math.isfinite(v) or abs(v) > MAX_COORDINATE for v in xy):
+    xy = [v for v in (as_number(v) for v in value) if v is not None and math.isfinite(v) and abs(v) <= MAX_COORDINATE]
+    if len(xy) != 2:
         raise DataError(source, f"keypoint {text}: [x, y] must be two finite pixel coordinates, got {value!r:.60}")
     return str(int(text)), xy
 
@@ -242,7 +242,7 @@ class EditsStore:
         self._cache: dict[str, dict] = {}
         self._locks: dict[str, threading.RLock] = {}
         self._locks_lock = threading.Lock()
-        self._lock_file = None
+        self._lock_file: int | None = None
         #: stem -> (merge key, time, undo steps) of the frame's last action that named a merge key
         self._merging: dict[str, tuple[object, float, int]] = {}
         if writable:

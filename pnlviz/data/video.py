@@ -10,11 +10,15 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .dataset import Frame
 from .errors import DataError
+
+if TYPE_CHECKING:  # imported when a frame is read
+    import cv2
 
 __all__ = ["VideoDataset"]
 
@@ -90,7 +94,7 @@ class VideoDataset:
         self.name = self.path.stem
         self._stems = tuple(f"{self.name}-IMG_{i + 1:05d}" for i in range(count))
         self._index = {s: i for i, s in enumerate(self._stems)}
-        self._cap = None
+        self._cap: cv2.VideoCapture | None = None
         self._next = 0
         self.rejected: list = []
 
