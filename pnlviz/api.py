@@ -48,7 +48,11 @@ def keypoints() -> dict[int, tuple[float, float, float]]:
     from pnlviz.field.model import load_field_model
 
     model = load_field_model()
-    return {int(k): tuple(float(v) for v in model.keypoints[int(k)].xyz) for k in model.keypoint_ids}
+    out: dict[int, tuple[float, float, float]] = {}
+    for k in model.keypoint_ids:
+        x, y, z = (float(v) for v in model.keypoints[int(k)].xyz)
+        out[int(k)] = (x, y, z)
+    return out
 
 
 def keypoint_names() -> dict[int, str]:
