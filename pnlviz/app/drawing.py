@@ -28,7 +28,7 @@ class Painter:
     drawn last, ``overlay`` its overlays, ``drawn`` how many times the tab was drawn; ``layers``
     and ``opacity`` how the overlays are drawn."""
 
-    def __init__(self, tab):
+    def __init__(self, tab) -> None:
         self.tab = tab
         self.layers = Layers()
         self.opacity = 1.0

@@ -71,12 +71,28 @@ class DragPhase(enum.Enum):
     END = "end"
 
 
+#: what a point is: a keypoint (or ghost) id, or a line point's (class name, index)
+PointKey = int | tuple[str, int]
+
+
 @dataclass(frozen=True)
 class Selection:
     """A selected point: a keypoint or ghost id, or for a line point (class name, index)."""
 
     kind: PointKind
-    key: object
+    key: PointKey
+
+    @property
+    def kid(self) -> int:
+        """The id of a keypoint or ghost."""
+        assert not isinstance(self.key, tuple), "a line point has no keypoint id"
+        return int(self.key)
+
+    @property
+    def line_point(self) -> tuple[str, int]:
+        """(class name, index) of a line point."""
+        assert isinstance(self.key, tuple), "a keypoint is not a line point"
+        return self.key
 
     @property
     def is_keypoint(self) -> bool:
@@ -89,7 +105,7 @@ class DragEvent:
     """A point dragged: which one, the phase, and the image pixel it is dragged to."""
 
     kind: PointKind
-    key: object
+    key: PointKey
     phase: DragPhase
     uv: np.ndarray
 

@@ -37,7 +37,7 @@ class Session:
     """The panel and scene nodes of one tab (``gui``/``scene`` of its viser client), or of the
     server itself when ``client`` is None (a session without a browser, for scripts and tests)."""
 
-    def __init__(self, app, gui, scene, client=None):
+    def __init__(self, app, gui, scene, client=None) -> None:
         self.app, self.state = app, app.state
         self.gui, self.scene, self.client = gui, scene, client
         st = self.state

@@ -89,7 +89,9 @@ class AppState:
         self.detector = detector
         if detector is not None and self.reader.predictions is None:
             self.reader.predictions = {}
-        self.ds, self.edits, self.size = self.reader.ds, self.reader.edits, size
+        edits_store = self.reader.edits
+        assert edits_store is not None  # FrameReader.open always opens the edits folder
+        self.ds, self.edits, self.size = self.reader.ds, edits_store, size
         self.stems = self.reader.stems
         #: every frame's calibration summary and the background pass (the detector's results
         #: are kept on disk beside them)

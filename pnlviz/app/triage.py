@@ -118,6 +118,7 @@ class _JsonLines:
         return offset, len(data)
 
     def read(self, offset: int, length: int) -> dict:
+        assert self.path is not None  # offsets come from append, which writes only to a file
         with self._lock, open(self.path, "rb") as f:
             f.seek(offset)
             return json.loads(f.read(length))
@@ -259,7 +260,8 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
                 progress.detected += 1
             except Exception:  # noqa: BLE001 - a frame the detector fails on is calibrated without
                 pass
-        summary = triage.store.get(stem) if triage.up_to_date(stem) else triage.calibrate(stem)
+        stored = triage.store.get(stem) if triage.up_to_date(stem) else None  # up to date: stored
+        summary = stored if stored is not None else triage.calibrate(stem)
         progress.done += 1
         progress.failed += not summary.ok
         if i % every == 0 or i == len(state.stems) - 1:
