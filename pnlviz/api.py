@@ -233,7 +233,9 @@ def calibrate_clip(frames: Sequence[Mapping], *, image_size: Sequence[int], pnl:
 
 def open_dataset(path: str | Path):
     """A dataset folder or zip (SoccerNet layout: ``<stem>.jpg`` with ``<stem>.json``), indexed
-    lazily: ``len(ds)``, ``ds.stems``, ``ds.image(stem)`` (BGR), ``ds.annotation(stem)``."""
+    lazily: ``len(ds)``, ``ds.stems``, ``ds.image(stem)`` (BGR), ``ds.annotation(stem)``. Split
+    folders or split zips (``sn23/train/``, ``sn23/valid.zip``, ...) are one dataset whose stems
+    are ``<split>/<stem>`` (``ds.splits`` names them)."""
     from pnlviz.data import open_dataset as open_data
 
     p = Path(path)

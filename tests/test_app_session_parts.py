@@ -29,8 +29,8 @@ from pnlviz.app.viewcontrol import ECHO_S, ViewControl
 
 # ---------------------------------------------------------------------- the queue
 def widget(value):
-    """A stand-in for a viser widget handle: a value and an id."""
-    return SimpleNamespace(value=value, _impl=SimpleNamespace(uuid=f"w{id(value)}-{time.perf_counter_ns()}"))
+    """A stand-in for a viser widget handle: a value (viser's events carry the handle itself)."""
+    return SimpleNamespace(value=value)
 
 
 def test_the_queue_runs_actions_in_the_order_they_came_and_survives_an_error():
@@ -54,7 +54,7 @@ def test_the_queue_drops_the_echoes_of_its_own_values_and_keeps_the_users():
     callback = queue.ordered(lambda event: got.append(event.target.value))
 
     def event(client):
-        return SimpleNamespace(target=SimpleNamespace(_impl=slider._impl, value=slider.value), client=client)
+        return SimpleNamespace(target=slider, client=client)
 
     queue.set_value(slider, 5)  # set from here: viser calls back later, with no client
     queue.set_value(slider, 5)  # unchanged: viser sends nothing, nothing to drop

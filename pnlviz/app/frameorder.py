@@ -11,6 +11,7 @@ import numpy as np
 
 from pnlviz.app.modes import Filter, Sort
 from pnlviz.app.triage import FrameSummary
+from pnlviz.data.layout import split_stem
 
 
 def matches(flt: Filter, summary: FrameSummary | None, review: str | None) -> bool:
@@ -59,10 +60,12 @@ def sort_key_text(sort: Sort, summary: FrameSummary | None) -> str | None:
 
 
 def visible_order(stems: Sequence[str], summaries: Mapping[str, FrameSummary], review: Callable[[str], str | None],
-                  flt: Filter, sort: Sort) -> list[int]:
-    """Dataset indices of the frames in ``flt``, in ``sort``'s order. ``summaries``: the frames'
-    summaries known so far, by stem; ``review(stem)``: a frame's review status."""
-    idx = [i for i, stem in enumerate(stems) if matches(flt, summaries.get(stem), review(stem))]
+                  flt: Filter, sort: Sort, split: str = "") -> list[int]:
+    """Dataset indices of the frames in ``flt`` (and in ``split``, of a dataset in splits; ``""``:
+    every split), in ``sort``'s order. ``summaries``: the frames' summaries known so far, by stem;
+    ``review(stem)``: a frame's review status."""
+    idx = [i for i, stem in enumerate(stems) if (not split or split_stem(stem)[0] == split)
+           and matches(flt, summaries.get(stem), review(stem))]
     if sort is not Sort.INDEX:
         idx.sort(key=lambda i: sort_key(sort, summaries.get(stems[i])))
     return idx
@@ -77,8 +80,13 @@ class FrameOrder:
         self.n_frames = n_frames
         self.index = index
         self.filter, self.sort = Filter.ALL, Sort.INDEX
+        self.split = ""  # a dataset in splits: the one split stepped through ("": all)
         self.order = list(range(n_frames))
         self.outside_filter = False
+
+    def filter_label(self) -> str:
+        """The filter as the panel names it (``"unreviewed"``, ``"unreviewed in valid"``)."""
+        return self.filter.value + (f" in {self.split}" if self.split else "")
 
     def position(self) -> int:
         """Where the frame is in the order, from 0 (0 when it is not in it)."""

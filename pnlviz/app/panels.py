@@ -9,7 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from pnlviz.app.bridge import bridge_html
+from pnlviz.app.bridge import BRIDGE_FIELD, bridge_html
 from pnlviz.app.modes import DragMode, Filter, Mode, Sort, labels
 from pnlviz.app.overlay import LEGEND, SET_RGB
 from pnlviz.viz import keypoint_map
@@ -104,8 +104,8 @@ class Panels:
             gui.add_markdown(help_markdown())
         self.background = gui.add_markdown("")
         # the pointer bridge: a text field it writes to (hidden by the bridge) and its loader
-        self.bridge_field = gui.add_text("pointer", initial_value="")
-        self.bridge = gui.add_html(bridge_html(self.bridge_field._impl.uuid, Mode.IMAGE))
+        self.bridge_field = gui.add_text(BRIDGE_FIELD, initial_value="")
+        self.bridge = gui.add_html(bridge_html(BRIDGE_FIELD, Mode.IMAGE))
         self._bind()
 
     def _frame_folder(self, gui) -> None:
@@ -114,6 +114,8 @@ class Panels:
             self.nav = gui.add_button_group("navigate", ("previous", "next"))
             self.jump = gui.add_text("jump to stem", initial_value="")
             self.filter = gui.add_dropdown("filter", labels(Filter), initial_value=Filter.ALL.value)
+            splits = self.session.state.ds.splits  # a dataset in split folders or zips
+            self.split = gui.add_dropdown("split", ("all", *splits), initial_value="all") if splits else None
             self.sort = gui.add_dropdown("sort", labels(Sort), initial_value=Sort.INDEX.value)
             self.filter_text = gui.add_markdown("")
 
@@ -179,7 +181,7 @@ class Panels:
             self.source = gui.add_dropdown("keypoint source", sources, initial_value=settings.source)
 
     def set_mode(self, mode: Mode) -> None:
-        self.bridge.content = bridge_html(self.bridge_field._impl.uuid, mode)
+        self.bridge.content = bridge_html(BRIDGE_FIELD, mode)
 
     # ------------------------------------------------------------------ bindings
     def _bind(self) -> None:
@@ -191,6 +193,9 @@ class Panels:
         self.jump.on_update(on(lambda _: s.jump(self.jump.value)))
         self.filter.on_update(on(lambda _: s.set_filter(self.filter.value)))
         self.sort.on_update(on(lambda _: s.set_sort(self.sort.value)))
+        if self.split is not None:
+            split = self.split
+            split.on_update(on(lambda _: s.set_split(split.value)))
         self.review.on_click(on(lambda e: edit.review(str(e.target.value).split(" (")[0], advance=self.advance.value)))
         self.kp_id.on_update(on(lambda _: edit.set_place_id(self.kp_id.value)))
         self.points.on_update(on(lambda _: edit.select_listed(self.points.value)))

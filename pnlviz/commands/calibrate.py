@@ -215,6 +215,7 @@ class _NoDataset:
     annotations), so every frame of the prediction zip is calibrated at ``--size``."""
 
     stems: list[str] = []
+    splits: tuple[str, ...] = ()
 
     def __contains__(self, stem) -> bool:
         return False
@@ -319,7 +320,8 @@ def _open_inputs(args):
         ds = VideoDataset(args.video)
     else:
         ds = open_input_dataset(args.data) if args.data is not None else _NoDataset()
-    predictions = read_predictions(args.detections, on_error=lambda e: print_skipped([e])) if args.detections else None
+    predictions = (read_predictions(args.detections, on_error=lambda e: print_skipped([e]), splits=ds.splits)
+                   if args.detections else None)
     edits = EditsStore(args.edits, writable=False) if args.edits is not None else None
     print_skipped(edits.warnings if edits is not None else [], prefix="warning: ")
     return ds, predictions, edits

@@ -51,7 +51,7 @@ def run_render(args) -> int:
     else:
         ds = open_input_dataset(args.data)
         fps = args.fps or 25.0
-    cameras, problems = read_cameras(args.cameras, on_error=lambda line: None)
+    cameras, problems = read_cameras(args.cameras, on_error=lambda line: None, splits=ds.splits)
     print_skipped(problems)
     stems = [s for members in clips([s for s in ds.stems if ds.frame(s).has_image]).values() for s in members]
     if not stems:

@@ -69,6 +69,8 @@ class VideoDataset:
     """The frames of one video file, with the part of :class:`pnlviz.data.Dataset`'s interface the
     batch commands use (stems, frames, images, sizes; no annotations)."""
 
+    splits: tuple[str, ...] = ()  # one video is one split
+
     def __init__(self, path: str | os.PathLike):
         import cv2
 

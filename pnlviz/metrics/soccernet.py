@@ -343,6 +343,16 @@ class Summary:
                              "recall": float(np.float64(c[0, 0]) / (c[0, 0] + c[1, 0]))}
         return out
 
+    def by_split(self) -> dict[str, Summary]:
+        """The scores of each split of a dataset in splits (frames ``<split>/<stem>``), in order
+        of first appearance; ``{}`` when no frame has a split."""
+        groups: dict[str, list[FrameResult]] = {}
+        for f in self.frames:
+            split, sep, _ = f.stem.rpartition("/")
+            if sep:
+                groups.setdefault(split, []).append(f)
+        return {s: Summary(self.thresholds, frames) for s, frames in groups.items()}
+
     def as_dict(self) -> dict[str, Any]:
         """Aggregate scores as plain data (no per-frame rows)."""
         return {
@@ -403,9 +413,9 @@ def evaluate_dataset(gt: Dataset | str | os.PathLike, cameras: Mapping[str, Came
     thresholds = tuple(float(t) for t in thresholds)
     report = on_error or (lambda line: None)
     skipped_cams: list[str] = []
-    if isinstance(cameras, (str, os.PathLike)):
-        cameras, skipped_cams = read_cameras(cameras, on_error=report)
     ds = gt if isinstance(gt, Dataset) else open_dataset(gt)
+    if isinstance(cameras, (str, os.PathLike)):
+        cameras, skipped_cams = read_cameras(cameras, on_error=report, splits=ds.splits)
     skipped_ann: list[str] = []
 
     def bad_annotation(stem: str, err: DataError) -> None:

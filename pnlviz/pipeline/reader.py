@@ -99,8 +99,8 @@ class FrameReader:
         unknown calibration setting."""
         ds = open_dataset(data)
         if not len(ds):
-            raise DataError(str(data), "no frames (expected <stem>.jpg / <stem>.json files)")
-        predictions = read_predictions(detections) if detections else None
+            ds.require_frames()
+        predictions = read_predictions(detections, splits=ds.splits) if detections else None
         recorded = (read_predictions_info(detections).get("calibration") if detections else None)
         source = str(predictions_info_path(detections)) if recorded and detections else "detector settings"
         settings = check_settings(recorded or detector_settings or {}, source)  # fails here, not on a frame
