@@ -348,7 +348,7 @@ class Summary:
         of first appearance; ``{}`` when no frame has a split."""
         groups: dict[str, list[FrameResult]] = {}
         for f in self.frames:
-            split, sep, _ = f.stem.rpartition("/")
+            split, sep, _ = (f.stem or "").rpartition("/")  # a frame scored without a stem has no split
             if sep:
                 groups.setdefault(split, []).append(f)
         return {s: Summary(self.thresholds, frames) for s, frames in groups.items()}
