@@ -245,6 +245,7 @@ class Dataset:
                 if on_error is not None:
                     on_error(stem, err)
                 continue
+            assert ann is not None  # the frame has an annotation file
             yield stem, ann
 
     # ------------------------------------------------------------------ images
@@ -288,7 +289,7 @@ class Dataset:
         not the dataset has that frame. A name that is not valid UTF-8 goes to :attr:`rejected`."""
         if self._camera_stems is None:
             if self.is_zip:
-                names = self._index.camera_members
+                names = self._index.camera_members or set()  # a zip's index has them
             else:
                 folder = self._index.path(CAMERAS_DIR)
                 names = set(os.listdir(folder)) if os.path.isdir(folder) else set()
@@ -315,7 +316,7 @@ class Dataset:
         """The ground-truth camera ``cameras/camera_<stem>.json`` (raw dict, validated), or None."""
         base = camera_member_name(stem)
         name = self._camera_path(base)
-        present = base in self._index.camera_members if self.is_zip else os.path.isfile(name)
+        present = base in (self._index.camera_members or ()) if self.is_zip else os.path.isfile(name)
         if not present:
             return None
         return parse_camera_bytes(self._read(name), self._source(name))
@@ -325,7 +326,7 @@ class Dataset:
         """The content of ``match_info.json`` (a dict), or None when the dataset has none."""
         if self._match_info is ...:
             name = self._index.path(MATCH_INFO)
-            present = name in self._index.members if self.is_zip else os.path.isfile(name)
+            present = name in (self._index.members or ()) if self.is_zip else os.path.isfile(name)
             info = None
             if present:
                 source = self._source(name)

@@ -83,7 +83,8 @@ class Predictions:
     def points_px(self, width: float, height: float) -> dict[tuple, tuple[float, float]]:
         """Every detected point in pixels, keyed ``("kp", id)`` for keypoints and ``("line", id,
         1 | 2)`` for line ends: two detections of a frame compare point by point."""
-        pts = {("kp", k): (x, y) for k, (x, y, _) in self.keypoints_px(width, height).items()}
+        pts: dict[tuple, tuple[float, float]] = {("kp", k): (x, y)
+                                                 for k, (x, y, _) in self.keypoints_px(width, height).items()}
         for k, (x1, y1, _, x2, y2, _) in self.lines_px(width, height).items():
             pts[("line", k, 1)], pts[("line", k, 2)] = (x1, y1), (x2, y2)
         return pts
