@@ -117,7 +117,7 @@ class AccessPolicy:
 
     def token_in_query(self, path: str) -> bool:
         given = parse_qs(urlsplit(path).query).get("token", [""])[0]
-        return bool(self.token) and hmac.compare_digest(given.encode(), self.token.encode())
+        return bool(self.token) and hmac.compare_digest(given.encode(), (self.token or "").encode())
 
     def _has_token(self, headers, path: str) -> bool:
         if self.token_in_query(path):
@@ -125,7 +125,7 @@ class AccessPolicy:
         for cookie in headers.get_all("Cookie"):
             for part in cookie.split(";"):
                 name, _, value = part.strip().partition("=")
-                if name == COOKIE and hmac.compare_digest(value.encode(), self.token.encode()):
+                if name == COOKIE and hmac.compare_digest(value.encode(), (self.token or "").encode()):
                     return True
         return False
 
@@ -159,11 +159,11 @@ def guarded_viser_server(policy: AccessPolicy, **kw) -> viser.ViserServer:
         return real(handler, host, port, process_request=policy.process_request(process_request), **options)
 
     with _SERVE_PATCH, contextlib.redirect_stdout(io.StringIO()):  # viser's banner shows URLs without the token
-        websockets.asyncio.server.serve = serve
+        setattr(websockets.asyncio.server, "serve", serve)  # a function where websockets has a class
         try:
             server = viser.ViserServer(**kw)
         finally:
-            websockets.asyncio.server.serve = real
+            setattr(websockets.asyncio.server, "serve", real)
     if not guarded.is_set():
         server.stop()
         raise UnguardedServerError(

@@ -6,6 +6,8 @@ order the browser sent them, and every value is checked by the action it reaches
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 
@@ -213,7 +215,7 @@ class Panels:
         self.alpha.on_update(on(lambda _: s.set_alpha(self.alpha.value)))
         self.source.on_update(on(lambda _: s.set_source(self.source.value)))
         self.bridge_field.on_update(on(lambda _: view.bridge_message(self.bridge_field.value)))
-        if self.clip_slider is not None:
+        if self.clip_slider is not None and self.clip_buttons is not None:  # made together
             clip = s.clip
             self.clip_slider.on_update(on(lambda _: clip.slider_moved(self.clip_slider.value)))
             actions = {"play": clip.play, "pause": clip.pause, "worst": lambda: clip.jump_worst(restart=True),
@@ -224,6 +226,7 @@ class Panels:
     def _bind_keys(self) -> None:
         s, gui = self.session, self.session.gui
         edit, view = s.editor, s.view_control
+        keys: tuple[tuple[str, str, str | None, Callable[[], object]], ...]
         keys = (("next frame", "N", None, lambda: s.step(1)),
                 ("previous frame", "P", None, lambda: s.step(-1)),
                 ("review: accepted, next", "G", None, lambda: edit.review("accepted", advance=self.advance.value)),

@@ -148,7 +148,7 @@ def _eval_homographies(args, cameras: dict | None, progress: bool) -> None:
         what = args.pred_homographies
     else:
         pred_h = {}
-        for stem, cam in cameras.items():
+        for stem, cam in (cameras or {}).items():  # --homographies without --pred-homographies has --pred
             try:
                 pred_h[stem] = homography_from_camera(cam, source_size=args.camera_size)
             except (DataError, ValueError) as e:
@@ -183,7 +183,7 @@ def run_eval(args) -> int:
         from pnlviz.data.cameras import read_cameras
 
         cameras, _ = read_cameras(args.pred, on_error=_report, splits=gt.splits if gt is not None else ())
-    if gt is not None:
+    if gt is not None and cameras is not None:  # --gt comes with --pred
         _eval_soccernet(args, gt, cameras, progress)
     if args.homographies is not None:
         _eval_homographies(args, cameras, progress)

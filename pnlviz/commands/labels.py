@@ -68,7 +68,7 @@ class LabelsJob(BatchJob):
 class _Tally:
     """What the run did, frame by frame (:meth:`add`), and its summary (:meth:`print`)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.totals: Counter[str] = Counter()
         self.visible: Counter[str] = Counter()
         self.n_ok = self.n_none = self.n_rejected = 0

@@ -97,7 +97,7 @@ def _render_frames(args, ds, cameras: dict, stems: list[str], fps: float, tmp) -
             continue
         h, w = img.shape[:2]
         if writer is None:
-            writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (w, h))
+            writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), (w, h))
             if not writer.isOpened():
                 print(f"error: OpenCV cannot write {args.out} (no mp4 encoder, or its folder cannot be written)",
                       file=sys.stderr)

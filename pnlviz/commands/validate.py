@@ -33,7 +33,7 @@ def _run_validate(args) -> int:
         frame = ds.frame(stem)
         if frame.has_annotation:
             try:
-                classes.update(ds.annotation(stem).keys())
+                classes.update((ds.annotation(stem) or {}).keys())  # has_annotation: never None
                 n_ann += 1
             except DataError as exc:
                 problems.append(str(exc))

@@ -38,6 +38,7 @@ import zipfile
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from pnlviz.data import atomic_write_bytes
 from pnlviz.data.cameras import camera_member_name
@@ -71,12 +72,12 @@ def export_stems(reader: FrameReader, include_all: bool = False) -> list[str]:
     """The frames an export holds, in dataset order: the accepted and corrected ones, or all."""
     if include_all:
         return list(reader.stems)
-    return [s for s in reader.stems if reader.edits.review(s) in ("accepted", "corrected")]
+    return [s for s in reader.stems if reader.edits_folder.review(s) in ("accepted", "corrected")]
 
 
 def edits_entry(reader: FrameReader, stem: str) -> dict:
     """What the manifest says of a frame's edits: its review status and what was changed."""
-    rec = reader.edits.get(stem)
+    rec = reader.edits_folder.get(stem)
     return {"review": rec.get("review"), "annotation_edited": rec.get("annotation") is not None,
             "keypoints_edited": sorted(int(k) for k in (rec.get("keypoints") or {}))}
 
@@ -133,7 +134,7 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
                                              "keypoints": kps, "homography": homography}).encode()
     if fl.camera is not None:
         files["cameras/" + camera_member_name(stem)] = dumps(fl.camera).encode()
-    flat = [0.0] * (3 * N_KEYPOINTS)
+    flat: list[object] = [0.0] * (3 * N_KEYPOINTS)
     for key, k in kps.items():
         i = int(key) - 1
         # COCO v: 2 visible ground truth, 1 labelled outside the image, 0 flagged by the gate
@@ -167,7 +168,7 @@ class ExportWriter:
     def __init__(self, reader: FrameReader, out: Path | None, include_all: bool = False, gate_px: float = GATE_PX):
         self.out = None if out is None else Path(out)
         self._order = {s: i for i, s in enumerate(reader.stems)}
-        self.manifest = {"source": reader.data.resolve().name, "edits": reader.edits.root.name,
+        self.manifest: dict[str, Any] = {"source": reader.data.resolve().name, "edits": reader.edits_folder.root.name,
                          "exported": time.strftime("%Y-%m-%dT%H:%M:%S"), "include_all": include_all,
                          "gate_px_at_960x540": float(gate_px), "flagged": 0, "frames": {}}
         self._parts: list[tuple[int, str, dict, dict | None, dict | None]] = []
@@ -196,7 +197,7 @@ class ExportWriter:
 
     def close(self) -> dict[str, bytes]:
         """Write the COCO file and the manifest and finish the output; the files (for ``out=None``)."""
-        coco = {"images": [], "annotations": [],
+        coco: dict[str, list] = {"images": [], "annotations": [],
                 "categories": [{"id": 1, "name": "pitch", "keypoints": [str(i) for i in range(1, N_KEYPOINTS + 1)],
                                 "skeleton": []}]}
         for _, stem, entry, image, annotation in sorted(self._parts, key=lambda p: p[0]):

@@ -108,6 +108,12 @@ class FrameReader:
         store = EditsStore(edits or default_edits_dir(data), writable=writable)
         return cls(ds, predictions=predictions, edits=store, size=size, detection_settings=settings, data=data)
 
+    @property
+    def edits_folder(self) -> EditsStore:
+        """The edits folder, for what needs one (a reader from :meth:`open` always has one)."""
+        assert self.edits is not None, "this reader has no edits folder"
+        return self.edits
+
     def close(self) -> None:
         """Release the edits folder and the dataset's files."""
         if self.edits is not None:
