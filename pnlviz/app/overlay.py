@@ -154,8 +154,8 @@ def _ghosts(view: FrameView, model: FieldModel, hidden: set[int]) -> Markers:
     with np.errstate(invalid="ignore"):
         inside = (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
     keep = [i for i in range(len(ids)) if inside[i]]
-    return Markers([ids[i] for i in keep], uv[keep].reshape(-1, 2), np.tile(np.array(GHOST_RGB, np.uint8), (len(keep), 1)),
-                   [str(ids[i]) for i in keep])
+    return Markers([ids[i] for i in keep], uv[keep].reshape(-1, 2),
+                   np.tile(np.array(GHOST_RGB, np.uint8), (len(keep), 1)), [str(ids[i]) for i in keep])
 
 
 def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldModel | None = None,
@@ -174,7 +174,8 @@ def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldMod
         if layers.refined_pitch:
             seg["refined_pitch"] = _pitch(res.camera, W, H, model, REFINED_RGB)
             pitch = seg["refined_pitch"]
-            seg["refined_pitch_casing"] = Segments(pitch.points, np.tile(np.array(CASING_RGB, np.uint8), (len(pitch), 1)))
+            casing = np.tile(np.array(CASING_RGB, np.uint8), (len(pitch), 1))
+            seg["refined_pitch_casing"] = Segments(pitch.points, casing)
     line_points = Markers()
     if view.annotation:
         names = list(view.annotation)

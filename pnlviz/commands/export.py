@@ -109,7 +109,8 @@ def run_export(args) -> int:
             print(f"warning: {warning}", file=sys.stderr)
         stems = export_stems(reader, args.all)
         job = ExportJob(str(Path(data).resolve()), None if args.detections is None else str(args.detections.resolve()),
-                        str(reader.edits_folder.root.resolve()), tuple(args.size), reader.default_settings(), args.gate_px)
+                        str(reader.edits_folder.root.resolve()), tuple(args.size), reader.default_settings(),
+                        args.gate_px)
         with ExportWriter(reader, args.out, include_all=args.all, gate_px=args.gate_px) as writer:
             run = run_batch(job, stems, writer.add, args, desc="export", local_state=reader,
                             failed=lambda stem, message: failed_frame(reader, stem, message),
