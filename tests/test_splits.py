@@ -181,7 +181,7 @@ def test_serve_opens_split_zips_and_filters_by_split(layouts, serve):
     p.split.value = "train"
     tab.flush()
     assert [app.state.stems[i] for i in tab.frames.order] == [f"train/{s}" for s in TRAIN]
-    assert "train/00000" in p.title.content and "1/3 of 'all in train'" in p.title.content
+    assert "train/00000" in p.title.content and "1/3 of 'split train'" in p.title.content
     tab.editor.review("accepted")
     tab.flush()
     edits = app.state.edits.root / "frames" / "train" / "00000.json"
