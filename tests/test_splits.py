@@ -71,6 +71,23 @@ def test_each_layout_is_one_dataset_with_split_stems(layouts, layout):
         ds.frame("00001")  # a stem without its split is not a frame of a dataset in splits
 
 
+def test_each_split_keeps_its_ground_truth_cameras(tmp_path):
+    """Synthetic splits carry cameras/camera_<stem>.json: they are the split's, not a split."""
+    from pnlviz.synth.writer import write_frame
+
+    root = tmp_path / "synth"
+    stems = {split: write_frame(root / split, 1, seed, (320, 180)) for split, seed in (("train", 1), ("valid", 2))}
+    whole = tmp_path / "synth.zip"
+    _zip(root, whole, prefix="synth/")
+    expected = [f"{split}/{stem}" for split, stem in stems.items()]
+    for data in (root, whole):
+        ds = open_dataset(data)
+        assert ds.splits == ("train", "valid") and list(ds.stems) == expected
+        assert list(ds.camera_stems()) == expected
+        camera = root / "valid" / "cameras" / f"camera_{stems['valid']}.json"
+        assert ds.camera_dict(expected[1]) == json.loads(camera.read_text())
+
+
 def test_what_is_not_a_split(tmp_path, layouts):
     # one subfolder alone is a plain dataset, as before
     one = tmp_path / "one"
@@ -181,7 +198,7 @@ def test_serve_opens_split_zips_and_filters_by_split(layouts, serve):
     p.split.value = "train"
     tab.flush()
     assert [app.state.stems[i] for i in tab.frames.order] == [f"train/{s}" for s in TRAIN]
-    assert "train/00000" in p.title.content and "1/3 of 'all in train'" in p.title.content
+    assert "train/00000" in p.title.content and "1/3 of 'split train'" in p.title.content
     tab.editor.review("accepted")
     tab.flush()
     edits = app.state.edits.root / "frames" / "train" / "00000.json"

@@ -85,8 +85,10 @@ class FrameOrder:
         self.outside_filter = False
 
     def filter_label(self) -> str:
-        """The filter as the panel names it (``"unreviewed"``, ``"unreviewed in valid"``)."""
-        return self.filter.value + (f" in {self.split}" if self.split else "")
+        """The filter as the panel names it (``"unreviewed"``, ``"split valid"``, ``"unreviewed in valid"``)."""
+        if not self.split:
+            return self.filter.value
+        return f"split {self.split}" if self.filter is Filter.ALL else f"{self.filter.value} in {self.split}"
 
     def position(self) -> int:
         """Where the frame is in the order, from 0 (0 when it is not in it)."""

@@ -38,8 +38,8 @@ def clip_key(stem: str) -> tuple[str, int]:
     m = _FRAME_NUMBER.match(stem)
     if m is None:
         return stem, 0
-    prefix = m.group(1).rstrip("-_. ")
-    prefix = _FRAME_WORD.sub("", prefix).rstrip("-_. ")
+    prefix = m.group(1).rstrip("-_. /")  # "/": a split's frames (valid/00042) are the clip "valid"
+    prefix = _FRAME_WORD.sub("", prefix).rstrip("-_. /")
     return prefix, int(m.group(2))
 
 

@@ -81,7 +81,7 @@ def _folder_splits(path: Path) -> tuple[list[SplitPart], list[DataError]] | None
             root = subdirs[0]
             continue
         break
-    if len(subdirs) + len(zips) < 2 and not zips:
+    if not zips and len(subdirs) < 2:
         return None
     parts: dict[str, SplitPart] = {}
     rejected = []
@@ -101,8 +101,8 @@ def _zip_splits(path: Path) -> list[SplitPart] | None:
     prefixes = set()
     for n in names:
         prefix, base = split_member(n)
-        if classify(base) is None or prefix.split("/", 1)[0] == CAMERAS_DIR:
-            continue
+        if classify(base) is None or CAMERAS_DIR in prefix.split("/"):
+            continue  # a split's own cameras/ (sn23/valid/cameras/camera_00042.json) is not a split
         if prefix == "":
             return None
         prefixes.add(prefix)
@@ -112,8 +112,7 @@ def _zip_splits(path: Path) -> list[SplitPart] | None:
     parents = {p.rstrip("/").rpartition("/")[0] for p in prefixes}
     if depth not in ({1}, {2}) or len(parents) != 1:
         return None  # frames at several depths or under several wrappers: not a split layout
-    parts = [SplitPart(p.rstrip("/").rpartition("/")[2], path, p) for p in sorted(prefixes)]
-    return [p for p in parts if p.name != CAMERAS_DIR]
+    return [SplitPart(p.rstrip("/").rpartition("/")[2], path, p) for p in sorted(prefixes)]
 
 
 def find_splits(path: str | os.PathLike) -> tuple[list[SplitPart], list[DataError]] | None:
