@@ -1,0 +1,167 @@
+"""The label-error finder (pnlviz.calib.qa) on synthetic frames with an exact camera: each kind
+of error injected alone is found, named, and its suggested fix brings the frame's score back."""
+
+import numpy as np
+import pytest
+
+from pnlviz.calib.qa import FrameQA, apply_fix, check_frame, frame_score
+from pnlviz.field import load_field_model
+from pnlviz.synth import annotate, sample_camera
+
+SCALE = np.array([959.0, 539.0])
+
+
+def synthetic(seed: int):
+    rng = np.random.default_rng(seed)
+    cam, _ = sample_camera(rng, 960, 540)
+    return cam, annotate(cam, rng)
+
+
+@pytest.fixture(scope="module")
+def left():
+    """A main-camera view of the left penalty area, goal and all (12 classes)."""
+    return synthetic(7)
+
+
+def only(qa: FrameQA, kind: str):
+    found = [f for f in qa.findings if f.kind == kind]
+    assert found, f"no {kind} in {[(f.kind, f.cls, f.message) for f in qa.findings]}"
+    return found[0]
+
+
+def restored(ann, finding):
+    fixed = check_frame(apply_fix(ann, finding.fix))
+    assert fixed.score < 1.0, [(f.kind, f.cls, f.message) for f in fixed.findings]
+    return fixed
+
+
+def test_a_clean_frame_has_no_finding_and_scores_below_one(left):
+    _, ann = left
+    qa = check_frame(ann)
+    assert qa.findings == [] and qa.score < 1.0
+    assert qa.camera is not None
+    line = qa.to_json("x")
+    assert line["stem"] == "x" and line["findings"] == [] and line["score"] == pytest.approx(qa.score, abs=1e-4)
+
+
+def test_a_class_named_from_the_other_side_is_renamed(left):
+    _, ann = left
+    bad = dict(ann)
+    bad["Small rect. right main"] = bad.pop("Small rect. left main")
+    qa = check_frame(bad)
+    f = only(qa, "wrong_class")
+    assert f.cls == "Small rect. right main" and "other side" in f.message
+    assert f.fix == {"op": "rename", "class": "Small rect. right main", "to": "Small rect. left main"}
+    assert qa.score >= 3.0
+    restored(bad, f)
+
+
+def test_a_neighbouring_marking_s_name_is_found():
+    _, ann = synthetic(2)  # Big rect. left main and top, Circle left, two side lines
+    bad = dict(ann)
+    bad["Small rect. left top"] = bad.pop("Big rect. left top")
+    qa = check_frame(bad)
+    f = only(qa, "wrong_class")
+    assert f.cls == "Small rect. left top" and f.fix["to"] == "Big rect. left top"
+    assert "neighbouring" in f.message and f.evidence["left_out"] is True
+    restored(bad, f)
+
+
+def test_a_line_clicked_off_its_paint_is_found_and_moved_onto_it(left):
+    _, ann = left
+    bad = dict(ann)
+    bad["Big rect. left main"] = ann["Big rect. left main"] + np.array([0.0, 25.0]) / SCALE
+    qa = check_frame(bad)
+    f = only(qa, "off_projection")
+    assert f.cls == "Big rect. left main" and f.evidence["median_px"] > 15
+    assert f.evidence["others_px"] < 8  # the camera without it fits the others
+    assert f.fix["op"] == "move_points" and len(f.fix["points"]) == len(bad["Big rect. left main"])
+    # the camera that judged it was not pulled by it: the points go back within a few px of the truth
+    moved = np.asarray(f.fix["points"]) * SCALE
+    assert np.max(np.abs(moved[:, 1] - ann["Big rect. left main"][:, 1] * SCALE[1])) < 6
+    restored(bad, f)
+
+
+def test_points_of_two_markings_in_one_class_are_split(left):
+    _, ann = left
+    bad = dict(ann)
+    stray = ann["Small rect. left main"][:2]  # two clicks of another marking appended
+    bad["Big rect. left main"] = np.vstack([ann["Big rect. left main"], stray])
+    qa = check_frame(bad)
+    f = only(qa, "split_class")
+    n = len(ann["Big rect. left main"])
+    assert f.cls == "Big rect. left main"
+    assert f.fix == {"op": "drop_points", "class": "Big rect. left main", "points": [n, n + 1]}
+    restored(bad, f)
+
+
+def test_a_marking_left_out_is_found_where_the_camera_puts_it(left):
+    cam, ann = left
+    bad = {k: v for k, v in ann.items() if k != "Big rect. left bottom"}
+    qa = check_frame(bad)
+    f = only(qa, "missing_class")
+    assert f.cls == "Big rect. left bottom" and f.fix["op"] == "add_class"
+    # the suggested points are on the marking
+    from pnlviz.geometry.distance import closest_on_polyline
+
+    truth, _ = cam.project(load_field_model().sample_polylines(0.5)["Big rect. left bottom"])
+    d = closest_on_polyline(np.asarray(f.fix["points"]) * SCALE, truth[np.isfinite(truth).all(axis=1)]).distance
+    assert np.max(d) < 3
+    restored(bad, f)
+
+
+def _detections(cam, ids):
+    from pnlviz.data import Predictions
+
+    xyz = load_field_model().keypoint_xyz(ids, pnlcalib=True)
+    uv, _ = cam.project(xyz)
+    return Predictions(keypoints={int(i): (float(u / 960), float(v / 540), 0.9) for i, (u, v) in zip(ids, uv)})
+
+
+def test_detections_that_disagree_with_the_annotation_are_found(left):
+    cam, ann = left
+    qa0 = check_frame(ann)
+    ids = [int(i) for i in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16) if i in _annotated_ids(ann)]
+    assert len(ids) >= 4
+    agree = check_frame(ann, detections=_detections(cam, ids))
+    assert [f for f in agree.findings if f.kind == "detection_disagreement"] == []
+    det = _detections(cam, ids)
+    x, y, p = det.keypoints[ids[0]]
+    det.keypoints[ids[0]] = (x + 40 / 960, y, p)
+    qa = check_frame(ann, detections=det)
+    f = only(qa, "detection_disagreement")
+    assert f.keypoint == ids[0] and f.evidence["distance_px"] > 30
+    assert f.evidence["annotation_to_camera_px"] < f.evidence["detection_to_camera_px"]
+    assert "backs the annotation" in f.message and qa.score > qa0.score + 1
+
+
+def _annotated_ids(ann):
+    from pnlviz.calib.inputs import observations_from_annotation
+
+    return set(observations_from_annotation(ann, 960, 540)[0].kp_ids.tolist())
+
+
+def test_a_frame_without_a_camera_says_so():
+    qa = check_frame({"Middle line": np.array([[0.5, 0.1], [0.5, 0.9]])})
+    assert qa.kinds == ["no_camera"] and qa.camera is None and qa.score == 1.0
+
+
+def test_the_score_is_the_worst_finding_plus_a_quarter_of_the_others():
+    from pnlviz.calib.qa import Finding
+
+    fs = [Finding("off_projection", "", 2.0), Finding("missing_class", "", 4.0)]
+    assert frame_score(fs) == pytest.approx(4.5)
+    assert frame_score([], 0.4) == pytest.approx(0.4) and frame_score([], 3.0) == pytest.approx(0.99)
+
+
+def test_fixes_are_applied_as_data_without_touching_the_input():
+    ann = {"A": np.array([[0.1, 0.1], [0.2, 0.2], [0.3, 0.3]]), "B": np.array([[0.5, 0.5], [0.6, 0.6]])}
+    out = apply_fix(ann, {"op": "rename", "class": "A", "to": "B"})
+    assert sorted(out) == ["B"] and len(out["B"]) == 5 and len(ann["A"]) == 3
+    out = apply_fix(ann, {"op": "drop_points", "class": "A", "points": [0, 2]})
+    assert out["A"].tolist() == [[0.2, 0.2]]
+    assert "B" not in apply_fix(ann, {"op": "drop_points", "class": "B", "points": [0, 1]})
+    with pytest.raises(ValueError, match="no class"):
+        apply_fix(ann, {"op": "rename", "class": "C", "to": "A"})
+    with pytest.raises(ValueError, match="points for the"):
+        apply_fix(ann, {"op": "move_points", "class": "A", "points": [[0, 0]]})
