@@ -165,3 +165,56 @@ def test_fixes_are_applied_as_data_without_touching_the_input():
         apply_fix(ann, {"op": "rename", "class": "C", "to": "A"})
     with pytest.raises(ValueError, match="points for the"):
         apply_fix(ann, {"op": "move_points", "class": "A", "points": [[0, 0]]})
+
+
+# ----------------------------------------------------------------------------- the command and the API
+def _dataset(folder, frames):
+    import json
+
+    from pnlviz.synth import annotation_to_json
+
+    folder.mkdir()
+    for stem, ann in frames.items():
+        (folder / f"{stem}.json").write_text(json.dumps(annotation_to_json(ann)))
+    return folder
+
+
+def test_pnlviz_qa_writes_one_line_per_frame_most_suspect_first_then_a_summary(tmp_path, left, capsys):
+    import json
+
+    from pnlviz.cli import main
+
+    _, ann = left
+    bad = dict(ann)
+    bad["Small rect. right main"] = bad.pop("Small rect. left main")
+    data = _dataset(tmp_path / "d", {"00001": ann, "00002": bad, "00003": synthetic(2)[1]})
+    out = tmp_path / "qa.jsonl"
+    assert main(["qa", "--data", str(data), "--out", str(out), "--no-progress"]) == 0
+    lines = [json.loads(t) for t in out.read_text().splitlines()]
+    assert [line.get("stem") for line in lines][:1] == ["00002"] and len(lines) == 4
+    assert lines[0]["findings"][0]["kind"] == "wrong_class" and lines[0]["findings"][0]["fix"]["to"] == \
+        "Small rect. left main"
+    scores = [line["score"] for line in lines[:3]]
+    assert scores == sorted(scores, reverse=True)
+    assert lines[-1]["summary"]["judged"] == 3 and lines[-1]["summary"]["flagged"] == 1
+    assert "00002" in capsys.readouterr().out
+    # resumed: nothing judged again, the same lines
+    assert main(["qa", "--data", str(data), "--out", str(out), "--no-progress", "--resume"]) == 0
+    assert "resuming: 3 of 3" in capsys.readouterr().out
+    again = [json.loads(t) for t in out.read_text().splitlines()]
+    assert [line.get("stem") for line in again[:3]] == [line["stem"] for line in lines[:3]]
+
+
+def test_the_python_api_judges_a_dataset_or_one_frame(tmp_path, left):
+    import pnlviz
+
+    _, ann = left
+    bad = {k: v for k, v in ann.items() if k != "Big rect. left bottom"}
+    data = _dataset(tmp_path / "d", {"a": ann, "b": bad})
+    ranked = pnlviz.qa(data)
+    assert [r["stem"] for r in ranked] == ["b", "a"]
+    assert ranked[0]["findings"][0]["class"] == "Big rect. left bottom"
+    one = pnlviz.qa({k: v * SCALE for k, v in bad.items()}, image_size=(960, 540))
+    assert one["findings"][0]["kind"] == "missing_class" and one["score"] == ranked[0]["score"]
+    with pytest.raises(pnlviz.ArgumentError, match="lines"):
+        pnlviz.qa({"Nope": [[0, 0], [1, 1]]}, image_size=(960, 540))

@@ -66,8 +66,13 @@ class Finding:
         return out
 
 
-def _r(x: float) -> float:
-    return round(float(x), 2)
+def _r(x: float) -> float | None:
+    """A figure for the evidence (JSON): 2 decimals, None for infinity (no projection to measure to)."""
+    return round(float(x), 2) if np.isfinite(x) else None
+
+
+def _px_words(x: float) -> str:
+    return f"{x:.0f} px off" if np.isfinite(x) else "out of the camera's view"
 
 
 def _points_json(norm: np.ndarray) -> list[list[float]]:
@@ -195,7 +200,7 @@ def class_findings(v: ClassVerdict, width: float, height: float, params: QAParam
         ev.update(alt=v.alt, alt_max_px=_r(np.max(v.d_alt)))
         sev = min(params.max_severity, worst / tol) * confidence
         return [Finding("wrong_class", f"{v.cls!r} fits the pitch as {v.alt!r} ({_relation(v.cls, v.alt)}): "
-                        f"{worst:.0f} px off under its name, {np.max(v.d_alt):.0f} px under the other",
+                        f"{_px_words(worst)} under its name, {np.max(v.d_alt):.0f} px under the other",
                         max(sev, 1.0), v.cls, evidence=ev, fix={"op": "rename", "class": v.cls, "to": v.alt})]
     off = np.flatnonzero(v.d > far)
     on = np.flatnonzero(v.d <= tol)
@@ -203,7 +208,7 @@ def class_findings(v: ClassVerdict, width: float, height: float, params: QAParam
         ev.update(off_points=off.tolist())
         sev = min(params.max_severity, float(np.max(v.d[off])) / tol) * confidence
         return [Finding("split_class", f"{len(off)} of the {n} points of {v.cls!r} cannot be on the marking the "
-                        f"others are on ({float(np.max(v.d[off])):.0f} px away)", max(sev, 1.0), v.cls,
+                        f"others are on ({_px_words(float(np.max(v.d[off])))})", max(sev, 1.0), v.cls,
                         evidence=ev, fix={"op": "drop_points", "class": v.cls, "points": off.tolist()})]
     sev = min(params.max_severity, float(np.median(v.d)) / tol) * confidence
     if sev < 1.0:
@@ -214,8 +219,8 @@ def class_findings(v: ClassVerdict, width: float, height: float, params: QAParam
     else:
         fix = {"op": "drop_points", "class": v.cls, "points": list(range(n))}
     return [Finding("off_projection", f"{v.cls!r} sits off the camera's projection of it (median "
-                    f"{np.median(v.d):.0f} px) while the other classes agree ({v.others:.1f} px)", sev, v.cls,
-                    evidence=ev, fix=fix)]
+                    f"{_px_words(float(np.median(v.d)))}) while the other classes agree ({v.others:.1f} px)", sev,
+                    v.cls, evidence=ev, fix=fix)]
 
 
 # ----------------------------------------------------------------------------- markings left out
