@@ -12,8 +12,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pnlviz.calib.problem import FrameData
-from pnlviz.calib.refine import CameraProblem, RefineParams
 from pnlviz.field.model import FieldModel
 from pnlviz.field.names import CIRCLE_CLASSES, MIRROR, MODEL_CLASSES
 from pnlviz.geometry.camera import Camera
@@ -25,19 +23,21 @@ KINDS = ("wrong_class", "off_projection", "split_class", "missing_class", "detec
 
 @dataclass(frozen=True)
 class QAParams:
-    """What counts as wrong. Pixel values at 960 px image width (scaled with the width)."""
+    """What counts as wrong. Pixel values at 960 px image width (scaled with the width by
+    :meth:`px`)."""
+
+    def px(self, value: float, width: float) -> float:
+        return value * width / 960.0
 
     tol_px: float = 8.0  #: a point this close to its class's projection sits on it
     far_px: float = 16.0  #: a point this far is off it
     rename_ratio: float = 3.0  #: another name fits this many times better (and within ``tol_px``)
     min_missing_px: float = 120.0  #: a marking is expected when this much of it is inside the image...
     missing_margin_px: float = 40.0  #: ... at least this far from the border
-    det_tol_px: float = 12.0  #: a detection this far from the annotation disagrees with it
+    min_sigma_px: float = 0.5  #: the clicks' spread about the paint is taken as at least this (px)
+    det_tol_px: float = 8.0  #: a detection this far from the annotation disagrees with it
     loo_iter: int = 15  #: iterations of each leave-one-class-out refit
     max_severity: float = 10.0  #: a finding's severity is capped here
-
-    def px(self, value: float, width: float) -> float:
-        return value * width / 960.0
 
 
 @dataclass(frozen=True)
@@ -99,46 +99,7 @@ def distances(pts: np.ndarray, poly: np.ndarray | None) -> np.ndarray:
     return closest(pts, poly).distance
 
 
-# ----------------------------------------------------------------------------- leave one class out
-def loo_camera(cam: Camera, data: FrameData, cls: str | set[str], params: QAParams) -> Camera | None:
-    """The camera refitted (from ``cam``: pose and focal length, bounded loss) to every line and
-    circle point of the frame except those of ``cls`` (a class or a set of them); None when the
-    others are too few to fix a camera."""
-    obs = data.obs
-    skip = {cls} if isinstance(cls, str) else set(cls)
-    lines = [n for n in obs.lines if n not in skip]
-    circles = [n for n in obs.circles if n not in skip]
-    n_pts = sum(len(obs.lines[n]) for n in lines) + sum(len(obs.circles[n]) for n in circles)
-    if len(lines) + len(circles) < 2 or n_pts < 9:
-        return None
-    rp = RefineParams(alpha=1.0, refine_focal=True, refine_k1=False, loss="cauchy",
-                      f_scale=params.px(3.0, obs.width), max_iter=params.loo_iter, tol=1e-6)
-    prob = CameraProblem(cam, data, rp, use_keypoints=np.zeros(obs.n_keypoints, bool), lines=lines,
-                         circles=circles)
-    if prob.n_res < prob.n_free + 2:
-        return None
-    new, _ = prob.solve()
-    return new if np.all(np.isfinite(new.R)) and np.all(np.isfinite(new.C)) else None
-
-
-def consistent(cam: Camera, data: FrameData, px: dict[str, np.ndarray], cls: str, skip: set[str],
-               params: QAParams, model: FieldModel) -> bool:
-    """Whether one camera fits ``cls`` and the other classes (but ``skip``) together, every
-    point within ``tol_px``: refitted from ``cam`` with them all (pose, focal length and k1).
-    Then nothing says the class is wrong, however badly the camera without it extrapolated."""
-    obs = data.obs
-    lines = [n for n in obs.lines if n not in skip or n == cls]
-    circles = [n for n in obs.circles if n not in skip or n == cls]
-    rp = RefineParams(alpha=1.0, refine_focal=True, refine_k1=True, max_iter=params.loo_iter, tol=1e-6)
-    prob = CameraProblem(cam, data, rp, use_keypoints=np.zeros(obs.n_keypoints, bool), lines=lines, circles=circles)
-    if prob.n_res < prob.n_free + 2:
-        return False
-    joint, _ = prob.solve()
-    proj = projected_classes(joint, model)
-    tol = params.px(params.tol_px, cam.width)
-    return all(float(np.max(distances(px[n], proj.get(n)))) <= tol for n in lines + circles if n in px)
-
-
+# ----------------------------------------------------------------------------- a class judged
 def agreement(cam: Camera, annotation_px: dict[str, np.ndarray], skip: str, proj: dict[str, np.ndarray]) -> float:
     """How well the other classes fit ``cam``: the median over them of their farthest point (px)."""
     worst = [float(np.max(distances(p, proj.get(n)))) for n, p in annotation_px.items() if n != skip]
@@ -156,10 +117,25 @@ class ClassVerdict:
     alt: str | None = None  #: the best other name
     d_alt: np.ndarray | None = None  #: the distances to that name's projection
     snapped: np.ndarray | None = None  #: each point moved onto the class's projection (pixels)
+    spread: float = 0.0  #: how unsure that camera is of where the class is (px, one standard deviation)
+
+
+def marking_std(spread, cls: str, pts: np.ndarray, model: FieldModel) -> float:
+    """How sure the camera is of where ``cls`` is, near the annotated points ``pts``: the median
+    standard deviation (px) of its projected samples closest to them."""
+    X = model.sample_polylines(2.0, 1.0)[cls]
+    uv, ok = trusted_projection(spread.model.camera(spread.state), X)
+    if ok.sum() < 2:
+        return np.inf
+    near = np.argmin(np.linalg.norm(uv[ok][None] - pts[:, None], axis=2), axis=1)
+    return float(np.median(spread.std(X[ok][np.unique(near)])))
 
 
 def judge_class(cls: str, pts: np.ndarray, cam: Camera, loo: bool, annotation_px: dict[str, np.ndarray],
-                model: FieldModel) -> ClassVerdict:
+                model: FieldModel, spread=None) -> ClassVerdict:
+    """``cls`` judged by ``cam``: its points' distances to its projection and to the best other
+    name's, how well the others agree, how sure the camera is there (``spread``: a
+    :class:`pnlviz.calib.qa_fits.CameraSpread`, at the class, else at the other name)."""
     proj = projected_classes(cam, model)
     d = distances(pts, proj.get(cls))
     verdict = ClassVerdict(cls, d, agreement(cam, annotation_px, cls, proj), loo)
@@ -173,6 +149,10 @@ def judge_class(cls: str, pts: np.ndarray, cam: Camera, loo: bool, annotation_px
         if best_d is None or np.max(dn) < np.max(best_d):
             best, best_d = name, dn
     verdict.alt, verdict.d_alt = best, best_d
+    if spread is not None:
+        verdict.spread = marking_std(spread, cls, pts, model)
+        if not np.isfinite(verdict.spread) and best is not None:
+            verdict.spread = marking_std(spread, best, pts, model)
     return verdict
 
 
@@ -188,13 +168,15 @@ def class_findings(v: ClassVerdict, width: float, height: float, params: QAParam
     name, points off the projection (fix: each moved onto it, or dropped when the camera does not
     see the class), or points of two markings (fix: the stray ones dropped)."""
     tol, far = params.px(params.tol_px, width), params.px(params.far_px, width)
-    if not np.isfinite(v.others) or v.others > far:
+    # an unsure camera (few other classes, or all on one side) asks for more before it says "off"
+    tol, far = max(tol, 3.0 * v.spread), max(far, 6.0 * v.spread)
+    if not np.isfinite(v.others) or v.others > far or not np.isfinite(v.spread):
         return []  # the other classes do not agree on a camera: nothing to judge this one by
     worst, n = float(np.max(v.d)), len(v.d)
     if worst <= far:
         return []
     ev = {"points": n, "max_px": _r(worst), "median_px": _r(np.median(v.d)), "others_px": _r(v.others),
-          "left_out": v.loo}
+          "camera_std_px": _r(v.spread), "left_out": v.loo}
     confidence = 1.0 if v.loo else 0.5
     if v.alt is not None and np.max(v.d_alt) <= tol and np.max(v.d_alt) * params.rename_ratio < worst:
         ev.update(alt=v.alt, alt_max_px=_r(np.max(v.d_alt)))
