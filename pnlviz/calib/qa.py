@@ -135,6 +135,33 @@ def _camera_without(cam: Camera, data: FrameData, findings: list[Finding], param
 QA_SETTINGS = FrameSettings(overrides={"ransac_thresholds": (10.0, 40.0), "refine_top": 1})
 
 
+def frame_camera(ann: dict[str, np.ndarray], size: tuple[int, int], settings: FrameSettings,
+                 model: FieldModel, priors: bool = True):
+    """The frame's calibration and the class left out to get it (None: none). Without the
+    broadcast-prior search first (slow, and a frame with keypoints enough does not need it); with
+    it (``priors``) for a frame with too few keypoints. When the whole annotation gives no camera, one class
+    may be what breaks it: each is left out in turn, and the camera that fits the others best
+    (the smallest median class residual) is kept."""
+    from dataclasses import replace
+
+    fast = replace(settings, overrides={**settings.overrides, "prior_search": False})
+    fc = calibrate_frame(FrameInputs(size, ann), fast, model)
+    if fc.ok:
+        return fc, None
+    if fc.failure.code in ("too_few_keypoints", "degenerate", "no_inliers") and priors:
+        slow = calibrate_frame(FrameInputs(size, ann), settings, model)
+        if slow.ok or len(ann) < 3:
+            return slow, None
+    best, best_fit = (fc, None), np.inf
+    for cls in ann if len(ann) >= 3 else ():
+        fc_c = calibrate_frame(FrameInputs(size, {k: v for k, v in ann.items() if k != cls}), fast, model)
+        if fc_c.ok and fc_c.result.line_residuals:
+            fit = float(np.median(list(fc_c.result.line_residuals.values())))
+            if fit < best_fit:
+                best, best_fit = (fc_c, cls), fit
+    return best
+
+
 def check_frame(annotation: Mapping[str, np.ndarray], size: tuple[int, int] = EVAL_SIZE, detections=None,
                 params: QAParams = QAParams(), model: FieldModel | None = None,
                 settings: FrameSettings = QA_SETTINGS) -> FrameQA:
@@ -148,7 +175,7 @@ def check_frame(annotation: Mapping[str, np.ndarray], size: tuple[int, int] = EV
     t0 = time.perf_counter()
     ann = _normalised(annotation)
     W, H = size
-    fc = calibrate_frame(FrameInputs(size, ann), settings, model) if ann else None
+    fc, _ = frame_camera(ann, size, settings, model, params.prior_search) if ann else (None, None)
     if fc is None or not fc.ok:
         why = "no annotated class with geometry" if fc is None else fc.failure.message
         f = Finding("no_camera", f"the annotation gives no camera: {why}", 1.0,

@@ -38,6 +38,7 @@ class QAParams:
     det_tol_px: float = 8.0  #: a detection this far from the annotation disagrees with it
     loo_iter: int = 15  #: iterations of each leave-one-class-out refit
     max_severity: float = 10.0  #: a finding's severity is capped here
+    prior_search: bool = True  #: a frame with too few keypoints is calibrated from broadcast priors (slow)
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,9 @@ def add_qa_parser(sub) -> None:
                    help="image size for frames without an image (default 960x540)")
     p.add_argument("--tol", type=float, default=None, metavar="PX",
                    help="a point this close to its marking sits on it (px at 960 wide; default 8)")
+    p.add_argument("--no-priors", action="store_true",
+                   help="faster: a frame with fewer than 4 keypoints is not calibrated from broadcast priors "
+                        "(it is listed as without a camera)")
     p.add_argument("--top", type=int, default=10, metavar="N", help="frames listed at the end (default 10)")
     p.add_argument("--workers", type=int, default=1, help="worker processes (0: all cores)")
     p.add_argument("--resume", action="store_true",
@@ -165,11 +168,12 @@ def _frames(ds, edits) -> list[str]:
 def _params(args):
     from pnlviz.calib.qa import QAParams
 
+    priors = not getattr(args, "no_priors", False)
     if args.tol is None:
-        return QAParams()
+        return QAParams(prior_search=priors)
     if not (math.isfinite(args.tol) and 0 < args.tol <= 100):
         raise SystemExit("error: --tol must be a number of pixels in (0, 100]")
-    return QAParams(tol_px=args.tol, far_px=2 * args.tol)
+    return QAParams(tol_px=args.tol, far_px=2 * args.tol, prior_search=priors)
 
 
 def run_qa(args) -> int:
