@@ -2,6 +2,7 @@
 half of the frames, the ranking's quality and speed.
 
     python benchmarks/bench_qa.py [--shared ../shared] [--frames N] [--seed S] [--figure docs/qa_findings.png]
+    python benchmarks/bench_qa.py --show 01610,00967,00903 --figure docs/qa_findings.png
 
 Each frame of the chosen half gets one error, the kinds in turn: a class renamed to the other
 side (left/right or top/bottom swapped), a class renamed to a neighbouring marking (big <-> small
@@ -18,8 +19,9 @@ each kind at 5% false alarms (the score above the untouched frames' 95th percent
 the injected error is the one named (its kind and class or keypoint), CPU time per frame (the
 machine may be shared: wall time says less), peak
 memory; and the top-ranked untouched frames with their findings (the dataset's own mistakes).
-``--figure``: a picture of the three top-ranked untouched frames (annotation drawn, the camera's
-projection of the pitch in white).
+``--figure``: a picture of the top-ranked untouched frame of three kinds of finding (the
+annotation drawn, the camera's projection of the pitch in white, where the suggested fix puts
+points circled in red).
 """
 
 from __future__ import annotations
@@ -204,6 +206,20 @@ def report(rows, times, top: int) -> list[dict]:
     return ranked
 
 
+def _fix_points(qa, f) -> np.ndarray:
+    """Where the finding's fix puts the class (pixels): the suggested points, or the camera's
+    projection of the new name near the annotated points."""
+    if f.fix is None:
+        return np.zeros((0, 2))
+    if f.fix["op"] in ("move_points", "add_class"):
+        return np.asarray(f.fix["points"]) * SCALE
+    if f.fix["op"] == "rename" and qa.camera is not None:
+        uv, _ = qa.camera.project(load_field_model().sample_polylines(4.0, 2.0)[f.fix["to"]])
+        return uv[np.isfinite(uv).all(axis=1) & (uv[:, 0] >= 0) & (uv[:, 0] < SIZE[0]) & (uv[:, 1] >= 0)
+                  & (uv[:, 1] < SIZE[1])]
+    return np.zeros((0, 2))
+
+
 def figure(rows: list[dict], path: Path) -> None:
     import cv2
 
@@ -217,7 +233,11 @@ def figure(rows: list[dict], path: Path) -> None:
             draw_pitch(im, q.camera, colour=(255, 255, 255))
         draw_annotation(im, r["ann"], labels=True, thickness=2)
         f = q.findings[0]
-        caption(im, f"SN22 {r['stem']}: {f.kind} {f.cls or f.keypoint}")
+        where = _fix_points(q, f)
+        for p in where:
+            cv2.circle(im, (int(p[0]), int(p[1])), 7, (0, 0, 255), 2, cv2.LINE_AA)
+        to = f" -> {f.fix['to']}" if f.fix and f.fix["op"] == "rename" else ""
+        caption(im, f"SN22 {r['stem']}: {f.kind}: {f.cls or f.keypoint}{to}")
         tiles.append(im)
     sheet = contact_sheet(tiles, columns=len(tiles), tile_width=480)
     cv2.imwrite(str(path), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 9])
@@ -231,13 +251,29 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--top", type=int, default=12)
     ap.add_argument("--figure", type=Path, default=None)
+    ap.add_argument("--show", default=None, metavar="STEM,STEM,...",
+                    help="only draw these frames' top findings into --figure (no injection, no figures)")
     args = ap.parse_args()
     ds = open_dataset(args.shared / "data" / "sn22_test_subset" / "annotations.zip")
+    if args.show:
+        model = load_field_model()
+        rows = []
+        for stem in args.show.split(","):
+            ann = {k: np.asarray(v, float) for k, v in ds.annotation(stem).items()}
+            rows.append({"stem": stem, "ann": ann, "clean": check_frame(ann, SIZE, model=model)})
+        figure(rows, args.figure or Path("qa_findings.png"))
+        return
     stems = [s for s in ds.stems if ds.frame(s).has_annotation][: args.frames or None]
     rows, times = judge_all(ds, stems, args.seed, lambda n: None)
     ranked = report(rows, times, args.top)
-    if args.figure is not None:
-        figure(ranked[:3], args.figure)
+    if args.figure is not None:  # the top-ranked untouched frame of each of three kinds
+        picked, kinds = [], set()
+        for r in ranked:
+            kind = r["clean"].findings[0].kind if r["clean"].findings else None
+            if kind is not None and kind not in kinds and len(picked) < 3:
+                picked.append(r)
+                kinds.add(kind)
+        figure(picked, args.figure)
 
 
 if __name__ == "__main__":
