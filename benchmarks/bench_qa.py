@@ -39,6 +39,10 @@ from pnlviz.data import Predictions, open_dataset
 from pnlviz.field import load_field_model
 from pnlviz.field.names import CIRCLE_CLASSES, MODEL_CLASSES
 
+#: untouched SN22 frames whose annotation is wrong, checked by eye on drawings like docs/qa_findings.png:
+#: a class named from the other side or as a neighbouring marking (hundreds of px off under its name,
+#: a few px under the other). The figures are printed with and without them among the untouched.
+KNOWN_ERRORS = ("00261", "00701", "00967", "01194", "01610", "01690", "01953", "02027")
 SIZE = (960, 540)
 SCALE = np.array([959.0, 539.0])
 KINDS = ("other_side", "neighbour", "off", "split", "missing", "detection")
@@ -177,13 +181,11 @@ def judge_all(ds, stems, seed, frames_done):
     return rows, times
 
 
-def report(rows, times, top: int) -> list[dict]:
-    untouched = [r for r in rows if "kind" not in r]
-    injected = [r for r in rows if "kind" in r]
+def figures(injected, untouched, title: str) -> None:
     neg = np.array([r["clean"].score for r in untouched])
     pos = np.array([r["qa"].score for r in injected])
     thr = float(np.quantile(neg, 0.95))
-    print(f"{len(rows)} SN22 frames: {len(injected)} with one injected error, {len(untouched)} untouched")
+    print(f"\n{title}: {len(injected)} frames with one injected error, {len(untouched)} untouched")
     print(f"AUROC of the frame score, injected vs untouched: {auroc(pos, neg):.3f}")
     print(f"5% false alarms: score > {thr:.2f} ({int(np.sum(neg > thr))} of {len(neg)} untouched frames above)")
     print(f"{'kind':12s} {'frames':>6s} {'recall@5%FA':>11s} {'named':>6s} {'median score':>12s}")
@@ -194,6 +196,15 @@ def report(rows, times, top: int) -> list[dict]:
         s = np.array([r["qa"].score for r in rs])
         hit = np.mean([named(r["qa"], kind, r["target"]) for r in rs])
         print(f"{kind:12s} {len(rs):6d} {np.mean(s > thr):11.3f} {hit:6.3f} {np.median(s):12.2f}")
+
+
+def report(rows, times, top: int) -> list[dict]:
+    untouched = [r for r in rows if "kind" not in r]
+    injected = [r for r in rows if "kind" in r]
+    print(f"{len(rows)} SN22 frames")
+    figures(injected, untouched, "all untouched frames")
+    figures(injected, [r for r in untouched if r["stem"] not in KNOWN_ERRORS],
+            f"untouched frames less the {len(KNOWN_ERRORS)} checked by eye as wrong (KNOWN_ERRORS)")
     ms = 1e3 * np.array(times)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"CPU time per frame (one process): median {np.median(ms):.0f} ms, mean {np.mean(ms):.0f} ms, "
