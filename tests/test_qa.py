@@ -218,3 +218,39 @@ def test_the_python_api_judges_a_dataset_or_one_frame(tmp_path, left):
     assert one["findings"][0]["kind"] == "missing_class" and one["score"] == ranked[0]["score"]
     with pytest.raises(pnlviz.ArgumentError, match="lines"):
         pnlviz.qa({"Nope": [[0, 0], [1, 1]]}, image_size=(960, 540))
+
+
+# ----------------------------------------------------------------------------- the app's suspects
+def test_the_app_filters_and_sorts_frames_by_the_same_scores(left):
+    from types import SimpleNamespace
+
+    from pnlviz.app.frameorder import sort_key_text, visible_order
+    from pnlviz.app.modes import Filter, Sort
+    from pnlviz.app.triage import FrameSummary, suspect_score
+    from pnlviz.calib.frame import FrameInputs, calibrate_frame
+
+    _, ann = left
+    bad = dict(ann)
+    bad["Small rect. right main"] = bad.pop("Small rect. left main")
+    scores = {}
+    for stem, a in (("clean", ann), ("bad", bad)):
+        fc = calibrate_frame(FrameInputs((960, 540), a))  # the app's view of the frame: its calibration
+        view = SimpleNamespace(annotation=a, origin="annotation", result=fc.result, observations=fc.observations,
+                               size=(960, 540))
+        scores[stem] = suspect_score(view)
+    assert scores["clean"][0] < 1 and scores["clean"][1] is None
+    assert scores["bad"][0] == pytest.approx(check_frame(bad).score) and "Small rect. right main" in scores["bad"][1]
+    assert suspect_score(SimpleNamespace(annotation=ann, origin="detections", result=None)) == (None, None)
+
+    def summary(stem, suspect, note=None):
+        return FrameSummary(stem, True, None, 1.0, 1.0, 0.9, "", suspect, note)
+
+    stems = ["a", "b", "c", "d"]
+    summaries = {"a": summary("a", scores["clean"][0]), "b": summary("b", scores["bad"][0], scores["bad"][1]),
+                 "c": summary("c", None)}  # c: not judged (another source); d: not calibrated yet
+    order = visible_order(stems, summaries, lambda s: None, Filter.SUSPECTS, Sort.INDEX)
+    assert [stems[i] for i in order] == ["b"]
+    order = visible_order(stems, summaries, lambda s: None, Filter.ALL, Sort.SUSPECT)
+    assert [stems[i] for i in order] == ["b", "a", "c", "d"]
+    assert sort_key_text(Sort.SUSPECT, summaries["b"]) == f"suspect score {scores['bad'][0]:.2f}: {scores['bad'][1]}"
+    assert "not judged" in sort_key_text(Sort.SUSPECT, summaries["c"])

@@ -44,6 +44,8 @@ class FrameSummary:
     median: float
     jac5: float | None
     token: str
+    suspect: float | None = None  #: the label-error finder's score (pnlviz.calib.qa; None: not judged)
+    suspect_note: str | None = None  #: its worst finding, in words
 
     @property
     def error(self) -> float:
@@ -63,14 +65,30 @@ def same_inputs(token: str, other: str) -> bool:
     return token.rsplit("|", 1)[0] == other.rsplit("|", 1)[0]
 
 
-def summarize(view, token: str) -> FrameSummary:
-    """A frame's view (:class:`pnlviz.pipeline.view.FrameView`) as a summary."""
+def summarize(view, token: str, judge: bool = False) -> FrameSummary:
+    """A frame's view (:class:`pnlviz.pipeline.view.FrameView`) as a summary; with ``judge``, its
+    annotation judged by the label-error finder too (:func:`suspect_score`)."""
     result = view.result
     ok = result is not None and result.ok
     r = list(result.point_residuals.values()) + list(result.line_residuals.values()) if ok else []
     failure = None if ok else (view.error or (result.failure if result is not None else "nothing to calibrate from"))
+    suspect, note = suspect_score(view) if judge else (None, None)
     return FrameSummary(view.stem, ok, failure, float(max(r)) if r else 0.0, float(np.median(r)) if r else 0.0,
-                        view.jac.get(5) if ok else None, token)
+                        view.jac.get(5) if ok else None, token, suspect, note)
+
+
+def suspect_score(view) -> tuple[float | None, str | None]:
+    """The label-error finder's score of a frame calibrated from its annotation alone, and its
+    worst finding in words (:func:`pnlviz.calib.qa.check_frame`, reusing the view's calibration);
+    (None, None) for a frame calibrated from anything else, or without an annotation."""
+    from pnlviz.calib.frame import FrameCalibration
+    from pnlviz.calib.qa import check_frame
+
+    if not view.annotation or view.origin != "annotation" or view.result is None:
+        return None, None
+    fc = FrameCalibration(view.observations, view.origin, None, view.result)
+    qa = check_frame(view.annotation, view.size, calibration=fc)
+    return round(qa.score, 3), (qa.findings[0].message if qa.findings else None)
 
 
 class _JsonLines:
@@ -297,7 +315,7 @@ class Triage:
         """Keep the summary of a view just computed under the default settings."""
         if view.settings != self.state.default_settings:
             return None
-        summary = summarize(view, self.token(view.stem))
+        summary = summarize(view, self.token(view.stem), judge=True)
         self.store.put(summary)
         return summary
 
@@ -337,4 +355,4 @@ class Triage:
 
 
 __all__ = ["DetectionCache", "FrameSummary", "PassProgress", "SummaryStore", "Triage", "cache_paths", "run_pass",
-           "same_inputs", "summarize", "summary_token"]
+           "same_inputs", "summarize", "summary_token", "suspect_score"]

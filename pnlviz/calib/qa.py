@@ -164,9 +164,11 @@ def frame_camera(ann: dict[str, np.ndarray], size: tuple[int, int], settings: Fr
 
 def check_frame(annotation: Mapping[str, np.ndarray], size: tuple[int, int] = EVAL_SIZE, detections=None,
                 params: QAParams = QAParams(), model: FieldModel | None = None,
-                settings: FrameSettings = QA_SETTINGS) -> FrameQA:
+                settings: FrameSettings = QA_SETTINGS, calibration=None) -> FrameQA:
     """Judge one frame's annotation (SoccerNet, normalised: x_px = x (W - 1)) at ``size`` (W, H);
     with ``detections`` (PnLCalib format, :class:`pnlviz.data.Predictions`), compare them with it.
+    ``calibration``: the frame's :class:`pnlviz.calib.frame.FrameCalibration` from its annotation
+    when the caller has it already (the app's view of the frame), instead of calibrating it here.
     Never raises on bad geometry: a frame without a camera says so."""
     from pnlviz.calib.inputs import observations_from_predictions
     from pnlviz.calib.sources import aligned_detections
@@ -175,7 +177,10 @@ def check_frame(annotation: Mapping[str, np.ndarray], size: tuple[int, int] = EV
     t0 = time.perf_counter()
     ann = _normalised(annotation)
     W, H = size
-    fc, _ = frame_camera(ann, size, settings, model, params.prior_search) if ann else (None, None)
+    if calibration is not None and ann:
+        fc = calibration
+    else:
+        fc, _ = frame_camera(ann, size, settings, model, params.prior_search) if ann else (None, None)
     if fc is None or not fc.ok:
         why = "no annotated class with geometry" if fc is None else fc.failure.message
         f = Finding("no_camera", f"the annotation gives no camera: {why}", 1.0,
