@@ -254,3 +254,26 @@ def test_the_app_filters_and_sorts_frames_by_the_same_scores(left):
     assert [stems[i] for i in order] == ["b", "a", "c", "d"]
     assert sort_key_text(Sort.SUSPECT, summaries["b"]) == f"suspect score {scores['bad'][0]:.2f}: {scores['bad'][1]}"
     assert "not judged" in sort_key_text(Sort.SUSPECT, summaries["c"])
+
+
+def test_the_app_applies_a_suggested_fix_as_an_undoable_edit(tmp_path, left):
+    from pnlviz.app.state import AppState
+    from pnlviz.app.triage import fix_frame
+
+    _, ann = left
+    bad = dict(ann)
+    bad["Small rect. right main"] = bad.pop("Small rect. left main")
+    data = _dataset(tmp_path / "d", {"00001": bad, "00002": ann})
+    st = AppState(data, edits=tmp_path / "d.edits", source="annotation")
+    try:
+        assert fix_frame(st, "00002") is None  # a clean frame: nothing to fix, nothing written
+        assert st.history("00002") == (0, 0)
+        finding = fix_frame(st, "00001")
+        assert finding.kind == "wrong_class" and finding.fix["to"] == "Small rect. left main"
+        fixed = st.view("00001").annotation
+        assert "Small rect. left main" in fixed and "Small rect. right main" not in fixed
+        assert st.edits.review("00001") == "corrected" and st.history("00001")[0] == 1
+        assert st.undo("00001")
+        assert "Small rect. right main" in st.view("00001").annotation
+    finally:
+        st.close()

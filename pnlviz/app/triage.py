@@ -77,6 +77,25 @@ def summarize(view, token: str, judge: bool = False) -> FrameSummary:
                         view.jac.get(5) if ok else None, token, suspect, note)
 
 
+def fix_frame(state, stem: str, settings=None):
+    """Apply the suggested fix of the frame's worst finding that has one (the label-error
+    finder's, on the frame as the tab shows it) as an ordinary annotation edit, undoable like
+    any other: the finding, or None when there is nothing to fix (a frame calibrated from
+    anything but its annotation is not judged)."""
+    from pnlviz.calib.frame import FrameCalibration
+    from pnlviz.calib.qa import apply_fix, check_frame
+
+    view = state.view(stem, settings)
+    if not view.annotation or view.origin != "annotation" or view.result is None:
+        return None
+    qa = check_frame(view.annotation, view.size, calibration=FrameCalibration(view.observations, view.origin, None,
+                                                                              view.result))
+    finding = next((f for f in qa.findings if f.fix is not None), None)
+    if finding is not None:
+        state.set_annotation(stem, apply_fix(view.annotation, finding.fix))
+    return finding
+
+
 def suspect_score(view) -> tuple[float | None, str | None]:
     """The label-error finder's score of a frame calibrated from its annotation alone, and its
     worst finding in words (:func:`pnlviz.calib.qa.check_frame`, reusing the view's calibration);
@@ -355,4 +374,4 @@ class Triage:
 
 
 __all__ = ["DetectionCache", "FrameSummary", "PassProgress", "SummaryStore", "Triage", "cache_paths", "run_pass",
-           "same_inputs", "summarize", "summary_token", "suspect_score"]
+           "fix_frame", "same_inputs", "summarize", "summary_token", "suspect_score"]
