@@ -63,7 +63,7 @@ def sort_key_text(sort: Sort, summary: FrameSummary | None) -> str | None:
         return f"JaC@5 {summary.jac5:.3f}" if summary.jac5 is not None else "JaC@5: no annotation to score against"
     if sort is Sort.SUSPECT:
         if summary.suspect is None:
-            return "suspect score: not judged (calibrated from detections, or no annotation)"
+            return "suspect score: not judged (calibrated from detections, no annotation, or edited since)"
         return f"suspect score {summary.suspect:.2f}" + (f": {summary.suspect_note}" if summary.suspect_note else "")
     return f"worst residual {summary.worst:,.1f} px"
 

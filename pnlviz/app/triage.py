@@ -20,7 +20,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -330,11 +330,16 @@ class Triage:
         return summary_token(settings or self.state.default_settings, self.state.edits.digest(stem),
                              self.has_detections(stem))
 
-    def note(self, view) -> FrameSummary | None:
-        """Keep the summary of a view just computed under the default settings."""
+    def note(self, view, judge: bool = False) -> FrameSummary | None:
+        """Keep the summary of a view just computed under the default settings; ``judge``: with
+        the label-error finder's score (the background pass; not after each edit, which must stay
+        quick)."""
         if view.settings != self.state.default_settings:
             return None
-        summary = summarize(view, self.token(view.stem), judge=True)
+        summary = summarize(view, self.token(view.stem), judge=judge)
+        old = None if judge else self.store.get(view.stem)
+        if old is not None and old.token == summary.token and old.suspect is not None:  # same inputs: same verdict
+            summary = replace(summary, suspect=old.suspect, suspect_note=old.suspect_note)
         self.store.put(summary)
         return summary
 
@@ -369,8 +374,10 @@ class Triage:
 
     def calibrate(self, stem: str) -> FrameSummary:
         """The frame calibrated under the default settings, its summary kept (the view is not)."""
-        view = self.state.view(stem, keep=False)
-        return self.note(view) or summarize(view, self.token(stem))
+        view = self.state.view(stem, keep=False)  # noted there, judged (a view not kept: the pass's)
+        stored = self.store.get(stem)
+        return stored if stored is not None and stored.token == self.token(stem) else \
+            summarize(view, self.token(stem), judge=True)
 
 
 __all__ = ["DetectionCache", "FrameSummary", "PassProgress", "SummaryStore", "Triage", "cache_paths", "run_pass",
