@@ -402,8 +402,8 @@ def test_the_panel_texts():
 
 
 def test_the_modes_keep_the_texts_the_user_sees():
-    assert labels(Filter) == ("all", "failed", "unreviewed", "accepted", "corrected", "rejected")
-    assert labels(Sort) == ("index", "JaC@5 (worst first)", "residual (worst first)")
+    assert labels(Filter) == ("all", "failed", "unreviewed", "accepted", "corrected", "rejected", "suspects")
+    assert labels(Sort) == ("index", "JaC@5 (worst first)", "residual (worst first)", "suspect score (worst first)")
     assert labels(DragMode) == ("keypoints", "line points")
     assert {f.review for f in Filter} - {None} == set(REVIEW_STATES)
     assert Mode.IMAGE.other is Mode.THREE_D and Mode.THREE_D.other is Mode.IMAGE and Mode("3d") is Mode.THREE_D

@@ -191,6 +191,20 @@ class Editor:
         self.selected = None
         self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid, self.tab.settings))
 
+    def apply_fix(self) -> None:
+        """The suggested fix of the frame's worst finding (the label-error finder's: a class
+        renamed, stray points dropped, points moved onto their marking, a marking added), applied
+        as an edit of the annotation (Ctrl+Z takes it back)."""
+        from pnlviz.app.triage import fix_frame
+
+        stem, found = self.tab.stem, []
+        self.trail.act(stem, lambda: found.append(fix_frame(self.tab.state, stem, self.tab.settings)))
+        if found and found[0] is not None:
+            self.tab.notify("fix applied", f"{found[0].message} -> {found[0].fix['op']} (Ctrl+Z takes it back)",
+                            error=False)
+        else:
+            self.tab.notify("nothing to fix", "the label-error finder suggests no fix for this frame", error=False)
+
     def place(self, stem: str, uv) -> None:
         """Put the chosen keypoint id at pixel ``uv`` of ``stem`` (shift+click)."""
         kid = self.place_id

@@ -32,6 +32,7 @@ class Filter(enum.Enum):
     ACCEPTED = "accepted"
     CORRECTED = "corrected"
     REJECTED = "rejected"
+    SUSPECTS = "suspects"  # an annotation the label-error finder flags (pnlviz.calib.qa: score >= 1)
 
     @property
     def review(self) -> str | None:
@@ -45,6 +46,7 @@ class Sort(enum.Enum):
     INDEX = "index"
     JAC5 = "JaC@5 (worst first)"
     RESIDUAL = "residual (worst first)"
+    SUSPECT = "suspect score (worst first)"
 
 
 class DragMode(enum.Enum):

@@ -233,6 +233,7 @@ class Panels:
                 ("review: corrected, next", "C", None, lambda: edit.review("corrected", advance=self.advance.value)),
                 ("review: rejected, next", "R", None, lambda: edit.review("rejected", advance=self.advance.value)),
                 ("hide the flagged points of the frame reviewed last", "H", None, edit.hide_flagged),
+                ("apply the label-error finder's fix (suspects)", "F", None, edit.apply_fix),
                 ("undo", "Z", "cmd/ctrl", edit.undo),
                 ("redo", "Z", "cmd/ctrl+shift", edit.redo),
                 ("image view / 3D view", "V", None, s.toggle_mode),

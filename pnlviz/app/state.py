@@ -230,7 +230,7 @@ class AppState:
                 self._cache[key] = view
                 while len(self._cache) > VIEW_CACHE:
                     self._cache.pop(next(iter(self._cache)))
-        self.triage.note(view)
+        self.triage.note(view, judge=not keep)  # the background pass's views are judged, not each edit's
         return view
 
     def cached_view(self, stem: str, settings: Settings | None = None) -> FrameView | None:
