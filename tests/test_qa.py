@@ -277,3 +277,18 @@ def test_the_app_applies_a_suggested_fix_as_an_undoable_edit(tmp_path, left):
         assert "Small rect. right main" in st.view("00001").annotation
     finally:
         st.close()
+
+
+def test_a_frame_the_app_could_not_calibrate_is_a_suspect_without_a_camera():
+    from types import SimpleNamespace
+
+    from pnlviz.app.triage import suspect_score
+    from pnlviz.calib.frame import FrameInputs, calibrate_frame
+
+    ann = {"Middle line": np.array([[0.5, 0.1], [0.5, 0.9]]), "Side line top": np.array([[0.1, 0.1], [0.9, 0.1]])}
+    fc = calibrate_frame(FrameInputs((960, 540), ann))
+    assert not fc.ok and fc.result is not None
+    view = SimpleNamespace(annotation=ann, origin="annotation", result=fc.result, observations=fc.observations,
+                           size=(960, 540))
+    score, note = suspect_score(view)
+    assert score == 1.0 and note.startswith("the annotation gives no camera")

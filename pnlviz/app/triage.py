@@ -106,7 +106,10 @@ def suspect_score(view) -> tuple[float | None, str | None]:
     if not view.annotation or view.origin != "annotation" or view.result is None:
         return None, None
     fc = FrameCalibration(view.observations, view.origin, None, view.result)
-    qa = check_frame(view.annotation, view.size, calibration=fc)
+    try:
+        qa = check_frame(view.annotation, view.size, calibration=fc)
+    except Exception:  # noqa: BLE001 - a bug here must not stop the background pass: the frame is not judged
+        return None, None
     return round(qa.score, 3), (qa.findings[0].message if qa.findings else None)
 
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
+from pnlviz.calib.frame import Failure, FrameInputs, FrameSettings, calibrate_frame
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.qa_checks import (KINDS, Finding, QAParams, class_findings, detection_findings, distances,
                                     judge_class, missing_findings, projected_classes)
@@ -182,9 +182,12 @@ def check_frame(annotation: Mapping[str, np.ndarray], size: tuple[int, int] = EV
     else:
         fc, _ = frame_camera(ann, size, settings, model, params.prior_search) if ann else (None, None)
     if fc is None or not fc.ok:
-        why = "no annotated class with geometry" if fc is None else fc.failure.message
+        res = None if fc is None else fc.result
+        failure = None if fc is None else (fc.failure or Failure(getattr(res, "failure_code", None) or "failed",
+                                                                 getattr(res, "failure", None) or "not calibrated"))
+        why = "no annotated class with geometry" if fc is None else failure.message
         f = Finding("no_camera", f"the annotation gives no camera: {why}", 1.0,
-                    evidence={"failure": why if fc is None else fc.failure.code})
+                    evidence={"failure": "no_input" if fc is None else failure.code})
         return FrameQA(frame_score([f]), [f], None, 1e3 * (time.perf_counter() - t0))
     cam = fc.result.camera
     data = FrameData.build(fc.observations, model)
