@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -36,8 +36,8 @@ from pnlviz.geometry.camera import Camera
 from .calibrate import CalibParams, calibrate
 from .cuts import segment_shots
 from .observations import Observations
-from .shot import TemporalParams
-from .shot_fit import ShotFit, fit_shot
+from .shot import ShotModel, TemporalParams, flatten
+from .shot_fit import ShotFit, camera_vector, fit_shot
 from .sources import apply_keypoint_edits
 
 __all__ = ["PROVENANCE", "ClipLabel", "ClipSolver", "CutEdits", "apply_cuts", "carried_points"]
@@ -162,8 +162,12 @@ class ClipSolver:
             self.own = [self._own_camera(o) for o in self.base]
         else:
             self.own = list(self.cameras)
-        #: the shots the clip's own cameras and image changes give (before the hand's cuts)
-        self.found = segment_shots(self.own, self.changes, self.params)
+        #: the shots found (before the hand's cuts): where the images change when every change is
+        #: known (a frame with few keypoints has an own camera that jumps, which is no cut), else
+        #: as ``pnlviz calibrate --temporal`` finds them
+        images = self.changes is not None and len(self.changes) == self.T - 1 and all(
+            c is not None for c in self.changes)
+        self.found = segment_shots([None] * self.T if images else self.own, self.changes, self.params)
         self._shots = [_Shot(r) for r in apply_cuts(self.found, self.cuts, self.T)]
         self._labels: list[dict[int, ClipLabel]] | None = None
         for k in range(len(self._shots)):
@@ -295,12 +299,36 @@ class ClipSolver:
             return None
         return r.camera if r.ok else None
 
+    def _start_cameras(self, frames: list[int]) -> list[Camera | None]:
+        """The frames' own cameras to start a shot's solve from, without those whose centre is
+        farther than ``cut_centre_m`` from the shot's median centre (a frame with few or wrong
+        keypoints: its neighbours place it)."""
+        own = [self.own[t] for t in frames]
+        known = [c.C for c in own if c is not None]
+        if not known:
+            return own
+        centre = np.median(np.array(known), axis=0)
+        return [c if c is not None and np.linalg.norm(c.C - centre) <= self.params.cut_centre_m else None for c in own]
+
+    def frame_error(self, t: int) -> float:
+        """What the app ranks frame ``t`` by: the median distance (px) of all its observations
+        (keypoints and line points, the dropped ones too) to its shot camera; inf without one."""
+        cam, obs = self.camera(t), self.frame_observations(t)
+        if cam is None:
+            return float("inf")
+        if obs is None:
+            return 0.0
+        r_kp, r_ln = ShotModel(flatten([obs], self.model), 1, self.size, replace(self.params, fit_k1=True)
+                               ).data_residuals(camera_vector(cam))
+        r = np.concatenate([np.hypot(r_kp[:, 0], r_kp[:, 1]), np.abs(r_ln)])
+        return float(np.median(r)) if len(r) else 0.0
+
     def _solve(self, k: int, warm: bool) -> None:
         s = self._shots[k]
         t0 = time.perf_counter()
         frames = list(s.frames)
         obs = [self.frame_observations(t) for t in frames]
-        own = [self.own[t] for t in frames]
+        own = self._start_cameras(frames)
         start = s.fit if warm and s.fit is not None else None
         if start is None and all(c is None for c in own):
             s.fit = None

@@ -33,7 +33,7 @@ from .observations import Observations
 from .shot import ShotData, ShotModel, TemporalParams, flatten, jacobian
 from .solver import SolverParams, levenberg_marquardt
 
-__all__ = ["ShotFit", "fit_shot"]
+__all__ = ["ShotFit", "camera_vector", "fit_shot"]
 
 
 @dataclass
@@ -83,7 +83,7 @@ def _rebased(cam: Camera, C: np.ndarray) -> np.ndarray:
     return np.array([*pan_tilt_roll_from_rotation(R), math.log(f)])
 
 
-def _camera_vector(cam: Camera) -> np.ndarray:
+def camera_vector(cam: Camera) -> np.ndarray:
     """``[C, k1, pan, tilt, roll, log f]`` of one camera (its x focal length)."""
     return np.concatenate([cam.C, [cam.radial[0]], pan_tilt_roll_from_rotation(cam.R), [math.log(cam.fx)]])
 
@@ -98,8 +98,9 @@ def _agreeing(data: ShotData, cameras: Sequence[Camera | None], size, params: Te
     for t, cam in enumerate(cameras):
         if cam is None:
             continue
-        r_kp, r_ln = ShotModel(data.frame(t), 1, size, one).data_residuals(_camera_vector(cam))
-        kp_keep[data.kp_t == t] = (np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.start_outlier_px) | data.kp_pin[data.kp_t == t]
+        r_kp, r_ln = ShotModel(data.frame(t), 1, size, one).data_residuals(camera_vector(cam))
+        mine = data.kp_t == t
+        kp_keep[mine] = (np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.start_outlier_px) | data.kp_pin[mine]
         ln_keep[data.ln_t == t] = np.abs(r_ln) <= params.start_outlier_px
     return kp_keep, ln_keep
 
