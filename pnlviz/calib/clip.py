@@ -158,6 +158,7 @@ class ClipSolver:
         self.T = len(self.observations)
         self.base = list(self.observations)
         self.edits: dict[int, dict[str, object]] = {}
+        self._stale: set[int] = set()  # frames whose own camera is to be recalibrated (their edits changed)
         if self.cameras is None:
             self.own = [self._own_camera(o) for o in self.base]
         else:
@@ -202,6 +203,9 @@ class ClipSolver:
 
     def own_camera(self, t: int) -> Camera | None:
         """Frame ``t``'s own camera: its per-frame calibration, with its edits."""
+        if t in self._stale:
+            self._stale.discard(t)
+            self.own[t] = self._own_camera(self.frame_observations(t))
         return self.own[t]
 
     def cameras_of(self) -> list[Camera | None]:
@@ -231,7 +235,7 @@ class ClipSolver:
                                   for k, v in edits.items()}
         else:
             self.edits.pop(int(t), None)
-        self.own[t] = self._own_camera(self.frame_observations(t))
+        self._stale.add(int(t))  # its own camera: recalibrated when asked for (it can take a second)
         k = self.shot_of(t)
         if solve:
             self._solve(k, warm=True)
@@ -303,7 +307,7 @@ class ClipSolver:
         """The frames' own cameras to start a shot's solve from, without those whose centre is
         farther than ``cut_centre_m`` from the shot's median centre (a frame with few or wrong
         keypoints: its neighbours place it)."""
-        own = [self.own[t] for t in frames]
+        own = [self.own_camera(t) for t in frames]
         known = [c.C for c in own if c is not None]
         if not known:
             return own
@@ -328,8 +332,9 @@ class ClipSolver:
         t0 = time.perf_counter()
         frames = list(s.frames)
         obs = [self.frame_observations(t) for t in frames]
-        own = self._start_cameras(frames)
         start = s.fit if warm and s.fit is not None else None
+        # a warm start needs no per-frame camera (the stale ones are not recalibrated for it)
+        own = self._start_cameras(frames) if start is None else [self.own[t] for t in frames]
         if start is None and all(c is None for c in own):
             s.fit = None
         else:
