@@ -152,15 +152,22 @@ class ClipSolver:
     cuts: CutEdits = field(default_factory=CutEdits)
     origins: Sequence[str] | None = None
     model: FieldModel | None = None
+    #: the keypoint edits made so far: ``{frame: {"id": [x, y] | None}}`` (``cameras``, when given,
+    #: are the frames' own cameras with them)
+    keypoint_edits: Mapping[int, Mapping[str, object]] | None = None
 
     def __post_init__(self):
         self.model = self.model or load_field_model()
         self.T = len(self.observations)
         self.base = list(self.observations)
         self.edits: dict[int, dict[str, object]] = {}
+        for t, e in (self.keypoint_edits or {}).items():
+            if e:
+                self.edits[int(t)] = {str(int(k)): (None if v is None else [float(v[0]), float(v[1])])
+                                      for k, v in e.items()}
         self._stale: set[int] = set()  # frames whose own camera is to be recalibrated (their edits changed)
         if self.cameras is None:
-            self.own = [self._own_camera(o) for o in self.base]
+            self.own = [self._own_camera(self.frame_observations(t)) for t in range(self.T)]
         else:
             self.own = list(self.cameras)
         #: the shots found (before the hand's cuts): where the images change when every change is
