@@ -122,3 +122,48 @@ def test_hand_cuts_are_kept_in_the_edits_folder(video, tmp_path):
         assert [s.start for s in again.shots] == [0, 6]
     finally:
         reader.close()
+
+
+def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(video, tmp_path, serve):
+    """`serve --video`: a clip frame shows its shot's camera (the toggle shows its own); a point
+    placed on one frame solves the shot again, so its neighbour's camera changes too; the strip
+    marks the keyframe; "accept shot" reviews every frame of it; an export writes them all."""
+    path, preds, plan = video
+    app = serve(path, detections=preds, edits=tmp_path / "edits")
+    st = app.state
+    tab = app.session()
+    tab.goto(8)
+    solver = st.shots.build("match", tab.settings)
+    stems = st.shots.clips["match"]
+    tab.show()
+    shown = tab.view()
+    assert shown.camera is solver.camera(8)
+    tab.clip.set_shot_model(False)
+    own = tab.view().camera
+    assert own is not solver.camera(8) and own is st.view(stems[8], tab.settings).result.camera
+    tab.clip.set_shot_model(True)
+    before = solver.camera(9)
+    model = load_field_model()
+    ids = np.array(model.keypoint_ids)
+    uv, z = plan.cameras[8].project(model.keypoint_xyz(ids))
+    inside = (z > 0) & (uv[:, 0] > 20) & (uv[:, 0] < W - 20) & (uv[:, 1] > 20) & (uv[:, 1] < H - 20)
+    detected = set(solver.frame_observations(8).kp_ids.tolist())
+    j = next(j for j in np.flatnonzero(inside) if int(ids[j]) not in detected)
+    st.move_keypoint(stems[8], int(ids[j]), float(uv[j, 0]), float(uv[j, 1]), tab.settings)
+    assert solver.keyframes == [8]
+    assert solver.camera(9) is not before  # the neighbour follows the edit
+    tab.goto(9)
+    assert tab.view().camera is solver.camera(9)
+    errors, cuts, keyframes = st.shots.strip(stems[9], tab.settings)
+    assert keyframes == [8] and cuts == [] and len(errors) == T
+    assert "1 keyframes" in tab.panels.clip_text.content
+    tab.clip.accept_shot()
+    assert all(st.edits.review(s) in ("accepted", "corrected") for s in stems)
+    assert st.edits.get(stems[3])["snapshot"]["shot"]["first"] == stems[0]
+    files = write_export(st.reader, tmp_path / "out")
+    assert sorted(files) == sorted(stems)
+    kp = json.loads((tmp_path / "out" / "keypoints" / f"{stems[9]}.json").read_text())["keypoints"]
+    assert kp[str(int(ids[j]))]["provenance"] == "shot"
+    tab.goto(6)
+    tab.clip.toggle_cut()
+    assert [s.start for s in st.shots.build("match", tab.settings).shots] == [0, 6]

@@ -85,7 +85,12 @@ class Session:
         return self.state.stems[self.frames.index]
 
     def view(self) -> FrameView:
-        return self.state.view(self.stem, self.settings)
+        """The tab's frame as it shows it: a clip frame under its shot model (unless the clip
+        panel's toggle shows the frame's own camera), any other frame its own view."""
+        view = self.state.view(self.stem, self.settings)
+        if self.clip.shot_model and self.index in self.clip.clip_of:
+            view = self.state.shots.shot_view(view, self.settings)
+        return view
 
     def notify(self, title: str, body: str, error: bool = True) -> None:
         """A notification in this tab (printed when the session has no browser)."""

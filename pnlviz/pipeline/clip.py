@@ -79,10 +79,12 @@ def clip_changes(reader: FrameReader, stems: Sequence[str]) -> list[float | None
 
 
 def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: Settings | None = None, *,
-                changes: Sequence[float | None] | None = None, model: FieldModel | None = None) -> ClipSolver:
+                changes: Sequence[float | None] | None = None, model: FieldModel | None = None,
+                cameras: Sequence | None = None) -> ClipSolver:
     """The clip ``stems`` (in frame order) under its shot model: each frame's own observations
     under ``settings`` (default: the reader's), its keypoint edits and the clip's hand cuts from
-    the edits folder, ``changes`` (:func:`clip_changes`) to find the cuts."""
+    the edits folder, ``changes`` (:func:`clip_changes`) to find the cuts; ``cameras``: the
+    frames' own cameras under ``settings`` with their edits, when known (else calibrated here)."""
     model = model or load_field_model()
     settings = settings or reader.default_settings()
     fs = reader.frame_settings(settings)
@@ -103,7 +105,8 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
             edits[t] = dict(read.inputs.keypoint_edits)
     cp = calib_params(fs, origin0)
     return ClipSolver(base, size or tuple(reader.size), TemporalParams(fit_k1=cp.refine_k1), cp, changes=changes,
-                      cuts=read_cuts(reader, clip), origins=origins, model=model, keypoint_edits=edits)
+                      cuts=read_cuts(reader, clip), origins=origins, model=model, keypoint_edits=edits,
+                      cameras=None if cameras is None else list(cameras))
 
 
 def shot_snapshot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Sequence[str], t: int,
