@@ -15,6 +15,7 @@ from pnlviz.geometry.camera import Camera
 from pnlviz.pipeline.clip import accept_shot, clip_changes, clip_solver, dataset_clips, read_cuts, set_cut
 from pnlviz.pipeline.export import write_export
 from pnlviz.pipeline.reader import FrameReader
+from pnlviz.app.shots import clip_shots
 
 W, H, T = 480, 270, 16
 
@@ -133,8 +134,8 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     st = app.state
     tab = app.session()
     tab.goto(8)
-    solver = st.shots.build("match", tab.settings)
-    stems = st.shots.clips["match"]
+    solver = clip_shots(st).build("match", tab.settings)
+    stems = clip_shots(st).clips["match"]
     tab.show()
     shown = tab.view()
     assert shown.camera is solver.camera(8)
@@ -154,7 +155,7 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     assert solver.camera(9) is not before  # the neighbour follows the edit
     tab.goto(9)
     assert tab.view().camera is solver.camera(9)
-    errors, cuts, keyframes = st.shots.strip(stems[9], tab.settings)
+    errors, cuts, keyframes = clip_shots(st).strip(stems[9], tab.settings)
     assert keyframes == [8] and cuts == [] and len(errors) == T
     assert "1 keyframes" in tab.panels.clip_text.content
     tab.clip.accept_shot()
@@ -166,4 +167,4 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     assert kp[str(int(ids[j]))]["provenance"] == "shot"
     tab.goto(6)
     tab.clip.toggle_cut()
-    assert [s.start for s in st.shots.build("match", tab.settings).shots] == [0, 6]
+    assert [s.start for s in clip_shots(st).build("match", tab.settings).shots] == [0, 6]

@@ -12,6 +12,7 @@ import numpy as np
 
 from pnlviz.app.modes import PointKind, Selection
 from pnlviz.app.overlay import Overlay
+from pnlviz.app.shots import SHOT_SUBSET
 from pnlviz.app.state import AppState, FrameView
 
 
@@ -57,10 +58,6 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))
     lines.append(f"computed in {view.ms:.0f} ms")
     return "\n\n".join(lines)
-
-
-#: the ``subset`` of a result that is a clip frame's shot camera (:mod:`pnlviz.app.shots`)
-SHOT_SUBSET = "shot"
 
 
 def pin_lines(res) -> list[str]:

@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from pnlviz.app.cards import clip_text
+from pnlviz.app.shots import clip_shots
 from pnlviz.app.timeline import strip_image, worst_frames
 from pnlviz.app.workspace import update_changed
 
@@ -41,7 +42,7 @@ class ClipPlayer:
         """(errors, cuts, keyframes) of the clip under its shot model, None without one (yet)."""
         if not self.shot_model or not self.members():
             return None
-        return self.tab.state.shots.strip(self.tab.stem, self.tab.settings)
+        return clip_shots(self.tab.state).strip(self.tab.stem, self.tab.settings)
 
     def errors(self) -> list[float]:
         """Each clip frame's error under its shot model when it has one (its observations' median
@@ -117,14 +118,14 @@ class ClipPlayer:
         """Review the frame's whole shot at once: every frame accepted with what its shot shows."""
         if not self.members():
             return
-        done = self.tab.state.shots.accept(self.tab.stem, self.tab.settings)
+        done = clip_shots(self.tab.state).accept(self.tab.stem, self.tab.settings)
         self.tab.notify("shot accepted", f"{len(done)} frames reviewed ({done[0]} .. {done[-1]})" if done
                         else "nothing to accept", error=False)
         self.tab.show()
 
     def toggle_cut(self) -> None:
         """A cut before this frame added by hand, or removed when there is one."""
-        cut = self.tab.state.shots.toggle_cut(self.tab.stem, self.tab.settings) if self.members() else None
+        cut = clip_shots(self.tab.state).toggle_cut(self.tab.stem, self.tab.settings) if self.members() else None
         if cut is None:
             self.tab.notify("no cut", "a cut goes before a frame of a clip other than its first", error=False)
         else:

@@ -16,12 +16,14 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, replace
 
-from pnlviz.app.cards import SHOT_SUBSET
 from pnlviz.calib.calibrate import CalibrationResult
 from pnlviz.calib.clip import ClipSolver
 from pnlviz.pipeline.clip import accept_shot, clip_changes, clip_solver, dataset_clips, set_cut, shot_snapshot
 
-__all__ = ["ClipShots", "ShotPlace"]
+__all__ = ["SHOT_SUBSET", "ClipShots", "ShotPlace", "clip_shots"]
+
+#: the ``subset`` of a result that is a clip frame's shot camera (the card says so)
+SHOT_SUBSET = "shot"
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,7 @@ class ClipShots:
             with self._lock:
                 self._building.discard(key)
         for s in self.clips[key[0]]:
-            self.state.notify_changed(s)
+            self.state._changed(s)  # what the clip's frames show changed: the tabs showing one redraw
 
     def changed(self, stem: str) -> None:
         """A frame changed (its edits, its review, its detections): its clip's models follow."""
@@ -179,3 +181,17 @@ class ClipShots:
                 if key[0] == place.clip and other is not solver:
                     del self._solvers[key]
         return cut
+
+
+_CREATE = threading.Lock()
+
+
+def clip_shots(state) -> ClipShots:
+    """The clips' shot models of an :class:`pnlviz.app.state.AppState`, made on first use and
+    following every change of its frames from then on."""
+    with _CREATE:
+        shots = getattr(state, "_clip_shots", None)
+        if shots is None:
+            shots = state._clip_shots = ClipShots(state)
+            state.subscribe(shots.changed)
+    return shots

@@ -158,19 +158,6 @@ class AppState:
 
         return clip_index(self.stems)
 
-    @functools.cached_property
-    def shots(self):
-        """The clips' shot models (:class:`pnlviz.app.shots.ClipShots`), following every change."""
-        from pnlviz.app.shots import ClipShots
-
-        shots = ClipShots(self)
-        self.subscribe(shots.changed)
-        return shots
-
-    def notify_changed(self, stem: str) -> None:
-        """Tell the listeners that what ``stem`` shows changed (a clip's model solved again)."""
-        self._changed(stem)
-
     @property
     def problems(self) -> list[str]:
         """Files of the dataset that are not used (names that are not UTF-8, a second file for
@@ -305,7 +292,9 @@ class AppState:
                 return None
             snap = None
             if (record.get("snapshot") or {}).get("shot") is not None:  # reviewed with its shot: as it shows now
-                snap = self.shots.snapshot(stem, settings or self.default_settings)
+                from pnlviz.app.shots import clip_shots
+
+                snap = clip_shots(self).snapshot(stem, settings or self.default_settings)
             if snap is None:
                 view = self.view(stem, settings or self.default_settings)
                 snap = take_snapshot(view, record, self.applied_detection_settings(view.origin, view.settings),
