@@ -19,7 +19,9 @@ camera first, then the largest median residual of the frame's observations under
 there, moves the keypoint farthest from its true position to the truth when it is more than
 ``--move-px`` off (hides it when its true position is not in view), else places the missing
 keypoint in view whose projection by the current camera is farthest from the truth (without a camera: the one farthest from the frame's other points). A
-frame with nothing left to do is passed over. It stops when the clip's FS@5 (completeness x mean
+frame with nothing left to do is passed over. The pitch is the same turned half a turn: where a
+frame's points follow that labelling (the detector took left for right), so does the annotator
+(FS@5 accepts either labelling, as the SoccerNet evaluator does). It stops when the clip's FS@5 (completeness x mean
 JaC@5, the SoccerNet metric against the annotations made from the true cameras) reaches
 ``--target``, or after ``--limit`` edits. Prints, summed over the clips::
 
@@ -133,6 +135,36 @@ def _truth_points(cam, model):
     return {int(i): uv[j] for j, i in enumerate(ids) if ok[j]}
 
 
+def half_turn(cam):
+    """The camera that sees the pitch turned half a turn about its centre: the same picture with
+    the other labelling (left for right, near for far)."""
+    from dataclasses import replace
+
+    D = np.diag([-1.0, -1.0, 1.0])
+    return replace(cam, R=cam.R @ D, C=D @ cam.C)
+
+
+def labelling(mode, t, truth):
+    """The true camera in the labelling frame ``t``'s points follow: the pitch is the same turned
+    half a turn, a detector may label a clip so (and FS@5 accepts either labelling, as the
+    SoccerNet evaluator does); the annotator corrects within the labelling the frame has."""
+    obs = mode.observations(t)
+    if obs is None or not obs.n_keypoints:
+        cam = mode.camera(t)
+        if cam is None:
+            return truth
+        twin = half_turn(truth)
+        return twin if np.linalg.norm(cam.C - twin.C) < np.linalg.norm(cam.C - truth.C) else truth
+
+    def fit(cam):
+        uv, z = cam.project(obs.kp_xyz)
+        d = np.where(z > 0, np.hypot(*(uv - obs.kp_xy).T), np.inf)
+        return float(np.median(d))
+
+    twin = half_turn(truth)
+    return twin if fit(twin) < fit(truth) else truth
+
+
 def next_edit(mode, t, truth, model, move_px: float):
     """The annotator's edit on frame ``t``: (id, true position, or None to hide a point that is not
     in view), or None when nothing is left to do."""
@@ -187,7 +219,7 @@ def correct(mode, truths, anns, model, target: float, limit: int, move_px: float
         if not wrong:
             break
         t = max(wrong, key=lambda u: (mode.error(u), -u))
-        step = next_edit(mode, t, truths[t], model, move_px)
+        step = next_edit(mode, t, labelling(mode, t, truths[t]), model, move_px)
         if step is None:
             done.add(t)
             continue

@@ -38,6 +38,8 @@ __all__ = ["ShotFit", "camera_vector", "fit_shot"]
 #: the relative decrease of the cost a solve from a previous solution stops at (1e-10 from the
 #: per-frame cameras): the cameras it gives differ by hundredths of a pixel
 WARM_TOL = 1e-6
+#: ... and its iterations at most (the page waits for it: the next edit goes on from where it is)
+WARM_ITERATIONS = 15
 
 
 @dataclass
@@ -181,6 +183,8 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
     nfev = 0
     # from a previous solution an edit moves the cameras a little: a looser stop is as good
     tol = WARM_TOL if start is not None else 1e-10
+    if start is not None:
+        params = replace(params, max_iterations=min(params.max_iterations, WARM_ITERATIONS))
     for _ in range(3):
         x, cost, n = _solve(ShotModel(data.subset(kp_keep, ln_keep), T, size, params), x, params, tol)
         nfev += n
