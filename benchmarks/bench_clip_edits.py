@@ -18,16 +18,17 @@ against the frame's annotation below 1, or no camera) takes the one the app rank
 camera first, then the largest median residual of the frame's observations under its camera);
 there, moves the keypoint farthest from its true position to the truth when it is more than
 ``--move-px`` off (hides it when its true position is not in view), else places the missing
-keypoint in view whose projection by the current camera is farthest from the truth (without a camera: the one farthest from the frame's other points). A
-frame with nothing left to do is passed over. The pitch is the same turned half a turn: where a
-frame's points follow that labelling (the detector took left for right), so does the annotator
-(FS@5 accepts either labelling, as the SoccerNet evaluator does). It stops when the clip's FS@5 (completeness x mean
+keypoint in view whose projection by the current camera is farthest from the truth (without a
+camera: the one farthest from the frame's other points). A frame with nothing left to do is
+passed over. The pitch is the same turned half a turn: where a frame's points follow that
+labelling (the detector took left for right), so does the annotator (FS@5 accepts either
+labelling, as the SoccerNet evaluator does). It stops when the clip's FS@5 (completeness x mean
 JaC@5, the SoccerNet metric against the annotations made from the true cameras) reaches
 ``--target``, or after ``--limit`` edits. Prints, summed over the clips::
 
     edits to FS@5 0.95: per-frame N1, shot model N2 (frames F, shots S)
 
-(S: the shots the clip's detections give, found as ``pnlviz calibrate --temporal`` finds them;
+(S: the shots the shot model starts with: cuts where the images change, as the app finds them;
 a clip that did not reach the target counts its limit, marked ``+``) and the time of the shot
 re-solves after an edit.
 """
