@@ -157,7 +157,7 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     assert tab.view().camera is solver.camera(9)
     errors, cuts, keyframes = clip_shots(st).strip(stems[9], tab.settings)
     assert keyframes == [8] and cuts == [] and len(errors) == T
-    assert "1 keyframes" in tab.panels.clip_text.content
+    assert "1 keyframe (corrected by hand)" in tab.panels.clip_text.content
     tab.clip.accept_shot()
     assert all(st.edits.review(s) in ("accepted", "corrected") for s in stems)
     assert st.edits.get(stems[3])["snapshot"]["shot"]["first"] == stems[0]

@@ -106,7 +106,8 @@ class ClipPlayer:
             return "  \nshot model: solving the clip's shots..."
         starts = [0, *shot[1]]
         k = sum(1 for s in starts if s <= pos)
-        return f"  \nshot {k} of {len(starts)} · {len(shot[2])} keyframes (corrected by hand)"
+        n = len(shot[2])
+        return f"  \nshot {k} of {len(starts)} · {n} keyframe{'' if n == 1 else 's'} (corrected by hand)"
 
     # ------------------------------------------------------------------ the shot model
     def set_shot_model(self, on) -> None:
