@@ -69,7 +69,7 @@ def test_a_shot_of_a_video_is_corrected_once_and_exported_with_provenance(video,
     model = load_field_model()
     reader = FrameReader.open(path, detections=preds, edits=tmp_path / "edits", writable=True)
     try:
-        stems = dataset_clips(reader)["match"]
+        stems = dataset_clips(reader.stems)["match"]
         assert len(stems) == T
         changes = clip_changes(reader, stems)
         solver = clip_solver(reader, "match", stems, changes=changes)
@@ -114,7 +114,7 @@ def test_hand_cuts_are_kept_in_the_edits_folder(video, tmp_path):
     path, preds, _ = video
     reader = FrameReader.open(path, detections=preds, edits=tmp_path / "edits", writable=True)
     try:
-        stems = dataset_clips(reader)["match"]
+        stems = dataset_clips(reader.stems)["match"]
         solver = clip_solver(reader, "match", stems, changes=clip_changes(reader, stems))
         set_cut(reader, solver, "match", 6, True)
         assert [s.start for s in solver.shots] == [0, 6]

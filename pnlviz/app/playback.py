@@ -42,7 +42,8 @@ class ClipPlayer:
         """(errors, cuts, keyframes) of the clip under its shot model, None without one (yet)."""
         if not self.shot_model or not self.members():
             return None
-        return clip_shots(self.tab.state).strip(self.tab.stem, self.tab.settings)
+        st = self.tab.state
+        return clip_shots(st).strip(st.stems[self.tab.index], self.tab.settings)
 
     def errors(self) -> list[float]:
         """Each clip frame's error under its shot model when it has one (its observations' median

@@ -42,7 +42,7 @@ class ClipShots:
 
     def __init__(self, state):
         self.state = state
-        self.clips = dataset_clips(state.reader)
+        self.clips = dataset_clips(state.stems)
         self._where = {s: (name, t) for name, members in self.clips.items() for t, s in enumerate(members)}
         self._solvers: dict[tuple, ClipSolver] = {}
         self._building: set[tuple] = set()

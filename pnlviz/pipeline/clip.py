@@ -35,10 +35,10 @@ __all__ = ["accept_shot", "clip_changes", "clip_solver", "dataset_clips", "read_
 CLIPS_DIR = "clips"
 
 
-def dataset_clips(reader: FrameReader) -> dict[str, list[str]]:
-    """``{clip: [stems in frame order]}`` of the reader's named clips (``<clip>-IMG_<n>``) of two
-    frames or more."""
-    return {name: list(members) for name, members in clips(reader.stems).items() if name and len(members) >= 2}
+def dataset_clips(stems: Sequence[str]) -> dict[str, list[str]]:
+    """``{clip: [stems in frame order]}`` of the named clips (``<clip>-IMG_<n>``) of two frames or
+    more among a dataset's ``stems``."""
+    return {name: list(members) for name, members in clips(stems).items() if name and len(members) >= 2}
 
 
 def _cuts_path(reader: FrameReader, clip: str) -> Path:
