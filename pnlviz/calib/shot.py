@@ -73,7 +73,7 @@ class TemporalParams:
     max_iterations: int = 50
     #: weight of a pinned keypoint (placed or moved by hand on one frame) in the shot's solve; a
     #: pin is never dropped as an outlier (as on a single frame, :mod:`pnlviz.calib.pins`)
-    pin_weight: float = 4.0
+    pin_weight: float = 7.0
 
 
 @dataclass
