@@ -39,7 +39,7 @@ from pnlviz.data.errors import ArgumentError
 from pnlviz.geometry.camera import Camera
 
 __all__ = ["ArgumentError", "Calibration", "Camera", "ClipCalibration", "calibrate", "calibrate_clip", "detect",
-           "keypoint_names", "keypoints", "open_dataset", "top_view"]
+           "keypoint_names", "keypoints", "open_dataset", "qa", "top_view"]
 
 
 def keypoints() -> dict[int, tuple[float, float, float]]:
@@ -48,7 +48,11 @@ def keypoints() -> dict[int, tuple[float, float, float]]:
     from pnlviz.field.model import load_field_model
 
     model = load_field_model()
-    return {int(k): tuple(float(v) for v in model.keypoints[int(k)].xyz) for k in model.keypoint_ids}
+    out: dict[int, tuple[float, float, float]] = {}
+    for k in model.keypoint_ids:
+        x, y, z = (float(v) for v in model.keypoints[int(k)].xyz)
+        out[int(k)] = (x, y, z)
+    return out
 
 
 def keypoint_names() -> dict[int, str]:
@@ -229,13 +233,60 @@ def calibrate_clip(frames: Sequence[Mapping], *, image_size: Sequence[int], pnl:
 
 def open_dataset(path: str | Path):
     """A dataset folder or zip (SoccerNet layout: ``<stem>.jpg`` with ``<stem>.json``), indexed
-    lazily: ``len(ds)``, ``ds.stems``, ``ds.image(stem)`` (BGR), ``ds.annotation(stem)``."""
+    lazily: ``len(ds)``, ``ds.stems``, ``ds.image(stem)`` (BGR), ``ds.annotation(stem)``. Split
+    folders or split zips (``sn23/train/``, ``sn23/valid.zip``, ...) are one dataset whose stems
+    are ``<split>/<stem>`` (``ds.splits`` names them)."""
     from pnlviz.data import open_dataset as open_data
 
     p = Path(path)
     if not p.exists():
         raise ArgumentError(f"path: {p} does not exist")
     return open_data(p)
+
+
+def qa(data, *, detections=None, image_size: Sequence[int] | None = None) -> list[dict] | dict:
+    """Find the label errors, as ``pnlviz qa`` does. ``data``: a dataset folder or zip -> one
+    ``{"stem", "score", "findings"}`` per annotated frame, most suspect first (higher score: more
+    likely wrong; a frame scores 1 or more when something is found); or one frame's lines
+    ``{SoccerNet class name: (M, 2) pixels}`` (as :func:`calibrate` takes them) with its
+    ``image_size`` -> that frame's ``{"score", "findings"}``. Each finding: ``kind``
+    (``wrong_class``, ``off_projection``, ``split_class``, ``missing_class``,
+    ``detection_disagreement``, ``no_camera``), ``class`` or ``keypoint``, ``message``,
+    ``severity``, ``evidence`` and a suggested ``fix`` (``{"op": "rename" | "drop_points" |
+    "move_points" | "add_class", ...}``, points normalised as in SoccerNet files).
+    ``detections``: a PnLCalib prediction zip for a dataset, or one frame's
+    ``pnlviz.data.Predictions``, compared with the annotation."""
+    from pnlviz.calib.qa import check_frame
+    from pnlviz.field.model import load_field_model
+
+    model = load_field_model()
+    if isinstance(data, Mapping):
+        if image_size is None:
+            raise ArgumentError("image_size: one frame's lines need the (width, height) of their image")
+        w, h = _image_size(image_size)
+        lines = _lines_arg(data, model)
+        return check_frame({k: v / [w - 1, h - 1] for k, v in lines.items()}, (w, h), detections, model=model).to_json()
+    if not isinstance(data, (str, Path)):
+        raise ArgumentError(f"data: expected a dataset path or one frame's lines, got {type(data).__name__}")
+    return _qa_dataset(open_dataset(data), detections, image_size, model)
+
+
+def _qa_dataset(ds, detections, image_size, model) -> list[dict]:
+    from pnlviz.calib.qa import check_frame
+    from pnlviz.data import read_predictions
+
+    size = (960, 540) if image_size is None else _image_size(image_size)
+    if detections is not None and not Path(detections).exists():
+        raise ArgumentError(f"detections: {detections} does not exist")
+    preds = read_predictions(detections) if detections is not None else {}
+    out = []
+    for stem in ds.stems:
+        ann = ds.annotation(stem) if ds.frame(stem).has_annotation else None
+        if ann is None:
+            continue
+        frame_size = (ds.image_size(stem) if ds.frame(stem).has_image else None) or size
+        out.append(check_frame(ann, frame_size, preds.get(stem), model=model).to_json(stem))
+    return sorted(out, key=lambda r: (-r["score"], r["stem"]))
 
 
 def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: float = 0.1) -> dict:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import zlib
+from collections.abc import Mapping
 
 import cv2
 import numpy as np
@@ -29,8 +30,9 @@ def cv_text(text: str) -> str:
 def class_colour(name: str) -> tuple[int, int, int]:
     if name not in _CLASS_COLOURS:
         h = zlib.crc32(name.strip().encode("utf-8", "surrogatepass")) % 180
-        hsv = np.uint8([[[h, 200, 255]]])
-        _CLASS_COLOURS[name] = tuple(int(c) for c in cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0])
+        hsv = np.array([[[h, 200, 255]]], np.uint8)
+        b, g, r = (int(c) for c in cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0])
+        _CLASS_COLOURS[name] = (b, g, r)
     return _CLASS_COLOURS[name]
 
 
@@ -52,7 +54,7 @@ def draw_pitch(image: np.ndarray, camera: Camera, colour=PITCH_BGR, thickness: i
     return image
 
 
-def draw_annotation(image: np.ndarray, annotation: dict[str, np.ndarray], *, normalised: bool = True,
+def draw_annotation(image: np.ndarray, annotation: Mapping[str, np.ndarray], *, normalised: bool = True,
                     thickness: int = 1, radius: int = 3, labels: bool = False) -> np.ndarray:
     """Draw annotated classes (points joined in order). ``normalised`` points use the SoccerNet
     convention x_px = x (W - 1). In place."""

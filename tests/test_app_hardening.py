@@ -11,6 +11,7 @@ import urllib.request
 
 import numpy as np
 import pytest
+import viser
 
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app.modes import DragEvent, DragPhase, PointKind
@@ -269,7 +270,7 @@ def _handshake(port, path="/", host="127.0.0.1", **headers):
 
     try:
         with websockets.sync.client.connect(f"ws://{host}:{port}{path}", additional_headers=headers,
-                                            subprotocols=["viser-v1.1.1"], open_timeout=10, origin=None):
+                                            subprotocols=[f"viser-v{viser.__version__}"], open_timeout=10, origin=None):
             return 101
     except websockets.exceptions.InvalidStatus as e:
         return e.response.status_code
@@ -286,6 +287,25 @@ def test_loopback_server_refuses_foreign_origins_and_hosts(data, serve):
     assert _handshake(port, Origin="https://evil.example") == 403
     assert _handshake(port, Host=f"evil.example:{port}") == 403  # a second Host header
     assert _http(app.url, {"Host": f"evil.example:{port}"})[0] == 403  # DNS rebinding: the name is not ours
+
+
+def test_a_viser_that_binds_its_server_another_way_is_refused_not_served_unguarded(monkeypatch):
+    from pnlviz.app import guard
+
+    stopped = []
+
+    class OtherViser:  # binds its web server without the websockets function the guard wraps
+        def __init__(self, **kw):
+            pass
+
+        def stop(self):
+            stopped.append(True)
+
+    monkeypatch.setattr(guard.viser, "ViserServer", OtherViser)
+    port = free_port()
+    with pytest.raises(guard.UnguardedServerError, match="viser>=1.1.1,<1.2"):
+        guard.guarded_viser_server(guard.AccessPolicy("127.0.0.1", port=port), host="127.0.0.1", port=port)
+    assert stopped == [True]
 
 
 def test_a_non_loopback_server_needs_its_token(data, serve):

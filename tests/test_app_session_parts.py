@@ -29,8 +29,8 @@ from pnlviz.app.viewcontrol import ECHO_S, ViewControl
 
 # ---------------------------------------------------------------------- the queue
 def widget(value):
-    """A stand-in for a viser widget handle: a value and an id."""
-    return SimpleNamespace(value=value, _impl=SimpleNamespace(uuid=f"w{id(value)}-{time.perf_counter_ns()}"))
+    """A stand-in for a viser widget handle: a value (viser's events carry the handle itself)."""
+    return SimpleNamespace(value=value)
 
 
 def test_the_queue_runs_actions_in_the_order_they_came_and_survives_an_error():
@@ -54,7 +54,7 @@ def test_the_queue_drops_the_echoes_of_its_own_values_and_keeps_the_users():
     callback = queue.ordered(lambda event: got.append(event.target.value))
 
     def event(client):
-        return SimpleNamespace(target=SimpleNamespace(_impl=slider._impl, value=slider.value), client=client)
+        return SimpleNamespace(target=slider, client=client)
 
     queue.set_value(slider, 5)  # set from here: viser calls back later, with no client
     queue.set_value(slider, 5)  # unchanged: viser sends nothing, nothing to drop
@@ -402,8 +402,8 @@ def test_the_panel_texts():
 
 
 def test_the_modes_keep_the_texts_the_user_sees():
-    assert labels(Filter) == ("all", "failed", "unreviewed", "accepted", "corrected", "rejected")
-    assert labels(Sort) == ("index", "JaC@5 (worst first)", "residual (worst first)")
+    assert labels(Filter) == ("all", "failed", "unreviewed", "accepted", "corrected", "rejected", "suspects")
+    assert labels(Sort) == ("index", "JaC@5 (worst first)", "residual (worst first)", "suspect score (worst first)")
     assert labels(DragMode) == ("keypoints", "line points")
     assert {f.review for f in Filter} - {None} == set(REVIEW_STATES)
     assert Mode.IMAGE.other is Mode.THREE_D and Mode.THREE_D.other is Mode.IMAGE and Mode("3d") is Mode.THREE_D

@@ -164,7 +164,7 @@ def test_the_page_is_told_the_view_and_where_points_can_be_grabbed():
     assert "data-view" not in page_data(0, -1, False, None, (1000, 800), None, 0.0, np.zeros((0, 2)))
 
 
-def test_the_bridge_element_carries_the_script_and_a_clean_input_id():
+def test_the_bridge_element_carries_the_script_and_a_clean_field_label():
     html = bridge_html('abc-1"><script>', "image")
     assert 'data-input="abc-1script"' in html and "<script>" not in html and 'data-mode="image"' in html
     assert "onerror=\"eval(atob('" in html

@@ -422,7 +422,8 @@ def test_no_frames_is_an_error_for_every_command(tmp_path, capsys, layout):
                  ["eval", "--gt", str(d), "--pred", str(cams), "--no-progress"]):
         assert main(argv) == 1, argv
         assert one_line(capsys.readouterr().err, "no frames") == (
-            f"error: {d}: no frames (expected <stem>.jpg/.png/.json at the top level or inside one folder)")
+            f"error: {d}: no frames (expected <stem>.jpg/.png/.json at the top level, inside one folder, "
+            f"or in split folders or zips)")
 
 
 def test_eval_without_any_matching_camera_fails(tmp_path, capsys):

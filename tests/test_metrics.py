@@ -116,6 +116,18 @@ def test_point_to_polyline_distance_is_bit_identical_to_the_official_one():
 
 
 # ====================================================================== frame-level logic
+def test_frames_scored_without_a_stem_have_no_split():
+    """``evaluate_frame`` takes no stem by default: such frames sum up as they are, in no split
+    (by_split raised AttributeError on them)."""
+    from pnlviz.metrics.soccernet import Summary
+
+    cam = Camera.from_look_at([0, 60, -20], [-30, 0, 0], hfov_deg=50, width=960, height=540)
+    ann = {n: p[[0, -1]] / [959.0, 539.0] for n, p in visible_pitch(cam, evaluator_precision=True).items()}
+    frames = [evaluate_frame(cam, ann), evaluate_frame(cam, ann, stem="valid/00001")]
+    splits = Summary(frames[0].thresholds, frames).by_split()
+    assert list(splits) == ["valid"] and [f.stem for f in splits["valid"].frames] == ["valid/00001"]
+
+
 def test_frame_scores_follow_the_official_rules_on_a_synthetic_frame():
     cam = Camera.from_look_at([0, 60, -20], [-30, 0, 0], hfov_deg=50, width=960, height=540)
     projected = visible_pitch(cam, evaluator_precision=True)

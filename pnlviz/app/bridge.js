@@ -29,7 +29,7 @@
 //   closed dropdown goes to the window's hotkeys (viser's hotkeys ignore every <input>).
 //
 // The server talks to it through the attributes of elements of its own (#pnlviz-bridge:
-// data-input, the uuid of the text field it writes to; data-mode, "image" or "3d"; #pnlviz-view:
+// data-input, the label of the text field it writes to; data-mode, "image" or "3d"; #pnlviz-view:
 // the view, see pnlviz/app/pagesync.py), and it talks to the server by writing JSON into that text
 // field, which viser sends like a typed value. GUI values are throttled (the latest one wins), so
 // what it sends is cumulative: the total nudge so far, the last gesture (until it is answered),
@@ -94,7 +94,7 @@
   const field = () => {
     const cfg = config();
     if (!cfg || !cfg.input) return null;
-    const label = document.querySelector(`label[for="${cfg.input}"], label[data-viser-for="${cfg.input}"]`);
+    const label = [...document.querySelectorAll("label")].find((l) => l.textContent.trim() === cfg.input);
     let row = label;
     while (row && !row.querySelector("input")) row = row.parentElement;
     const input = row ? row.querySelector("input") : null;
@@ -520,7 +520,7 @@
       let row = label.parentElement;
       for (let up = 0; row && up < 2 && !row.querySelector(controls); up++) row = row.parentElement;
       const target = row ? row.querySelector(controls) : null;
-      label.setAttribute("data-viser-for", id); // what viser named it (the bridge finds its field so)
+      label.setAttribute("data-viser-for", id); // what viser named it
       if (!target) label.removeAttribute("for");
       else if (target.id) label.setAttribute("for", target.id); // it has an id of its own: point there
       else target.id = id;

@@ -33,10 +33,10 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         lines.append("reference camera (magenta): known for this frame")
     if res is None:
         return "\n\n".join(lines or ["nothing to calibrate from yet: place four keypoints (shift+click)"])
-    if not res.ok:
+    cam = res.camera
+    if cam is None:  # not res.ok
         lines.append(f"**not calibrated**: {res.failure}")
         return "\n\n".join(lines)
-    cam = res.camera
     pan, tilt, roll = cam.pan_tilt_roll_deg
     errs = np.array([v for v in res.point_residuals.values() if np.isfinite(v)])
     line_errs = np.array(list(res.line_residuals.values()))
@@ -140,10 +140,11 @@ def selected_text(selected: Selection | None, overlay: Overlay | None, model, pl
     key = selected.key
     if selected.kind is PointKind.LINE_POINTS:
         m = overlay.line_points
-        text = f"**{key[0]}**, point {key[1]}"
+        name, index = selected.line_point
+        text = f"**{name}**, point {index}"
     else:
         m = overlay.keypoints if selected.kind is PointKind.KEYPOINTS else overlay.ghosts
-        text = f"**{key}** {keypoint_name(model, key)}"
+        text = f"**{key}** {keypoint_name(model, selected.kid)}"
         if selected.kind is PointKind.GHOSTS:
             text += " · not observed: drag it where it is"
         elif key in overlay.residuals:

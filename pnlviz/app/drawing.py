@@ -28,7 +28,7 @@ class Painter:
     drawn last, ``overlay`` its overlays, ``drawn`` how many times the tab was drawn; ``layers``
     and ``opacity`` how the overlays are drawn."""
 
-    def __init__(self, tab):
+    def __init__(self, tab) -> None:
         self.tab = tab
         self.layers = Layers()
         self.opacity = 1.0
@@ -142,7 +142,7 @@ class Painter:
     def show_panel(self, view: FrameView) -> None:
         tab, p = self.tab, self.tab.panels
         st, frames = tab.state, tab.frames
-        flt, n = frames.filter.value, len(frames.order)
+        flt, n = frames.filter_label(), len(frames.order)
         position = frames.position() + 1 if frames.index in frames.order else 0
         key = sort_key_text(frames.sort, st.triage.lookup(view.stem, tab.settings))
         update_changed(p.title, content=cards.title_text(view, position, n, frames.outside_filter, flt, key))

@@ -83,7 +83,7 @@ class Editor:
     """The edits of one tab (``tab``: its :class:`pnlviz.app.session.Session`, for the frame
     shown, the settings, the queue and the drawing)."""
 
-    def __init__(self, tab):
+    def __init__(self, tab) -> None:
         self.tab = tab
         self.trail = EditTrail(tab.state, tab.guard)
         self.selected: Selection | None = None
@@ -102,7 +102,7 @@ class Editor:
         placing."""
         self.selected = selected
         if selected is not None and selected.is_keypoint:
-            self.choose_id(int(selected.key))
+            self.choose_id(selected.kid)
         self.tab.workspace.select(selected)
         self.tab.painter.show_selected()
 
@@ -127,7 +127,9 @@ class Editor:
     def set_place_id(self, value) -> None:
         """A choice in the picker ("45 · penalty mark left")."""
         panels = self.tab.panels
-        self.place_id = choice_id(panels.choice(panels.kp_id, panels.kp_choices, panels.choice_of(self.place_id)))
+        kid = choice_id(panels.choice(panels.kp_id, panels.kp_choices, panels.choice_of(self.place_id)))
+        assert kid is not None  # every option starts with its id
+        self.place_id = kid
         panels.kp_map.image = panels.map_of(self.place_id)
         self.tab.painter.show_selected()
 
@@ -185,9 +187,23 @@ class Editor:
         if self.selected is None or self.selected.kind is not PointKind.KEYPOINTS:
             self.tab.notify("nothing to hide", "select a keypoint first (click it)", error=False)
             return
-        stem, kid = self.tab.stem, int(self.selected.key)
+        stem, kid = self.tab.stem, self.selected.kid
         self.selected = None
         self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid, self.tab.settings))
+
+    def apply_fix(self) -> None:
+        """The suggested fix of the frame's worst finding (the label-error finder's: a class
+        renamed, stray points dropped, points moved onto their marking, a marking added), applied
+        as an edit of the annotation (Ctrl+Z takes it back)."""
+        from pnlviz.app.triage import fix_frame
+
+        stem, found = self.tab.stem, []
+        self.trail.act(stem, lambda: found.append(fix_frame(self.tab.state, stem, self.tab.settings)))
+        if found and found[0] is not None:
+            self.tab.notify("fix applied", f"{found[0].message} -> {found[0].fix['op']} (Ctrl+Z takes it back)",
+                            error=False)
+        else:
+            self.tab.notify("nothing to fix", "the label-error finder suggests no fix for this frame", error=False)
 
     def place(self, stem: str, uv) -> None:
         """Put the chosen keypoint id at pixel ``uv`` of ``stem`` (shift+click)."""
@@ -219,15 +235,15 @@ class Editor:
 
         def edit() -> None:
             if point.kind is PointKind.LINE_POINTS:
-                state.move_line_point(stem, point.key[0], point.key[1], *uv, settings=settings)
+                state.move_line_point(stem, *point.line_point, *uv, settings=settings)
             else:
-                state.move_keypoint(stem, int(point.key), *uv, settings=settings, merge=merge)
+                state.move_keypoint(stem, point.kid, *uv, settings=settings, merge=merge)
             state.view(stem, settings)  # recalibrate now, to time it
             self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
 
         self.trail.act(stem, edit)
         if point.kind is PointKind.GHOSTS and stem == self.tab.stem:
-            self.select(Selection(PointKind.KEYPOINTS, int(point.key)))
+            self.select(Selection(PointKind.KEYPOINTS, point.kid))
 
     def undo(self) -> None:
         """Take back this tab's last change (going back to its frame), else the frame's last one."""
@@ -257,7 +273,7 @@ class Editor:
         """A click beside the points: the nearest point within reach is selected, else nothing."""
         view2d = self.tab.view_control.view2d
         best, best_d = None, CLICK_REACH_PX / (view2d.zoom if view2d else 1.0)
-        kinds = (PointKind.KEYPOINTS, PointKind.GHOSTS)
+        kinds: tuple[PointKind, ...] = (PointKind.KEYPOINTS, PointKind.GHOSTS)
         kinds += (PointKind.LINE_POINTS,) if self.drag_mode is DragMode.LINE_POINTS else ()
         for kind in kinds:
             nodes = self.tab.workspace.points[kind]
@@ -312,7 +328,7 @@ class Editor:
         if drag.point.kind is not PointKind.KEYPOINTS or drag.stem != self.tab.stem:
             return  # a ghost becomes a keypoint (and a line point changes no keypoint) on release
         try:
-            view = self.tab.state.preview(drag.stem, self.tab.settings, int(drag.point.key), *drag.uv)
+            view = self.tab.state.preview(drag.stem, self.tab.settings, drag.point.kid, *drag.uv)
         except EditError:
             return
         if self.dragging is drag:  # still dragging: show the frame as it would be

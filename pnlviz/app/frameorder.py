@@ -11,12 +11,15 @@ import numpy as np
 
 from pnlviz.app.modes import Filter, Sort
 from pnlviz.app.triage import FrameSummary
+from pnlviz.data.layout import split_stem
 
 
 def matches(flt: Filter, summary: FrameSummary | None, review: str | None) -> bool:
     """Whether a frame with this summary (None: not calibrated yet) and review status is in ``flt``."""
     if flt is Filter.FAILED:
         return summary is not None and not summary.ok
+    if flt is Filter.SUSPECTS:
+        return summary is not None and summary.suspect is not None and summary.suspect >= 1.0
     if flt is Filter.UNREVIEWED:
         return review is None
     if flt.review is not None:
@@ -42,6 +45,10 @@ def sort_key(sort: Sort, summary: FrameSummary | None) -> float:
         return summary.jac5 if summary.ok and summary.jac5 is not None else -1.0
     if sort is Sort.RESIDUAL:
         return -worst_residual(summary)
+    if sort is Sort.SUSPECT:  # most suspect first; not judged (another source) after, not calibrated yet last
+        if summary is None:
+            return 1.0
+        return -summary.suspect if summary.suspect is not None else 0.5
     return 0.0
 
 
@@ -55,14 +62,20 @@ def sort_key_text(sort: Sort, summary: FrameSummary | None) -> str | None:
         return f"{sort.value}: no camera"
     if sort is Sort.JAC5:
         return f"JaC@5 {summary.jac5:.3f}" if summary.jac5 is not None else "JaC@5: no annotation to score against"
+    if sort is Sort.SUSPECT:
+        if summary.suspect is None:
+            return "suspect score: not judged (calibrated from detections, no annotation, or edited since)"
+        return f"suspect score {summary.suspect:.2f}" + (f": {summary.suspect_note}" if summary.suspect_note else "")
     return f"worst residual {summary.worst:,.1f} px"
 
 
 def visible_order(stems: Sequence[str], summaries: Mapping[str, FrameSummary], review: Callable[[str], str | None],
-                  flt: Filter, sort: Sort) -> list[int]:
-    """Dataset indices of the frames in ``flt``, in ``sort``'s order. ``summaries``: the frames'
-    summaries known so far, by stem; ``review(stem)``: a frame's review status."""
-    idx = [i for i, stem in enumerate(stems) if matches(flt, summaries.get(stem), review(stem))]
+                  flt: Filter, sort: Sort, split: str = "") -> list[int]:
+    """Dataset indices of the frames in ``flt`` (and in ``split``, of a dataset in splits; ``""``:
+    every split), in ``sort``'s order. ``summaries``: the frames' summaries known so far, by stem;
+    ``review(stem)``: a frame's review status."""
+    idx = [i for i, stem in enumerate(stems) if (not split or split_stem(stem)[0] == split)
+           and matches(flt, summaries.get(stem), review(stem))]
     if sort is not Sort.INDEX:
         idx.sort(key=lambda i: sort_key(sort, summaries.get(stems[i])))
     return idx
@@ -77,8 +90,15 @@ class FrameOrder:
         self.n_frames = n_frames
         self.index = index
         self.filter, self.sort = Filter.ALL, Sort.INDEX
+        self.split = ""  # a dataset in splits: the one split stepped through ("": all)
         self.order = list(range(n_frames))
         self.outside_filter = False
+
+    def filter_label(self) -> str:
+        """The filter as the panel names it (``"unreviewed"``, ``"split valid"``, ``"unreviewed in valid"``)."""
+        if not self.split:
+            return self.filter.value
+        return f"split {self.split}" if self.filter is Filter.ALL else f"{self.filter.value} in {self.split}"
 
     def position(self) -> int:
         """Where the frame is in the order, from 0 (0 when it is not in it)."""

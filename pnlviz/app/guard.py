@@ -10,8 +10,10 @@ another site (or another local port) could read the app's state and change label
 * **Token** (required when the app listens beyond loopback): ``?token=...`` in the URL the server
   prints; the page load then sets an HttpOnly cookie that the websocket handshake carries.
 
-viser 1.1.1 has no hook for this, so :func:`guarded_viser_server` hands viser's websocket server
-a ``process_request`` that runs these checks before viser's own (static files and the upgrade).
+viser (1.1) has no hook for this, so :func:`guarded_viser_server` hands viser's websocket server
+a ``process_request`` that runs these checks before viser's own (static files and the upgrade),
+through the public ``websockets`` function viser binds it with. It checks that it did: a viser that
+binds its server another way is refused with a clear error, never served unguarded.
 """
 
 from __future__ import annotations
@@ -115,7 +117,7 @@ class AccessPolicy:
 
     def token_in_query(self, path: str) -> bool:
         given = parse_qs(urlsplit(path).query).get("token", [""])[0]
-        return bool(self.token) and hmac.compare_digest(given.encode(), self.token.encode())
+        return bool(self.token) and hmac.compare_digest(given.encode(), (self.token or "").encode())
 
     def _has_token(self, headers, path: str) -> bool:
         if self.token_in_query(path):
@@ -123,7 +125,7 @@ class AccessPolicy:
         for cookie in headers.get_all("Cookie"):
             for part in cookie.split(";"):
                 name, _, value = part.strip().partition("=")
-                if name == COOKIE and hmac.compare_digest(value.encode(), self.token.encode()):
+                if name == COOKIE and hmac.compare_digest(value.encode(), (self.token or "").encode()):
                     return True
         return False
 
@@ -150,13 +152,25 @@ def guarded_viser_server(policy: AccessPolicy, **kw) -> viser.ViserServer:
     banner viser prints meanwhile is dropped: the caller prints the URLs to open (with the token).
     """
     real = websockets.asyncio.server.serve
+    guarded = threading.Event()
 
     def serve(handler, host=None, port=None, *, process_request=None, **options):
+        guarded.set()
         return real(handler, host, port, process_request=policy.process_request(process_request), **options)
 
     with _SERVE_PATCH, contextlib.redirect_stdout(io.StringIO()):  # viser's banner shows URLs without the token
-        websockets.asyncio.server.serve = serve
+        setattr(websockets.asyncio.server, "serve", serve)  # a function where websockets has a class
         try:
-            return viser.ViserServer(**kw)
+            server = viser.ViserServer(**kw)
         finally:
-            websockets.asyncio.server.serve = real
+            setattr(websockets.asyncio.server, "serve", real)
+    if not guarded.is_set():
+        server.stop()
+        raise UnguardedServerError(
+            f"viser {getattr(viser, '__version__', '?')} started its web server without the access checks: "
+            f"pnlviz needs viser>=1.1.1,<1.2 (pip install 'viser>=1.1.1,<1.2')")
+    return server
+
+
+class UnguardedServerError(RuntimeError):
+    """The installed viser binds its web server in a way the access checks cannot reach."""

@@ -32,6 +32,7 @@ class Filter(enum.Enum):
     ACCEPTED = "accepted"
     CORRECTED = "corrected"
     REJECTED = "rejected"
+    SUSPECTS = "suspects"  # an annotation the label-error finder flags (pnlviz.calib.qa: score >= 1)
 
     @property
     def review(self) -> str | None:
@@ -45,6 +46,7 @@ class Sort(enum.Enum):
     INDEX = "index"
     JAC5 = "JaC@5 (worst first)"
     RESIDUAL = "residual (worst first)"
+    SUSPECT = "suspect score (worst first)"
 
 
 class DragMode(enum.Enum):
@@ -71,12 +73,28 @@ class DragPhase(enum.Enum):
     END = "end"
 
 
+#: what a point is: a keypoint (or ghost) id, or a line point's (class name, index)
+PointKey = int | tuple[str, int]
+
+
 @dataclass(frozen=True)
 class Selection:
     """A selected point: a keypoint or ghost id, or for a line point (class name, index)."""
 
     kind: PointKind
-    key: object
+    key: PointKey
+
+    @property
+    def kid(self) -> int:
+        """The id of a keypoint or ghost."""
+        assert not isinstance(self.key, tuple), "a line point has no keypoint id"
+        return int(self.key)
+
+    @property
+    def line_point(self) -> tuple[str, int]:
+        """(class name, index) of a line point."""
+        assert isinstance(self.key, tuple), "a keypoint is not a line point"
+        return self.key
 
     @property
     def is_keypoint(self) -> bool:
@@ -89,7 +107,7 @@ class DragEvent:
     """A point dragged: which one, the phase, and the image pixel it is dragged to."""
 
     kind: PointKind
-    key: object
+    key: PointKey
     phase: DragPhase
     uv: np.ndarray
 

@@ -10,6 +10,7 @@ the same on the pixels, for pictures and for the 3D view's frustum.
 
 from __future__ import annotations
 
+from collections.abc import Set
 from dataclasses import dataclass, field
 
 import cv2
@@ -153,12 +154,12 @@ def _ghosts(view: FrameView, model: FieldModel, hidden: set[int]) -> Markers:
     with np.errstate(invalid="ignore"):
         inside = (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
     keep = [i for i in range(len(ids)) if inside[i]]
-    return Markers([ids[i] for i in keep], uv[keep].reshape(-1, 2), np.tile(np.uint8(GHOST_RGB), (len(keep), 1)),
-                   [str(ids[i]) for i in keep])
+    return Markers([ids[i] for i in keep], uv[keep].reshape(-1, 2),
+                   np.tile(np.array(GHOST_RGB, np.uint8), (len(keep), 1)), [str(ids[i]) for i in keep])
 
 
 def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldModel | None = None,
-                     hidden: set[int] = frozenset()) -> Overlay:
+                     hidden: Set[int] = frozenset()) -> Overlay:
     """The overlays of ``view`` that ``layers`` asks for. ``hidden``: keypoint ids marked not
     visible (no ghost is offered for them)."""
     model = model or load_field_model()
@@ -173,7 +174,8 @@ def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldMod
         if layers.refined_pitch:
             seg["refined_pitch"] = _pitch(res.camera, W, H, model, REFINED_RGB)
             pitch = seg["refined_pitch"]
-            seg["refined_pitch_casing"] = Segments(pitch.points, np.tile(np.uint8(CASING_RGB), (len(pitch), 1)))
+            casing = np.tile(np.array(CASING_RGB, np.uint8), (len(pitch), 1))
+            seg["refined_pitch_casing"] = Segments(pitch.points, casing)
     line_points = Markers()
     if view.annotation:
         names = list(view.annotation)
@@ -192,15 +194,16 @@ def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldMod
     markers, residuals = Markers(), {}
     if obs is not None and obs.n_keypoints:
         ids = [int(k) for k in obs.kp_ids]
-        colours = np.array([SET_RGB.get(str(s), (255, 255, 255)) for s in obs.kp_sets], np.uint8)
-        markers = Markers(ids, obs.kp_xy.copy(), colours, [str(k) for k in ids])
-        if res is not None and res.ok:
-            proj, _ = res.camera.project(obs.kp_xyz)
+        kp_colours = np.array([SET_RGB.get(str(s), (255, 255, 255)) for s in obs.kp_sets], np.uint8)
+        markers = Markers(ids, obs.kp_xy.copy(), kp_colours, [str(k) for k in ids])
+        camera = res.camera if res is not None else None  # None unless res.ok
+        if camera is not None:
+            proj, _ = camera.project(obs.kp_xyz)
             good = np.all(np.isfinite(proj), axis=1)
             residuals = {k: float(np.hypot(*(proj[i] - obs.kp_xy[i]))) for i, k in enumerate(ids) if good[i]}
             if layers.residuals and good.any():
                 seg["residuals"] = Segments(np.stack([obs.kp_xy[good], proj[good]], axis=1),
-                                            np.tile(np.uint8(RESIDUAL_RGB), (int(good.sum()), 1)))
+                                            np.tile(np.array(RESIDUAL_RGB, np.uint8), (int(good.sum()), 1)))
     ghosts = _ghosts(view, model, set(hidden)) if layers.ghosts else Markers()
     pinned = [int(k) for k in obs.kp_ids[obs.pins]] if obs is not None else []
     flagged = dict(res.flagged) if res is not None and res.ok else {}
@@ -215,11 +218,12 @@ def render(view: FrameView, image: np.ndarray | None, layers: Layers = Layers(),
     res = view.result
     if layers.reference_pitch and view.reference_camera is not None:
         draw_pitch(img, view.reference_camera, colour=REFERENCE_RGB[::-1], thickness=1)
-    if res is not None and res.ok:
+    camera = res.camera if res is not None else None  # None unless res.ok
+    if res is not None and camera is not None:
         if layers.initial_pitch and res.initial_camera is not None:
             draw_pitch(img, res.initial_camera, colour=INITIAL_RGB[::-1], thickness=1)
         if layers.refined_pitch:
-            draw_pitch(img, res.camera, colour=REFINED_RGB[::-1], thickness=2)
+            draw_pitch(img, camera, colour=REFINED_RGB[::-1], thickness=2)
     if layers.annotation and view.annotation:
         draw_annotation(img, view.annotation, thickness=1, radius=2)
     geom = overlay_geometry(view, Layers(annotation=False, initial_pitch=False, refined_pitch=False,
@@ -240,7 +244,7 @@ def render(view: FrameView, image: np.ndarray | None, layers: Layers = Layers(),
                 cv2.putText(img, label, (c[0] + 6, c[1] - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
                             tuple(int(v) for v in col[::-1]), 1, cv2.LINE_AA)
     if view.error or (res is not None and not res.ok):
-        caption(img, f"{view.stem}: {view.error or res.failure}")
+        caption(img, f"{view.stem}: {view.error or (res.failure if res is not None else '')}")
     if W > max_width:
         img = cv2.resize(img, (max_width, int(round(H * max_width / W))), interpolation=cv2.INTER_AREA)
     return img[:, :, ::-1].copy()

@@ -6,10 +6,12 @@ order the browser sent them, and every value is checked by the action it reaches
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 
-from pnlviz.app.bridge import bridge_html
+from pnlviz.app.bridge import BRIDGE_FIELD, bridge_html
 from pnlviz.app.modes import DragMode, Filter, Mode, Sort, labels
 from pnlviz.app.overlay import LEGEND, SET_RGB
 from pnlviz.viz import keypoint_map
@@ -104,8 +106,8 @@ class Panels:
             gui.add_markdown(help_markdown())
         self.background = gui.add_markdown("")
         # the pointer bridge: a text field it writes to (hidden by the bridge) and its loader
-        self.bridge_field = gui.add_text("pointer", initial_value="")
-        self.bridge = gui.add_html(bridge_html(self.bridge_field._impl.uuid, Mode.IMAGE))
+        self.bridge_field = gui.add_text(BRIDGE_FIELD, initial_value="")
+        self.bridge = gui.add_html(bridge_html(BRIDGE_FIELD, Mode.IMAGE))
         self._bind()
 
     def _frame_folder(self, gui) -> None:
@@ -114,6 +116,8 @@ class Panels:
             self.nav = gui.add_button_group("navigate", ("previous", "next"))
             self.jump = gui.add_text("jump to stem", initial_value="")
             self.filter = gui.add_dropdown("filter", labels(Filter), initial_value=Filter.ALL.value)
+            splits = self.session.state.ds.splits  # a dataset in split folders or zips
+            self.split = gui.add_dropdown("split", ("all", *splits), initial_value="all") if splits else None
             self.sort = gui.add_dropdown("sort", labels(Sort), initial_value=Sort.INDEX.value)
             self.filter_text = gui.add_markdown("")
 
@@ -183,7 +187,7 @@ class Panels:
             self.source = gui.add_dropdown("keypoint source", sources, initial_value=settings.source)
 
     def set_mode(self, mode: Mode) -> None:
-        self.bridge.content = bridge_html(self.bridge_field._impl.uuid, mode)
+        self.bridge.content = bridge_html(BRIDGE_FIELD, mode)
 
     # ------------------------------------------------------------------ bindings
     def _bind(self) -> None:
@@ -195,6 +199,9 @@ class Panels:
         self.jump.on_update(on(lambda _: s.jump(self.jump.value)))
         self.filter.on_update(on(lambda _: s.set_filter(self.filter.value)))
         self.sort.on_update(on(lambda _: s.set_sort(self.sort.value)))
+        if self.split is not None:
+            split = self.split
+            split.on_update(on(lambda _: s.set_split(split.value)))
         self.review.on_click(on(lambda e: edit.review(str(e.target.value).split(" (")[0], advance=self.advance.value)))
         self.kp_id.on_update(on(lambda _: edit.set_place_id(self.kp_id.value)))
         self.points.on_update(on(lambda _: edit.select_listed(self.points.value)))
@@ -212,7 +219,7 @@ class Panels:
         self.alpha.on_update(on(lambda _: s.set_alpha(self.alpha.value)))
         self.source.on_update(on(lambda _: s.set_source(self.source.value)))
         self.bridge_field.on_update(on(lambda _: view.bridge_message(self.bridge_field.value)))
-        if self.clip_slider is not None:
+        if self.clip_slider is not None and self.clip_buttons is not None:  # made together
             clip = s.clip
             self.clip_slider.on_update(on(lambda _: clip.slider_moved(self.clip_slider.value)))
             actions = {"play": clip.play, "pause": clip.pause, "worst": lambda: clip.jump_worst(restart=True),
@@ -226,12 +233,14 @@ class Panels:
     def _bind_keys(self) -> None:
         s, gui = self.session, self.session.gui
         edit, view = s.editor, s.view_control
+        keys: tuple[tuple[str, str, str | None, Callable[[], object]], ...]
         keys = (("next frame", "N", None, lambda: s.step(1)),
                 ("previous frame", "P", None, lambda: s.step(-1)),
                 ("review: accepted, next", "G", None, lambda: edit.review("accepted", advance=self.advance.value)),
                 ("review: corrected, next", "C", None, lambda: edit.review("corrected", advance=self.advance.value)),
                 ("review: rejected, next", "R", None, lambda: edit.review("rejected", advance=self.advance.value)),
                 ("hide the flagged points of the frame reviewed last", "H", None, edit.hide_flagged),
+                ("apply the label-error finder's fix (suspects)", "F", None, edit.apply_fix),
                 ("undo", "Z", "cmd/ctrl", edit.undo),
                 ("redo", "Z", "cmd/ctrl+shift", edit.redo),
                 ("image view / 3D view", "V", None, s.toggle_mode),

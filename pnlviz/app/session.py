@@ -38,7 +38,7 @@ class Session:
     """The panel and scene nodes of one tab (``gui``/``scene`` of its viser client), or of the
     server itself when ``client`` is None (a session without a browser, for scripts and tests)."""
 
-    def __init__(self, app, gui, scene, client=None):
+    def __init__(self, app, gui, scene, client=None) -> None:
         self.app, self.state = app, app.state
         self.gui, self.scene, self.client = gui, scene, client
         st = self.state
@@ -144,6 +144,12 @@ class Session:
         self.frames.filter = Filter(self.panels.choice(self.panels.filter, labels(Filter), Filter.ALL.value))
         self.refresh_order()
 
+    def set_split(self, value) -> None:
+        """A dataset in splits: step through one split ("all": every split)."""
+        splits = self.state.ds.splits
+        self.frames.split = value if value in splits else ""
+        self.refresh_order()
+
     def set_sort(self, value) -> None:
         self.frames.sort = Sort(self.panels.choice(self.panels.sort, labels(Sort), Sort.INDEX.value))
         self.refresh_order(first=self.frames.sort is not Sort.INDEX)
@@ -151,7 +157,8 @@ class Session:
     def _visible_order(self) -> list[int]:
         st = self.state
         summaries = st.triage.summaries(self.settings)
-        return visible_order(st.stems, summaries, st.edits.review, self.frames.filter, self.frames.sort)
+        return visible_order(st.stems, summaries, st.edits.review, self.frames.filter, self.frames.sort,
+                             self.frames.split)
 
     def refresh_order(self, first: bool = False) -> None:
         """The frames of the filter, in the chosen order; the tab stays on its frame if it is one
@@ -160,7 +167,7 @@ class Session:
         with self.lock:
             index = self.frames.refreshed(self._visible_order(), first)
             if self.frames.outside_filter:
-                self.notify("no match", f"no frame matches the filter '{self.frames.filter.value}'", error=False)
+                self.notify("no match", f"no frame matches the filter '{self.frames.filter_label()}'", error=False)
             self.goto(index)
 
     def advance_from(self, stem: str) -> None:
@@ -168,7 +175,7 @@ class Session:
         with self.lock:
             index, ended = self.frames.after(self.state.index_of(stem), self._visible_order())
             if ended:
-                self.notify("end of the filter", f"{stem} was the last frame of '{self.frames.filter.value}'",
+                self.notify("end of the filter", f"{stem} was the last frame of '{self.frames.filter_label()}'",
                             error=False)
             self.goto(index)
 

@@ -89,7 +89,9 @@ class AppState:
         self.detector = detector
         if detector is not None and self.reader.predictions is None:
             self.reader.predictions = {}
-        self.ds, self.edits, self.size = self.reader.ds, self.reader.edits, size
+        edits_store = self.reader.edits
+        assert edits_store is not None  # FrameReader.open always opens the edits folder
+        self.ds, self.edits, self.size = self.reader.ds, edits_store, size
         self.stems = self.reader.stems
         #: every frame's calibration summary and the background pass (the detector's results
         #: are kept on disk beside them)
@@ -228,7 +230,7 @@ class AppState:
                 self._cache[key] = view
                 while len(self._cache) > VIEW_CACHE:
                     self._cache.pop(next(iter(self._cache)))
-        self.triage.note(view)
+        self.triage.note(view, judge=not keep)  # the background pass's views are judged, not each edit's
         return view
 
     def cached_view(self, stem: str, settings: Settings | None = None) -> FrameView | None:

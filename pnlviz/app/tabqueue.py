@@ -28,7 +28,9 @@ class TabQueue:
     def __init__(self, notify: Callable[..., None], loop: Callable[[], asyncio.AbstractEventLoop] | None = None):
         self.notify, self._loop = notify, loop
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pnlviz-tab")
-        self._own_sets: dict[str, int] = {}  # widget -> values set by this tab whose callbacks are to come
+        # id(widget) -> values set by this tab whose callbacks are to come (viser's event carries the
+        # widget's handle itself as its target; the panel keeps its handles for the tab's life)
+        self._own_sets: dict[int, int] = {}
         self._own_lock = threading.Lock()
         self.closed = False
 
@@ -38,11 +40,11 @@ class TabQueue:
         taken for the user's."""
 
         async def queued(event) -> None:
-            impl = getattr(getattr(event, "target", None), "_impl", None)
-            if getattr(event, "client", True) is None and impl is not None:
+            target = getattr(event, "target", None)
+            if getattr(event, "client", True) is None and target is not None:
                 with self._own_lock:
-                    if self._own_sets.get(impl.uuid):
-                        self._own_sets[impl.uuid] -= 1
+                    if self._own_sets.get(id(target)):
+                        self._own_sets[id(target)] -= 1
                         return
             self.enqueue(lambda: fn(event))
 
@@ -55,7 +57,7 @@ class TabQueue:
         if handle.value == value:
             return  # viser does nothing either
         with self._own_lock:
-            self._own_sets[handle._impl.uuid] = self._own_sets.get(handle._impl.uuid, 0) + 1
+            self._own_sets[id(handle)] = self._own_sets.get(id(handle), 0) + 1
         handle.value = value
 
     def enqueue(self, action: Callable[[], object]) -> None:

@@ -20,7 +20,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +44,8 @@ class FrameSummary:
     median: float
     jac5: float | None
     token: str
+    suspect: float | None = None  #: the label-error finder's score (pnlviz.calib.qa; None: not judged)
+    suspect_note: str | None = None  #: its worst finding, in words
 
     @property
     def error(self) -> float:
@@ -63,14 +65,49 @@ def same_inputs(token: str, other: str) -> bool:
     return token.rsplit("|", 1)[0] == other.rsplit("|", 1)[0]
 
 
-def summarize(view, token: str) -> FrameSummary:
-    """A frame's view (:class:`pnlviz.pipeline.view.FrameView`) as a summary."""
+def summarize(view, token: str, judge: bool = False) -> FrameSummary:
+    """A frame's view (:class:`pnlviz.pipeline.view.FrameView`) as a summary; with ``judge``, its
+    annotation judged by the label-error finder too (:func:`suspect_score`)."""
     result = view.result
     ok = result is not None and result.ok
     r = list(result.point_residuals.values()) + list(result.line_residuals.values()) if ok else []
     failure = None if ok else (view.error or (result.failure if result is not None else "nothing to calibrate from"))
+    suspect, note = suspect_score(view) if judge else (None, None)
     return FrameSummary(view.stem, ok, failure, float(max(r)) if r else 0.0, float(np.median(r)) if r else 0.0,
-                        view.jac.get(5) if ok else None, token)
+                        view.jac.get(5) if ok else None, token, suspect, note)
+
+
+def fix_frame(state, stem: str, settings=None):
+    """Apply the suggested fix of the frame's worst finding that has one (the label-error
+    finder's, on the frame as the tab shows it) as an ordinary annotation edit, undoable like
+    any other: the finding, or None when there is nothing to fix (a frame calibrated from
+    anything but its annotation is not judged)."""
+    from pnlviz.calib.frame import FrameCalibration
+    from pnlviz.calib.qa import apply_fix, check_frame
+
+    view = state.view(stem, settings)
+    if not view.annotation or view.origin != "annotation" or view.result is None:
+        return None
+    qa = check_frame(view.annotation, view.size, calibration=FrameCalibration(view.observations, view.origin, None,
+                                                                              view.result))
+    finding = next((f for f in qa.findings if f.fix is not None), None)
+    if finding is not None:
+        state.set_annotation(stem, apply_fix(view.annotation, finding.fix))
+    return finding
+
+
+def suspect_score(view) -> tuple[float | None, str | None]:
+    """The label-error finder's score of a frame calibrated from its annotation alone, and its
+    worst finding in words (:func:`pnlviz.calib.qa.check_frame`, reusing the view's calibration);
+    (None, None) for a frame calibrated from anything else, or without an annotation."""
+    from pnlviz.calib.frame import FrameCalibration
+    from pnlviz.calib.qa import check_frame
+
+    if not view.annotation or view.origin != "annotation" or view.result is None:
+        return None, None
+    fc = FrameCalibration(view.observations, view.origin, None, view.result)
+    qa = check_frame(view.annotation, view.size, calibration=fc)
+    return round(qa.score, 3), (qa.findings[0].message if qa.findings else None)
 
 
 class _JsonLines:
@@ -118,6 +155,7 @@ class _JsonLines:
         return offset, len(data)
 
     def read(self, offset: int, length: int) -> dict:
+        assert self.path is not None  # offsets come from append, which writes only to a file
         with self._lock, open(self.path, "rb") as f:
             f.seek(offset)
             return json.loads(f.read(length))
@@ -259,7 +297,8 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
                 progress.detected += 1
             except Exception:  # noqa: BLE001 - a frame the detector fails on is calibrated without
                 pass
-        summary = triage.store.get(stem) if triage.up_to_date(stem) else triage.calibrate(stem)
+        stored = triage.store.get(stem) if triage.up_to_date(stem) else None  # up to date: stored
+        summary = stored if stored is not None else triage.calibrate(stem)
         progress.done += 1
         progress.failed += not summary.ok
         if i % every == 0 or i == len(state.stems) - 1:
@@ -293,11 +332,16 @@ class Triage:
         return summary_token(settings or self.state.default_settings, self.state.edits.digest(stem),
                              self.has_detections(stem))
 
-    def note(self, view) -> FrameSummary | None:
-        """Keep the summary of a view just computed under the default settings."""
+    def note(self, view, judge: bool = False) -> FrameSummary | None:
+        """Keep the summary of a view just computed under the default settings; ``judge``: with
+        the label-error finder's score (the background pass; not after each edit, which must stay
+        quick)."""
         if view.settings != self.state.default_settings:
             return None
-        summary = summarize(view, self.token(view.stem))
+        summary = summarize(view, self.token(view.stem), judge=judge)
+        old = None if judge else self.store.get(view.stem)
+        if old is not None and old.token == summary.token and old.suspect is not None:  # same inputs: same verdict
+            summary = replace(summary, suspect=old.suspect, suspect_note=old.suspect_note)
         self.store.put(summary)
         return summary
 
@@ -332,9 +376,11 @@ class Triage:
 
     def calibrate(self, stem: str) -> FrameSummary:
         """The frame calibrated under the default settings, its summary kept (the view is not)."""
-        view = self.state.view(stem, keep=False)
-        return self.note(view) or summarize(view, self.token(stem))
+        view = self.state.view(stem, keep=False)  # noted there, judged (a view not kept: the pass's)
+        stored = self.store.get(stem)
+        return stored if stored is not None and stored.token == self.token(stem) else \
+            summarize(view, self.token(stem), judge=True)
 
 
 __all__ = ["DetectionCache", "FrameSummary", "PassProgress", "SummaryStore", "Triage", "cache_paths", "run_pass",
-           "same_inputs", "summarize", "summary_token"]
+           "fix_frame", "same_inputs", "summarize", "summary_token", "suspect_score"]

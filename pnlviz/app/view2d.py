@@ -166,6 +166,12 @@ class View2D:
         return cls(fu * plane.W - 0.5, fv * plane.H - 0.5, fz * View2D.fit(plane, canvas).zoom)
 
 
+def placed(plane: ImagePlane | None) -> ImagePlane:
+    """The plane a frame is shown on, once one is (what is drawn over a frame comes after it)."""
+    assert plane is not None, "no frame shown yet"
+    return plane
+
+
 def declutter(screen_xy, min_gap: float) -> np.ndarray:
     """Which labels to show so that none is closer than ``min_gap`` to one shown before it
     (greedy, in the order given: put the important ones first). Bool mask."""

@@ -76,6 +76,7 @@ class ViewControl:
         if phase is not DragPhase.END:
             return
         base, self._pan_from = self._pan_from, None
+        assert base is not None  # in the image view, set at the press or here
         d = (np.asarray(now, float) - np.asarray(start, float)) * self.canvas
         self.push(base.panned(d[0] / base.zoom, d[1] / base.zoom))
 
@@ -90,15 +91,17 @@ class ViewControl:
                 self.on_push(g.k, False)
             return
         v, canvas = self.view2d, np.asarray(self.canvas, float)
+        assert v is not None  # in the image view
         centre = np.array([v.cu, v.cv]) + ((1.0 - g.s) * canvas / 2 - np.asarray(g.t)) / (g.s * v.zoom)
         self.push(View2D(float(centre[0]), float(centre[1]), v.zoom * g.s), answer=g.k)
 
     def zoom_by(self, factor: float, at_screen=None) -> None:
         """Zoom by ``factor`` around a canvas point (pixels; default: the centre)."""
-        if not self.in_image:
+        v = self.view2d
+        if not self.in_image or v is None:  # in_image: there is a view
             return
-        at = self.view2d.to_pixel(at_screen, self.canvas) if at_screen is not None else None
-        self.push(self.view2d.zoomed(factor, at))
+        at = v.to_pixel(at_screen, self.canvas) if at_screen is not None else None
+        self.push(v.zoomed(factor, at))
 
     def fit(self) -> None:
         if self.mode is Mode.IMAGE and self.workspace.plane is not None:
@@ -106,8 +109,9 @@ class ViewControl:
 
     def native(self) -> None:
         """One image pixel per screen pixel, around the centre of the view."""
-        if self.in_image:
-            self.push(View2D(self.view2d.cu, self.view2d.cv, 1.0))
+        v = self.view2d
+        if self.in_image and v is not None:  # in_image: there is a view
+            self.push(View2D(v.cu, v.cv, 1.0))
 
     def to_pixel(self, fractions) -> np.ndarray:
         """The image pixel under a canvas point given as fractions of the canvas."""

@@ -14,12 +14,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
-from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter
+from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
 
 #: screen pixels: the radius of a point's disc, of its black rim, of the area that grabs it, and
 #: of the selection ring
@@ -134,6 +135,7 @@ class _PointNodes:
             pos, batched_scales=scales, batched_colors=(255, 255, 255), opacity=0.0, side="double",
             cast_shadow=False, receive_shadow=False, lod="off")
         self._grab_made = (pos.copy(), scales.copy())
+        assert self.events is not None  # the workspace's, given when there are points to grab
         self._bind(self.grab, self.events)
 
     def _draw(self) -> None:
@@ -143,8 +145,8 @@ class _PointNodes:
                 if node is not None:
                     update_changed(node, visible=False)
             return
-        pos = self.plane.world(self.uv, self.layer).astype(np.float32)
-        rim_pos = pos + np.float32([0.0, 0.0, 0.0002])
+        pos = placed(self.plane).world(self.uv, self.layer).astype(np.float32)
+        rim_pos = pos + np.array([0.0, 0.0, 0.0002], np.float32)
         if self.disc is None:
             common = {"point_shape": "circle", "point_shading": "flat", "precision": "float32"}
             self.rim = self.scene.add_point_cloud(f"{self.path}/rim", rim_pos, np.zeros_like(self.colors),
@@ -168,7 +170,7 @@ class _PointNodes:
         pos[:, 2] = PLANE_Z + 5.0  # spares: behind the image, tiny (a zero scale has no inverse)
         scales = np.full(capacity, 1e-6)
         if n:
-            pos[:n] = self.plane.world(self.uv, "grab")
+            pos[:n] = placed(self.plane).world(self.uv, "grab")
             scales[:n] = GRAB_PX * self.world_per_px
         return pos, scales
 
@@ -198,7 +200,7 @@ class _PointNodes:
             return index if index is not None and 0 <= index < len(self.keys) else None
         if not self.keys:
             return None
-        reach = 1.5 * GRAB_PX * self.world_per_px / self.plane.scale  # image pixels
+        reach = 1.5 * GRAB_PX * self.world_per_px / placed(self.plane).scale  # image pixels
         d = np.hypot(*(self.uv - at_uv).T)
         if index is not None and 0 <= index < len(self.keys) and d[index] <= reach:
             return index
@@ -211,7 +213,8 @@ class _PointNodes:
         @node.on_click
         async def _(event) -> None:
             o = np.asarray(event.ray_origin, float)
-            i = self._instance(event.instance_index, self.plane.pixel_on_ray(o, o + np.asarray(event.ray_direction)))
+            i = self._instance(event.instance_index,
+                               placed(self.plane).pixel_on_ray(o, o + np.asarray(event.ray_direction)))
             if i is not None:
                 events.pick(Selection(self.kind, self.keys[i]))
 
@@ -219,7 +222,7 @@ class _PointNodes:
         async def _(event) -> None:
             phase = DragPhase(event.phase)
             if phase is DragPhase.START:
-                at = self.plane.pixel(event.start_position)
+                at = placed(self.plane).pixel(event.start_position)
                 exact = bool(np.all(np.isfinite(at)))
                 if not exact:  # viser lost the instance it hit: where the pointer is, on screen
                     at = events.screen_to_pixel(np.asarray(event.end_screen_pos, float))
@@ -231,7 +234,7 @@ class _PointNodes:
             if "key" not in grabbed:
                 return
             # the point follows the pointer by as many image pixels as the pointer moved
-            pointer = (self.plane.pixel(event.end_position) if grabbed["exact"]
+            pointer = (placed(self.plane).pixel(event.end_position) if grabbed["exact"]
                        else events.screen_to_pixel(np.asarray(event.end_screen_pos, float)))
             now = grabbed["uv"] + pointer - grabbed["at"]
             if phase is not DragPhase.START and self.keys[grabbed["index"]:grabbed["index"] + 1] == [grabbed["key"]]:
@@ -263,7 +266,7 @@ class Workspace:
                        for kind, layer, opacity in ((PointKind.KEYPOINTS, "keypoints", 1.0),
                                                     (PointKind.GHOSTS, "ghosts", 0.55),
                                                     (PointKind.LINE_POINTS, "keypoints", 1.0))}
-        self._labels: dict[object, object] = {}  # keypoint id -> label node
+        self._labels: dict[object, Any] = {}  # keypoint id -> label node (viser's)
         self._label_uv: dict[object, np.ndarray] = {}
         self._label_rank: dict[object, int] = {}
         self.selected: Selection | None = None
@@ -377,7 +380,7 @@ class Workspace:
                      keypoints: bool = True, ghosts: bool = True, line_points: bool = False, ids: bool = True) -> None:
         """Every layer of ``overlay`` updated in place (``line_colors``: colours per segment end,
         (N, 2, 3), e.g. blended towards the image for a lower opacity)."""
-        plane = self.plane
+        plane = placed(self.plane)  # the frame is shown first
         for name in set(self._lines) | set(overlay.segments):
             seg = overlay.segments.get(name, Segments())
             handle = self._lines.get(name)
@@ -421,13 +424,13 @@ class Workspace:
         for k, flagged in pins.items():
             box = observed.uv[observed.keys.index(k)] + corners
             segs.append(np.stack([box[:-1], box[1:]], 1))
-            cols.append(np.tile(np.uint8(FLAGGED_RGB if flagged else PIN_RGB), (4, 2, 1)))
-        pts, cols = self.plane.world(np.concatenate(segs), "selection"), np.concatenate(cols)
+            cols.append(np.tile(np.array(FLAGGED_RGB if flagged else PIN_RGB, np.uint8), (4, 2, 1)))
+        pts, colors = self.plane.world(np.concatenate(segs), "selection"), np.concatenate(cols)
         if handle is None:
-            self._pin_boxes = self.scene.add_line_segments(f"{self.root}/pins", pts, cols, thickness=2.0,
+            self._pin_boxes = self.scene.add_line_segments(f"{self.root}/pins", pts, colors, thickness=2.0,
                                                            thickness_units="screen")
         else:
-            update_changed(handle, points=pts, colors=cols, visible=True)
+            update_changed(handle, points=pts, colors=colors, visible=True)
 
     def _show_labels(self, labelled: list) -> None:
         wanted = {k: (np.asarray(uv, float), rank) for k, uv, rank in labelled}
@@ -436,7 +439,7 @@ class Workspace:
             self._label_uv.pop(k, None)
             self._label_rank.pop(k, None)
         for k, (uv, rank) in wanted.items():
-            pos = self.plane.world(uv, "selection")
+            pos = placed(self.plane).world(uv, "selection")
             text = f"{k}" if rank == 0 else f"{k}?"
             handle = self._labels.get(k)
             if handle is None:
@@ -453,7 +456,7 @@ class Workspace:
             return
         keys = sorted(self._labels, key=lambda k: (self._label_rank[k], str(k)))
         uv = np.array([self._label_uv[k] for k in keys])
-        px_per_image_px = self.plane.scale / self.world_per_px
+        px_per_image_px = placed(self.plane).scale / self.world_per_px
         keep = declutter(uv * px_per_image_px, LABEL_MIN_GAP_PX)
         for k, show in zip(keys, keep):
             handle = self._labels[k]
@@ -476,8 +479,8 @@ class Workspace:
                 update_changed(self._ring, visible=False)
             return
         a = np.linspace(0, 2 * math.pi, 33)
-        circle = uv + RING_PX * self.world_per_px / self.plane.scale * np.stack([np.cos(a), np.sin(a)], 1)
-        pts = self.plane.world(np.stack([circle[:-1], circle[1:]], 1), "selection")
+        circle = uv + RING_PX * self.world_per_px / placed(self.plane).scale * np.stack([np.cos(a), np.sin(a)], 1)
+        pts = placed(self.plane).world(np.stack([circle[:-1], circle[1:]], 1), "selection")
         if self._ring is None:
             self._ring = self.scene.add_line_segments(f"{self.root}/selection", pts, SELECTED_RGB, thickness=2.0,
                                                       thickness_units="screen")

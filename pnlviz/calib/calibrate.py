@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import cv2
 import numpy as np
@@ -96,7 +97,9 @@ class CalibParams:
         unknown = sorted(set(overrides) - known)
         if unknown:
             raise ValueError(f"unknown calibration setting(s) {unknown}; known: {sorted(known)}")
-        return replace(self, **{k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()})  # JSON lists
+        # JSON gives lists where the fields hold tuples
+        changes: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()}
+        return replace(self, **changes)
 
 
 @dataclass

@@ -52,7 +52,7 @@ def segment_shots(cameras: Sequence[Camera | None], changes: Sequence[float | No
                 and _view_change(a, b) > params.cut_view * a.width)
 
     for t in range(T):
-        if t > 0 and changes is not None and changes[t - 1] is not None and changes[t - 1] > params.cut_image:
+        if t > 0 and changes is not None and (change := changes[t - 1]) is not None and change > params.cut_image:
             cuts.append(t)
             centres = []
         cam = cameras[t]
@@ -62,8 +62,8 @@ def segment_shots(cameras: Sequence[Camera | None], changes: Sequence[float | No
         if centres and last is not None:
             ref = np.median(np.array(centres[-5:]), axis=0)
             if apart(cam, last, ref):
-                later = [u for u in calibrated if u > t][:1]
-                confirmed = bool(later) and apart(cameras[later[0]], last, ref)
+                later = next((cameras[u] for u in calibrated if u > t), None)
+                confirmed = later is not None and apart(later, last, ref)
                 if not confirmed:
                     continue  # an outlier frame: it neither cuts nor moves the reference
                 if not cuts or cuts[-1] != t:

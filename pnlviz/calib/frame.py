@@ -20,6 +20,7 @@ from pnlviz.calib.observations import Observations
 from pnlviz.calib.sources import KeypointEdit, apply_keypoint_edits, merge_observations
 from pnlviz.conventions import DEFAULT_ALPHA
 from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.geometry.camera import Camera
 
 #: which observations a frame is calibrated from: "both" merges annotation and detections
 SOURCES = ("annotation", "detections", "both")
@@ -86,20 +87,25 @@ class FrameCalibration:
     def ok(self) -> bool:
         return self.result is not None and self.result.ok
 
+    @property
+    def camera(self) -> Camera | None:
+        """The frame's camera, None without one."""
+        return self.result.camera if self.result is not None else None
+
 
 def observations_for(inputs: FrameInputs, source: str, model: FieldModel) -> tuple[Observations | None, str | None]:
     """The observations of a frame and where they came from (see :class:`FrameCalibration`)."""
     W, H = inputs.size
-    ann, det = inputs.annotation, inputs.detections
-    use_ann = ann is not None and source in ("annotation", "both")
-    use_det = det is not None and (source in ("detections", "both") or not use_ann)
-    obs, origin = None, None
-    if use_ann and use_det:
+    ann = inputs.annotation if source in ("annotation", "both") else None  # the ones used
+    det = inputs.detections if source in ("detections", "both") or ann is None else None
+    obs: Observations | None = None
+    origin: str | None = None
+    if ann is not None and det is not None:
         obs, origin = merge_observations(observations_from_annotation(ann, W, H, model=model)[0],
                                          observations_from_predictions(det, W, H, model=model), model), "both"
-    elif use_ann:
+    elif ann is not None:
         obs, origin = observations_from_annotation(ann, W, H, model=model)[0], "annotation"
-    elif use_det:
+    elif det is not None:
         obs, origin = observations_from_predictions(det, W, H, model=model), "detections"
     if inputs.keypoint_edits:
         if obs is None:

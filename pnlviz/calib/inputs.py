@@ -3,6 +3,8 @@ line annotations (through the keypoint labels of :mod:`pnlviz.labels`)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Set
+
 import numpy as np
 
 from pnlviz.calib.observations import Observations
@@ -15,7 +17,7 @@ PREDICTED_KEYPOINTS = range(1, 58)
 
 
 def auxiliary_keypoints(lines: dict[str, np.ndarray], width: int, height: int, model: FieldModel,
-                        skip: set[int] = frozenset(), beyond: float = 0.5) -> dict[int, tuple[float, float]]:
+                        skip: Set[int] = frozenset(), beyond: float = 0.5) -> dict[int, tuple[float, float]]:
     """Keypoints at the intersections of pairs of observed straight lines (catalogue ``line_line``
     and ``extended_line_line`` definitions), kept when inside the image or at most ``beyond`` of
     its size outside it (the paper's rule for extended intersections)."""
@@ -62,7 +64,7 @@ def observations_from_predictions(pred, width: int, height: int, *, kp_threshold
     return obs
 
 
-def observations_from_annotation(annotation: dict[str, np.ndarray], width: int, height: int, *,
+def observations_from_annotation(annotation: Mapping[str, np.ndarray], width: int, height: int, *,
                                  label_params=None, model: FieldModel | None = None):
     """Observations from a SoccerNet annotation (normalised, x_px = x (W - 1)): the keypoint
     labels of every set (:func:`pnlviz.labels.keypoints_from_annotation`) and the annotated points

@@ -165,7 +165,10 @@ class HomographyModel:
         """Pixels (N, 2) of transformed points and, with ``jac`` (and their ``Xn``), their
         derivative (N, 2, 8)."""
         uv, D = dehomogenize(xh, jac)
-        return uv, (D @ self._dxh(M, Xn) if jac else None)
+        if not jac:
+            return uv, None
+        assert D is not None and Xn is not None, "the derivative needs the model points Xn"
+        return uv, D @ self._dxh(M, Xn)
 
     def project(self, Xn: np.ndarray, M: np.ndarray, jac: bool = False):
         return self.pixels(self.transform(Xn, M), M, jac, Xn)

@@ -128,6 +128,7 @@ def pin_camera(obs: Observations, min_hfov: float, max_hfov: float, fit_px: floa
     failure, H = check_pins(obs)
     if failure is not None:
         return failure
+    assert H is not None  # check_pins gives a homography whenever no condition fails
     ground, _ = ground_pins(obs)
     world, xy = obs.kp_xyz[ground, :2], obs.kp_xy[ground]
     W, Hh = obs.width, obs.height
@@ -144,14 +145,14 @@ def pin_camera(obs: Observations, min_hfov: float, max_hfov: float, fit_px: floa
         c = _planar_pose(world, xy, (W / 2) / np.tan(np.radians(hfov) / 2), W, Hh)
         if c is not None:
             tried.append((rms(c), c))
-    best = min(tried, key=lambda t: t[0], default=(np.inf, None))
-    if best[1] is None or not best[0] <= fit_px:
-        found = best[1] is not None and np.isfinite(best[0])
-        got = f" (best {best[0]:.0f} px at {best[1].hfov_deg:.0f} deg)" if found else ""
+    best_rms, best_cam = min(tried, key=lambda t: t[0], default=(np.inf, None))
+    if best_cam is None or not best_rms <= fit_px:
+        found = best_cam is not None and np.isfinite(best_rms)
+        got = f" (best {best_rms:.0f} px at {best_cam.hfov_deg:.0f} deg)" if best_cam is not None and found else ""
         return PinFailure(PinCondition.FOCAL_OUT_OF_RANGE,
                           f"focal length out of range: no field of view of {min_hfov:g}-{max_hfov:g} deg puts "
                           f"hand-placed points {_ids(obs.kp_ids[ground])} within {fit_px:.0f} px{got}")
-    return best[1]
+    return best_cam
 
 
 def flagged_pins(obs: Observations, residuals: dict[int, float], limit_px: float) -> dict[int, float]:

@@ -28,7 +28,7 @@ Without pins every step is what it was.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -80,13 +80,18 @@ class FrameResult:
         return self.estimate is not None
 
 
-class Kind(Protocol):
-    """What the pipeline needs of a model, for one frame (``data``) and its settings."""
+ResultT_co = TypeVar("ResultT_co", bound=FrameResult, covariant=True)
+ResultT = TypeVar("ResultT", bound=FrameResult)
+
+
+class Kind(Protocol[ResultT_co]):
+    """What the pipeline needs of a model, for one frame (``data``) and its settings; its results
+    are ``ResultT_co``."""
 
     data: FrameData
     ground_only: bool  #: keypoints off the ground plane take no part (the homography)
 
-    def new_result(self) -> FrameResult: ...  # an empty result of the model's type
+    def new_result(self) -> ResultT_co: ...  # an empty result of the model's type
 
     def too_few(self) -> str | None: ...  # why the frame has too few keypoints, or None
 
@@ -183,12 +188,12 @@ def vote(cands: list[Candidate], kind: Kind, params) -> Candidate | None:
         return None
     obs = kind.data.obs
     tau = params.px(params.vote_tau, obs.width)
-    taus = getattr(kind, "vote_taus", None)
-    pinned = taus is not None and obs.pins.any()
+    taus = getattr(kind, "vote_taus", None) if obs.pins.any() else None  # per-observation bounds with pins
+    pin_tau = params.px(params.pin_vote_px, obs.width)
     residuals = kind.scorer(cands[0].estimate)
     for c in cands:
         r = residuals(c.estimate)
-        c.score = truncated_score(r, taus(len(r), tau, params.px(params.pin_vote_px, obs.width)) if pinned else tau)
+        c.score = truncated_score(r, tau if taus is None else taus(len(r), tau, pin_tau))
     return best(cands)
 
 
@@ -210,7 +215,7 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
     return new, sorted(lines + circles)
 
 
-def calibrate_with(kind: Kind, params) -> FrameResult:
+def calibrate_with(kind: Kind[ResultT], params) -> ResultT:
     """The whole frame (steps 1-4), as ``kind.new_result()``. Never raises on bad geometry:
     failures come back with a reason."""
     obs = kind.data.obs

@@ -184,13 +184,14 @@ class Problem:
         for _, rows, pts in self.circle_items:
             weight, block = self._circle(T[rows], self.world[rows], pts, state, jac)
             at = self._put(r, J, at, weight, block)
-        return r, (J[:, m.free] if jac else None)
+        return r, (None if J is None else J[:, m.free])
 
     @staticmethod
     def _put(r: np.ndarray, J: np.ndarray | None, at: int, weight: float, block: Block) -> int:
         n = len(block.r)
         r[at:at + n] = weight * block.r
         if J is not None:
+            assert block.J is not None, "a block without its Jacobian in a Jacobian evaluation"
             J[at:at + n] = weight * block.J
         return at + n
 

@@ -206,8 +206,8 @@ class ShotModel:
             rows.append(np.array([n_data + n_acc]))
             cols.append(np.array([3]))
             n_k1 = 1
-        rows, cols = np.concatenate(rows), np.concatenate(cols)
-        return scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_data + n_acc + n_k1, 4 + 4 * T))
+        row, col = np.concatenate(rows), np.concatenate(cols)
+        return scipy.sparse.csr_matrix((np.ones(len(row)), (row, col)), shape=(n_data + n_acc + n_k1, 4 + 4 * T))
 
 
 def jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, r0: np.ndarray,

@@ -61,12 +61,13 @@ def initial(cameras: Sequence[Camera | None], T: int) -> tuple[np.ndarray, float
     """Warm start: median centre and k1 of the per-frame cameras; per frame the angles and log f
     of its camera moved to that centre (:func:`_rebased`), unwrapped, with the frames that have no
     camera interpolated (held at the ends)."""
-    known = [t for t in range(T) if cameras[t] is not None]
-    if not known:
+    found = [(t, cam) for t in range(T) if (cam := cameras[t]) is not None]
+    if not found:
         raise ValueError("no frame of the shot has a camera to start from")
-    C = np.median(np.array([cameras[t].C for t in known]), axis=0)
-    k1 = float(np.median([cameras[t].radial[0] for t in known]))
-    vals = np.array([_rebased(cameras[t], C) for t in known])
+    known = [t for t, _ in found]
+    C = np.median(np.array([cam.C for _, cam in found]), axis=0)
+    k1 = float(np.median([cam.radial[0] for _, cam in found]))
+    vals = np.array([_rebased(cam, C) for _, cam in found])
     vals[:, 0] = np.unwrap(vals[:, 0])
     vals[:, 2] = np.unwrap(vals[:, 2])
     per = np.column_stack([np.interp(np.arange(T), known, vals[:, j]) for j in range(4)])
@@ -85,7 +86,7 @@ def _rebased(cam: Camera, C: np.ndarray) -> np.ndarray:
     rel = cam.R @ R0.T  # = Rz(roll)^T for look_at's roll
     roll = math.atan2(rel[0, 1], rel[0, 0])
     R = look_at_rotation(C, target, roll)
-    f = cam.fx * np.linalg.norm(target - C) / max(np.linalg.norm(target - cam.C), 1e-6)
+    f = cam.fx * np.linalg.norm(target - C) / max(float(np.linalg.norm(target - cam.C)), 1e-6)
     return np.array([*pan_tilt_roll_from_rotation(R), math.log(f)])
 
 
@@ -142,7 +143,7 @@ def _solve(m: ShotModel, x: np.ndarray, params: TemporalParams, tol: float = 1e-
         return jacobian(m.residuals, x, r, sparsity, groups)
 
     solver = SolverParams(loss="soft_l1", f_scale=params.robust, max_iter=params.max_iterations, tol=tol,
-                          step_tol=1e-10 * np.linalg.norm(x), max_trials=12)
+                          step_tol=1e-10 * float(np.linalg.norm(x)), max_trials=12)
     x, info = levenberg_marquardt(evaluate, lambda x, dx: x + dx, x, solver, jacobian=derivative)
     return x, float(info["cost"]), nfev
 

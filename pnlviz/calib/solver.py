@@ -99,6 +99,7 @@ def levenberg_marquardt(evaluate: Evaluate, retract: Callable[[Any, np.ndarray],
     lam, it, success = 1e-3, 0, False
     for it in range(1, p.max_iter + 1):
         if J is None:
+            assert jacobian is not None, "evaluate(x, True) gave no Jacobian"
             J = jacobian(x, r)
         A, g = _normal_equations(J, r, p)
         step, lam = _descend(evaluate, retract, x, A, g, cost, lam, p, jacobian is None)

@@ -38,11 +38,9 @@ def mirrored(det: Observations, model: FieldModel) -> Observations:
                         det.kp_main, {MIRROR[k]: v for k, v in det.lines.items()}, det.circles)
 
 
-def merge_observations(ann: Observations, det: Observations, model: FieldModel) -> Observations:
-    """Annotation and detections together. PnLCalib's networks name the sides so that the goal
-    nearest the camera is the left one, annotations name the true sides: when the detections
-    agree better with the annotation mirrored (keypoints with the same ids, median distance),
-    their ids and line classes are mirrored first. The annotation wins where both have a point."""
+def aligned_detections(ann: Observations, det: Observations, model: FieldModel) -> Observations:
+    """The detections named on the annotation's sides: mirrored (ids and line classes) when they
+    agree better with the annotation that way (keypoints with the same ids, median distance)."""
     mirror = mirror_ids(model)
     ann_xy = dict(zip(ann.kp_ids.tolist(), ann.kp_xy))
     det_xy = dict(zip(det.kp_ids.tolist(), det.kp_xy))
@@ -52,7 +50,16 @@ def merge_observations(ann: Observations, det: Observations, model: FieldModel) 
         return float(np.median(d)) if d else np.inf
 
     if disagreement({i: mirror.get(i, -1) for i in ann_xy}) < disagreement({i: i for i in ann_xy}):
-        det = mirrored(det, model)
+        return mirrored(det, model)
+    return det
+
+
+def merge_observations(ann: Observations, det: Observations, model: FieldModel) -> Observations:
+    """Annotation and detections together. PnLCalib's networks name the sides so that the goal
+    nearest the camera is the left one, annotations name the true sides: when the detections
+    agree better with the annotation mirrored (keypoints with the same ids, median distance),
+    their ids and line classes are mirrored first. The annotation wins where both have a point."""
+    det = aligned_detections(ann, det, model)
     keep = ~np.isin(det.kp_ids, ann.kp_ids)
     return Observations(ann.width, ann.height, np.concatenate([ann.kp_ids, det.kp_ids[keep]]),
                         np.vstack([ann.kp_xy, det.kp_xy[keep]]), np.vstack([ann.kp_xyz, det.kp_xyz[keep]]),

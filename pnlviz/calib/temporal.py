@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from .cuts import segment_shots
 from .observations import Observations
 from .shot import TemporalParams
 from .shot_fit import ShotFit, fit_shot
+
+if TYPE_CHECKING:  # imported when called (frame imports this module's neighbours)
+    from .frame import FrameInputs, FrameSettings
 
 __all__ = ["ClipCalibration", "ClipResult", "calibrate_clip", "calibrate_clip_frames", "image_change",
            "image_changes"]
@@ -100,7 +104,7 @@ class ClipCalibration:
     result: ClipResult
 
 
-def calibrate_clip_frames(inputs: Sequence[object | None], settings: object, *,
+def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameSettings, *,
                           cameras: Sequence[Camera | None] | None = None,
                           changes: Sequence[float | None] | None = None,
                           model: FieldModel | None = None) -> ClipCalibration:
@@ -113,14 +117,11 @@ def calibrate_clip_frames(inputs: Sequence[object | None], settings: object, *,
     from .frame import calib_params, calibrate_frame, observations_for
 
     model = model or load_field_model()
-    sizes = {tuple(i.size) for i in inputs if i is not None}
+    sizes = {(i.size[0], i.size[1]) for i in inputs if i is not None}
     if len(sizes) != 1:
         raise ValueError("the frames of a clip must have one size")
     if cameras is None:
-        cameras = []
-        for i in inputs:
-            fc = calibrate_frame(i, settings, model) if i is not None else None
-            cameras.append(fc.result.camera if fc is not None and fc.ok else None)
+        cameras = [calibrate_frame(i, settings, model).camera if i is not None else None for i in inputs]
     found = [observations_for(i, settings.source, model) if i is not None else (None, None) for i in inputs]
     origin = next((g for _, g in found if g is not None), None)
     params = TemporalParams(fit_k1=calib_params(settings, origin).refine_k1)

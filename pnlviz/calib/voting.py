@@ -6,7 +6,8 @@ observations, and the winner (the lowest score, ``full`` on ties).
 
 from __future__ import annotations
 
-from typing import Protocol
+from collections.abc import Sequence
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -31,8 +32,9 @@ def subset_mask(obs: Observations, subset: str, ground_only: bool = False) -> np
     return mask & obs.ground if ground_only else mask
 
 
-def truncated_score(distances: np.ndarray, tau: float) -> float:
-    """``sum(min(d^2, tau^2))``: every observation counts, none by more than ``tau``."""
+def truncated_score(distances: np.ndarray, tau: float | np.ndarray) -> float:
+    """``sum(min(d^2, tau^2))``: every observation counts, none by more than ``tau`` (one bound,
+    or one per observation)."""
     return float(np.sum(np.minimum(distances * distances, tau * tau)))
 
 
@@ -42,7 +44,10 @@ class Scored(Protocol):
     score: float
 
 
-def best(candidates: list[Scored]) -> Scored | None:
+ScoredT = TypeVar("ScoredT", bound=Scored)
+
+
+def best(candidates: Sequence[ScoredT]) -> ScoredT | None:
     """The lowest score (to 1e-6), then the earlier subset, then the smaller threshold."""
     if not candidates:
         return None

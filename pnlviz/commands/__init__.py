@@ -12,6 +12,7 @@ from pnlviz.commands.common import os_error_line, parse_size
 from pnlviz.commands.detect import add_detect_parser
 from pnlviz.commands.evaluate import add_eval_parser
 from pnlviz.commands.labels import add_labels_parser
+from pnlviz.commands.qa import add_qa_parser
 from pnlviz.commands.render import add_render_parser
 from pnlviz.commands.export import add_export_parser
 from pnlviz.commands.serve import add_serve_parser
@@ -36,6 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_detect_parser(sub)
     add_train_parser(sub)
     add_calibrate_parser(sub)
+    add_qa_parser(sub)
     add_eval_parser(sub)
     add_export_parser(sub)
     add_validate_parser(sub)

@@ -29,6 +29,7 @@ import uuid
 from collections.abc import Callable, Hashable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 __all__ = ["BatchJob", "BatchRun", "add_cluster_args", "cluster_client", "interrupted", "journaled_zip",
            "map_on_cluster", "on_cluster", "pool_size", "previous_run", "resume_zip", "run_batch", "worker_state"]
@@ -124,7 +125,7 @@ def on_cluster(args) -> bool:
 
 
 @contextlib.contextmanager
-def cluster_client(args) -> Iterator[object | None]:
+def cluster_client(args) -> Iterator[Any]:
     """A ``distributed.Client`` for ``--dask`` / ``--scheduler`` (None without them); a clear
     error when dask is not installed or the scheduler cannot be reached."""
     if not on_cluster(args):
@@ -215,8 +216,8 @@ def _results(stack: contextlib.ExitStack, job: BatchJob, items: Sequence, args, 
     return itertools.chain.from_iterable(job.run_chunk(state, part) for part in _chunks(items, chunk))
 
 
-def run_batch(job: BatchJob, items: Sequence, handle: Callable[[object], None], args, *, desc: str,
-              processes: int = 1, local_state=None, failed: Callable[[object, str], object] | None = None,
+def run_batch(job: BatchJob, items: Sequence, handle: Callable[[Any], None], args, *, desc: str,
+              processes: int = 1, local_state=None, failed: Callable[[Any, str], object] | None = None,
               chunk: int = 1, progress: bool = True) -> BatchRun:
     """``job`` over ``items``: on the cluster of ``args`` (``--dask`` / ``--scheduler``; ``failed``
     gives the result of an item whose task failed there), else in a local pool of ``processes``

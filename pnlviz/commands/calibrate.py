@@ -12,9 +12,13 @@ import sys
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pnlviz.commands.batch import BatchJob
 from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
+
+if TYPE_CHECKING:
+    from pnlviz.calib.frame import FrameInputs
 
 #: how the summary names the engine's failure codes, in the order of
 #: :data:`pnlviz.calib.calibrate.FAILURE_CODES` (see :func:`failure_words`)
@@ -100,7 +104,7 @@ def calibrate_stem(reader, stem: str, settings) -> tuple[str, dict | None, dict]
     report: dict = {"stem": stem}
     inputs, problem = frame_inputs(reader, stem)
     if inputs is None:
-        report.update(problem)
+        report.update(problem or {})  # a frame without inputs has its problem
         return stem, None, report
     fc = calibrate_frame(inputs, settings)
     if fc.failure is not None:
@@ -108,6 +112,7 @@ def calibrate_stem(reader, stem: str, settings) -> tuple[str, dict | None, dict]
     if fc.result is None:
         return stem, None, report
     res = fc.result
+    assert fc.observations is not None  # a frame with a result has its observations
     report.update({
         "ms": round(fc.ms, 2), "keypoints": int(fc.observations.n_keypoints), "origin": fc.origin,
         "subset": res.subset, "threshold": res.threshold, "plane": res.plane,
@@ -116,12 +121,12 @@ def calibrate_stem(reader, stem: str, settings) -> tuple[str, dict | None, dict]
         "line_residuals_initial": {k: round(v, 3) for k, v in res.line_residuals_initial.items()},
         "line_residuals": {k: round(v, 3) for k, v in res.line_residuals.items()},
     })
-    if not res.ok:
+    if res.camera is None:  # not res.ok
         return stem, None, report
     return stem, res.camera.scaled(*EVAL_SIZE).to_soccernet(), report
 
 
-def frame_inputs(reader, stem: str) -> tuple[object | None, dict | None]:
+def frame_inputs(reader, stem: str) -> tuple[FrameInputs | None, dict | None]:
     """The :class:`pnlviz.calib.frame.FrameInputs` of one frame as :class:`pnlviz.pipeline.FrameReader`
     reads it, or None with the report's failure fields: a frame whose files (its image included)
     cannot be read is skipped, one with nothing to calibrate from fails."""
@@ -185,14 +190,15 @@ def temporal_pass(reader, settings, stems: list[str], results: dict, progress: b
             fit = res.fits[res.shot_of[t]]
             report["temporal"] = {"clip": clip, "shot": res.shot_of[t], "shots": len(res.shots),
                                   "per_frame": cam_dict is not None}
-            if res.cameras[t] is not None and fit is not None:
+            cam = res.cameras[t]
+            if cam is not None and fit is not None:
                 i = t - res.shots[res.shot_of[t]].start
                 r = fit.residuals[i]
                 report["temporal"].update(residual_median=round(float(np.median(r)), 3) if len(r) else None,
                                           dropped=fit.dropped[i])
                 report.pop("failure", None)
                 report.pop("failure_code", None)
-                out[s] = (res.cameras[t].scaled(*EVAL_SIZE).to_soccernet(), report)
+                out[s] = (cam.scaled(*EVAL_SIZE).to_soccernet(), report)
             else:
                 out[s] = (cam_dict, report)
         bar.update(len(members))
@@ -215,6 +221,7 @@ class _NoDataset:
     annotations), so every frame of the prediction zip is calibrated at ``--size``."""
 
     stems: list[str] = []
+    splits: tuple[str, ...] = ()
 
     def __contains__(self, stem) -> bool:
         return False
@@ -319,7 +326,8 @@ def _open_inputs(args):
         ds = VideoDataset(args.video)
     else:
         ds = open_input_dataset(args.data) if args.data is not None else _NoDataset()
-    predictions = read_predictions(args.detections, on_error=lambda e: print_skipped([e])) if args.detections else None
+    predictions = (read_predictions(args.detections, on_error=lambda e: print_skipped([e]), splits=ds.splits)
+                   if args.detections else None)
     edits = EditsStore(args.edits, writable=False) if args.edits is not None else None
     print_skipped(edits.warnings if edits is not None else [], prefix="warning: ")
     return ds, predictions, edits

@@ -167,6 +167,7 @@ def _sidecar(args, det, frames: int) -> dict:
     from pnlviz.detect.default import DEFAULT_MODEL
 
     weights = {"kp": args.weights_kp, "lines": args.weights_lines}
+    named: str | dict[str, str]
     if args.weights is not None:
         kind, named = "light model", str(args.weights)
     elif any(weights.values()):

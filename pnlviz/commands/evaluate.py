@@ -111,19 +111,21 @@ def _args_problem(args) -> str | None:
     return None
 
 
-def _eval_soccernet(args, cameras: dict, progress: bool) -> None:
-    """The SoccerNet score of ``cameras`` against the annotations of ``--gt``, printed (and
-    written to ``--csv``)."""
-    from pnlviz.commands.common import open_input_dataset
+def _eval_soccernet(args, gt, cameras: dict, progress: bool) -> None:
+    """The SoccerNet score of ``cameras`` against the annotations of the dataset ``gt``
+    (``--gt``), printed (and written to ``--csv``)."""
     from pnlviz.metrics.soccernet import evaluate_dataset
 
-    gt = open_input_dataset(args.gt)
     summary = evaluate_dataset(gt, cameras, args.thresholds, progress=progress,
                                count_unknown=not args.ignore_unknown, workers=max(1, args.workers),
                                on_error=_report)
     _require_matches(args, summary, len(cameras))
     print(f"SoccerNet camera calibration (960x540): {args.gt} vs {args.pred}")
     print(summary.table())
+    for split, part in summary.by_split().items():
+        fs = f", FS {part.final_score:.4f}" if 5.0 in part.thresholds else ""
+        jac = ", ".join(f"JaC@{t:g} {part.jac(t):.4f}" for t in part.thresholds)
+        print(f"  split {split}: frames {part.n_frames}, CR {part.completeness:.4f}, {jac}{fs}")
     skipped = len(summary.skipped_annotations)
     if skipped:
         print(f"{skipped} annotation(s) skipped (not counted)")
@@ -146,7 +148,7 @@ def _eval_homographies(args, cameras: dict | None, progress: bool) -> None:
         what = args.pred_homographies
     else:
         pred_h = {}
-        for stem, cam in cameras.items():
+        for stem, cam in (cameras or {}).items():  # --homographies without --pred-homographies has --pred
             try:
                 pred_h[stem] = homography_from_camera(cam, source_size=args.camera_size)
             except (DataError, ValueError) as e:
@@ -172,12 +174,17 @@ def run_eval(args) -> int:
                      datasets=[args.gt], what="--csv")
     progress = not args.no_progress
     cameras = None
+    gt = None
+    if args.gt is not None:
+        from pnlviz.commands.common import open_input_dataset
+
+        gt = open_input_dataset(args.gt)
     if args.pred is not None:
         from pnlviz.data.cameras import read_cameras
 
-        cameras, _ = read_cameras(args.pred, on_error=_report)
-    if args.gt is not None:
-        _eval_soccernet(args, cameras, progress)
+        cameras, _ = read_cameras(args.pred, on_error=_report, splits=gt.splits if gt is not None else ())
+    if gt is not None and cameras is not None:  # --gt comes with --pred
+        _eval_soccernet(args, gt, cameras, progress)
     if args.homographies is not None:
         _eval_homographies(args, cameras, progress)
     return 0

@@ -8,8 +8,12 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pnlviz.commands.batch import BatchJob
+
+if TYPE_CHECKING:
+    from pnlviz.pipeline.reader import Settings
 
 
 def add_export_parser(sub) -> None:
@@ -42,7 +46,7 @@ class ExportJob(BatchJob):
     detections: str | None
     edits: str
     size: tuple[int, int]
-    settings: object
+    settings: Settings
     gate_px: float = 10.0
 
     def open_state(self):
@@ -101,11 +105,12 @@ def run_export(args) -> int:
         return 2
     # read-only: export never creates, locks or changes the edits folder
     with FrameReader.open(data, detections=args.detections, edits=args.edits, size=args.size) as reader:
-        for warning in [str(e) for e in reader.ds.rejected] + reader.edits.warnings:
+        for warning in [str(e) for e in reader.ds.rejected] + reader.edits_folder.warnings:
             print(f"warning: {warning}", file=sys.stderr)
         stems = export_stems(reader, args.all)
         job = ExportJob(str(Path(data).resolve()), None if args.detections is None else str(args.detections.resolve()),
-                        str(reader.edits.root.resolve()), tuple(args.size), reader.default_settings(), args.gate_px)
+                        str(reader.edits_folder.root.resolve()), tuple(args.size), reader.default_settings(),
+                        args.gate_px)
         with ExportWriter(reader, args.out, include_all=args.all, gate_px=args.gate_px) as writer:
             run = run_batch(job, stems, writer.add, args, desc="export", local_state=reader,
                             failed=lambda stem, message: failed_frame(reader, stem, message),

@@ -38,7 +38,9 @@ def label_frame(ds, stem: str, out_dir: str, size: tuple[int, int], params) -> t
         width, height = image_size or size
         labels = keypoints_from_annotation(ann, width, height, params)
         ext = line_extremities(ann, width, height, mirror=labels.mirrored)
-        write_labels(Path(out_dir) / f"{stem}.json", labels, ext)
+        path = Path(out_dir) / f"{stem}.json"  # <out>/<split>/<stem>.json for a dataset in splits
+        path.parent.mkdir(exist_ok=True)
+        write_labels(path, labels, ext)
         return stem, "ok", (labels.count_by_set(), labels.count_by_set(visible_only=True), len(labels.rejected))
     except DataError as exc:
         return stem, "skipped", str(exc)
@@ -66,7 +68,7 @@ class LabelsJob(BatchJob):
 class _Tally:
     """What the run did, frame by frame (:meth:`add`), and its summary (:meth:`print`)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.totals: Counter[str] = Counter()
         self.visible: Counter[str] = Counter()
         self.n_ok = self.n_none = self.n_rejected = 0
@@ -164,7 +166,8 @@ def run_labels(args) -> int:
     size = tuple(getattr(args, "size", None) or DEFAULT_SIZE)
     stems, kept = list(ds.stems), 0
     if getattr(args, "resume", False):  # label files are written whole (atomically): one there is done
-        done = {p.stem for p in out_dir.glob("*.json")}
+        done = {p.relative_to(out_dir).with_suffix("").as_posix()
+                for p in [*out_dir.glob("*.json"), *out_dir.glob("*/*.json")]}
         kept = sum(s in done for s in stems)
         stems = [s for s in stems if s not in done]
         print(f"resuming: {kept} frames already labelled in {out_dir}, {len(stems)} to go")
@@ -175,4 +178,4 @@ def run_labels(args) -> int:
     if run.interrupted:
         return interrupted(kept + tally.n_ok, kept + len(stems), out_dir)
     tally.print(args.data, len(stems), out_dir)
-    return 1 if tally.failed or not tally.n_ok else 0
+    return 1 if tally.failed or not (tally.n_ok or kept) else 0  # a resumed job already done is a success

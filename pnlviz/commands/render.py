@@ -51,7 +51,7 @@ def run_render(args) -> int:
     else:
         ds = open_input_dataset(args.data)
         fps = args.fps or 25.0
-    cameras, problems = read_cameras(args.cameras, on_error=lambda line: None)
+    cameras, problems = read_cameras(args.cameras, on_error=lambda line: None, splits=ds.splits)
     print_skipped(problems)
     stems = [s for members in clips([s for s in ds.stems if ds.frame(s).has_image]).values() for s in members]
     if not stems:
@@ -97,7 +97,7 @@ def _render_frames(args, ds, cameras: dict, stems: list[str], fps: float, tmp) -
             continue
         h, w = img.shape[:2]
         if writer is None:
-            writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (w, h))
+            writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), (w, h))
             if not writer.isOpened():
                 print(f"error: OpenCV cannot write {args.out} (no mp4 encoder, or its folder cannot be written)",
                       file=sys.stderr)

@@ -38,7 +38,8 @@ def _run_sheet(args) -> int:
         raise OutputError(f"--out {args.out}", "the sheet must be a .png or .jpg file")
     check_output(args.out, inputs=[args.cameras], datasets=[args.data])
     ds = open_input_dataset(args.data)
-    cams = read_camera_zip(args.cameras, on_error=lambda e: print_skipped([e])) if args.cameras else {}
+    cams = (read_camera_zip(args.cameras, on_error=lambda e: print_skipped([e]), splits=ds.splits)
+            if args.cameras else {})
     tiles = []
     for stem in ds.stems[: args.n]:
         frame = ds.frame(stem)

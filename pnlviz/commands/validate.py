@@ -23,7 +23,7 @@ def _run_validate(args) -> int:
 
     from tqdm import tqdm
 
-    from pnlviz.data import DataError, open_dataset
+    from pnlviz.data import DataError, SplitDataset, open_dataset
 
     ds = open_dataset(args.data)
     classes: Counter[str] = Counter()
@@ -33,7 +33,7 @@ def _run_validate(args) -> int:
         frame = ds.frame(stem)
         if frame.has_annotation:
             try:
-                classes.update(ds.annotation(stem).keys())
+                classes.update((ds.annotation(stem) or {}).keys())  # has_annotation: never None
                 n_ann += 1
             except DataError as exc:
                 problems.append(str(exc))
@@ -50,6 +50,8 @@ def _run_validate(args) -> int:
         print_skipped(problems, prefix="")
         ds.require_frames()
     print(f"{args.data}: {len(ds)} frames, {n_ann} valid annotations, {n_img} images, {n_cam} valid cameras")
+    for split, part in (ds.parts.items() if isinstance(ds, SplitDataset) else ()):
+        print(f"  split {split}: {len(part)} frames ({part.path.name}{'' if part.is_zip else '/'})")
     for name, count in sorted(classes.items(), key=lambda kv: -kv[1]):
         print(f"  {count:7d}  {name}")
     if problems:

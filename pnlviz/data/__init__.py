@@ -28,7 +28,8 @@ from .cameras import (
     write_camera_json,
     write_camera_zip,
 )
-from .dataset import IMAGE_EXTENSIONS, Dataset, Frame, decode_image, open_dataset
+from .dataset import IMAGE_EXTENSIONS, Dataset, Frame, decode_image
+from .splits import SplitDataset, open_dataset
 from .errors import DataError
 from .homographies import parse_homographies, read_homographies, write_homographies
 from .layout import natural_key, sort_stems
@@ -77,6 +78,7 @@ __all__ = [
     "from_pixels",
     "natural_key",
     "open_dataset",
+    "SplitDataset",
     "parse_annotation",
     "parse_annotation_bytes",
     "parse_homographies",

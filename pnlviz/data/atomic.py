@@ -44,6 +44,7 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb", encoding: str | None 
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        f: IO
         if mode == "w":
             f = os.fdopen(fd, "w", encoding=encoding or "utf-8", newline="")
         else:

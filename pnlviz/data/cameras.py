@@ -10,15 +10,15 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from pathlib import Path
 from typing import Any
 
 from .atomic import atomic_write_text
 from .errors import DataError, member_source
 from .jsonio import as_number, describe, dumps, parse_json_bytes, read_file_bytes, to_jsonable
-from .layout import is_junk, natural_key, sort_stems, split_member
-from .reading import bad_name_error, is_utf8, open_zip, read_file, read_zip_member
+from .layout import keyed_members, member_name, natural_key, sort_stems
+from .reading import frame_files, open_zip, read_file, read_zip_member
 from .zipwriter import ZipStream
 
 __all__ = [
@@ -55,8 +55,9 @@ _CAMERA_NAME = re.compile(r"camera_(.+)\.json")
 
 
 def camera_member_name(stem: str) -> str:
-    """File name of the camera of annotation ``<stem>.json``: ``camera_<stem>.json``."""
-    return f"camera_{stem}.json"
+    """File name of the camera of annotation ``<stem>.json``: ``camera_<stem>.json``; in the
+    split's folder for a frame of a dataset in splits (``valid/camera_00042.json``)."""
+    return member_name(stem, lambda base: f"camera_{base}.json")
 
 
 def camera_stem(name: str) -> str | None:
@@ -149,37 +150,34 @@ def write_camera_json(path: str | os.PathLike, camera: Mapping) -> None:
     atomic_write_text(path, _camera_text(camera, os.fspath(path)))
 
 
-def _camera_members(zf, zpath: str) -> dict[str, str]:
-    """``{stem: member}`` of the cameras of an open zip (DataError for duplicates or several folders)."""
+def _camera_members(zf, zpath: str, splits: Collection[str]) -> dict[str, str]:
+    """``{stem: member}`` of the cameras of an open zip (DataError for duplicates or stray folders)."""
+    def refuse(err: DataError) -> None:
+        raise err
+
+    members, problem = keyed_members(frame_files(zpath, zf, camera_stem, refuse), splits)
+    if problem:
+        raise DataError(zpath, f"camera {problem}")
     found: dict[str, str] = {}
-    folders = set()
-    for name in zf.namelist():
-        if is_junk(name):
-            continue
-        prefix, base = split_member(name)
-        stem = camera_stem(base)
-        if stem is None:
-            continue
+    for stem, name in members:
         if stem in found:
             raise DataError(zpath, f"camera of frame {stem!r} appears twice ({found[stem]!r} and {name!r})")
         found[stem] = name
-        folders.add(prefix)
-    if len(folders) > 1:
-        listed = ", ".join(repr(f or "/") for f in sorted(folders)[:3])
-        raise DataError(zpath, f"camera files are spread over several folders ({listed}); expected one flat folder")
     return found
 
 
-def read_camera_zip(path: str | os.PathLike, on_error: Callable[[DataError], Any] | None = None) -> dict[str, dict]:
+def read_camera_zip(path: str | os.PathLike, on_error: Callable[[DataError], Any] | None = None,
+                    splits: Collection[str] = ()) -> dict[str, dict]:
     """Read a zip of ``camera_<stem>.json`` files -> ``{stem: camera dict}`` in natural order.
 
     The files are normally at the top level; one folder level (all cameras in the same folder)
-    is accepted too. Other members are ignored. Each camera is validated. A camera that cannot
+    is accepted too, and split folders (``valid/camera_00042.json`` is frame ``valid/00042``;
+    ``splits``, the dataset's, names them when only one is there). Other members are ignored. Each camera is validated. A camera that cannot
     be read or validated raises DataError, or with ``on_error`` is passed to it and skipped.
     """
     zpath = os.fspath(path)
     with open_zip(path) as zf:
-        found = _camera_members(zf, zpath)
+        found = _camera_members(zf, zpath, splits)
         out: dict[str, dict] = {}
         for stem in sort_stems(found):
             source = member_source(zpath, found[stem])
@@ -210,52 +208,24 @@ def write_camera_zip(path: str | os.PathLike, cameras: Mapping[str, Mapping]) ->
             zs.add(name, text)
 
 
-def _camera_files(path: Path, zf, problems: list[str]) -> dict[str, list[tuple[str, str]]]:
-    """``{folder prefix: [(stem, member or file path)]}`` of the cameras of a zip or a folder."""
-    found: dict[str, list[tuple[str, str]]] = {}
-    if zf is None:
-        for p in sorted(path.iterdir()):
-            stem = camera_stem(p.name)
-            if stem is None or not p.is_file():
-                continue
-            if is_utf8(stem):
-                found.setdefault("", []).append((stem, os.fspath(p)))
-            else:
-                problems.append(str(bad_name_error(os.fspath(p))))
-        return found
-    for name in zf.namelist():
-        if is_junk(name):
-            continue
-        prefix, base = split_member(name)
-        stem = camera_stem(base)
-        if stem is not None:
-            found.setdefault(prefix, []).append((stem, name))
-    return found
-
-
-def read_cameras(path: str | os.PathLike, on_error: Callable[[str], Any] | None = None) -> tuple[dict[str, dict], list[str]]:
+def read_cameras(path: str | os.PathLike, on_error: Callable[[str], Any] | None = None,
+                 splits: Collection[str] = ()) -> tuple[dict[str, dict], list[str]]:
     """Read a zip (or folder) of ``camera_<stem>.json`` leniently -> ``({stem: dict}, problems)``.
 
     Unlike :func:`read_camera_zip`, a camera that cannot be read or validated (or
     whose file name is not valid UTF-8) is skipped with a one-line problem (``on_error(line)`` is
     called too) instead of failing the whole archive. Files at the top level are used; if there
-    are none, one folder level is accepted. A problem with the archive itself raises
-    :class:`DataError`.
+    are none, one folder level, or split folders (as :func:`read_camera_zip`). A problem with the
+    archive itself raises :class:`DataError`.
     """
     path = Path(path)
     problems: list[str] = []
     zf = None if path.is_dir() else open_zip(path)
     try:
-        found = _camera_files(path, zf, problems)
-        if "" in found:
-            members = found[""]
-        elif len(found) == 1:
-            members = next(iter(found.values()))
-        else:
-            members = []
-            if found:
-                problems.append(f"{os.fspath(path)}: camera files are spread over several folders "
-                                f"({', '.join(sorted(found)[:3])}); none used")
+        found = frame_files(path, zf, camera_stem, lambda err: problems.append(str(err)))
+        members, problem = keyed_members(found, splits)
+        if problem:
+            problems.append(f"{os.fspath(path)}: camera {problem}")
         by_stem: dict[str, dict] = {}
         for stem, member in members:
             source = member_source(path, member) if zf else member

@@ -47,10 +47,11 @@ from .index import CAMERAS_DIR, IMAGE_EXTENSIONS, MATCH_INFO, index_folder, inde
 from .layout import sort_stems
 from .reading import bad_name_error, is_utf8, limit_for, open_file, open_zip, read_file, read_zip_member, zip_member
 
-__all__ = ["Frame", "Dataset", "open_dataset", "IMAGE_EXTENSIONS"]
+__all__ = ["Frame", "Dataset", "IMAGE_EXTENSIONS"]
 
 #: The message of a dataset without a single frame.
-NO_FRAMES = "no frames (expected <stem>.jpg/.png/.json at the top level or inside one folder)"
+NO_FRAMES = (
+    "no frames (expected <stem>.jpg/.png/.json at the top level, inside one folder, or in split folders or zips)")
 
 
 @dataclass(frozen=True)
@@ -82,7 +83,8 @@ class Frame:
 class Dataset:
     """Lazily indexed frames of a folder or zip; see the module docstring.
 
-    Use :func:`open_dataset` to create one. ``len(ds)``, ``ds.stems`` (natural order),
+    Use :func:`pnlviz.data.open_dataset` to create one (``root``: for a zip, the member prefix
+    of its frames, found when None). ``len(ds)``, ``ds.stems`` (natural order),
     ``ds.frame(stem)``, ``ds.annotation(stem)``, ``ds.image(stem)``, ``ds.image_size(stem)``,
     ``ds.camera_dict(stem)``, ``ds.camera_stems()``, ``ds.match_info``,
     ``ds.iter_annotations(on_error=...)``, ``ds.rejected`` (files not used, one DataError each),
@@ -90,7 +92,11 @@ class Dataset:
     :class:`DataError`.
     """
 
-    def __init__(self, path: str | os.PathLike, cache_size: int = 64):
+    #: The splits of a dataset in split folders or zips (:class:`pnlviz.data.splits.SplitDataset`);
+    #: ``()`` for a plain one.
+    splits: tuple[str, ...] = ()
+
+    def __init__(self, path: str | os.PathLike, cache_size: int = 64, root: str | None = None):
         self.path = Path(path)
         self.cache_size = cache_size
         #: ``(stem, DataError)`` of the frames the last :meth:`iter_annotations` skipped.
@@ -108,7 +114,7 @@ class Dataset:
         self.is_zip = not self.path.is_dir()
         if self.is_zip:
             self._zf = open_zip(self.path, not_zip="not a folder or a valid .zip archive")
-            self._index = index_zip(self.path, self._zf)
+            self._index = index_zip(self.path, self._zf, root)
         else:
             self._index = index_folder(self.path)
         self.rejected = self._index.rejected
@@ -239,6 +245,7 @@ class Dataset:
                 if on_error is not None:
                     on_error(stem, err)
                 continue
+            assert ann is not None  # the frame has an annotation file
             yield stem, ann
 
     # ------------------------------------------------------------------ images
@@ -282,7 +289,7 @@ class Dataset:
         not the dataset has that frame. A name that is not valid UTF-8 goes to :attr:`rejected`."""
         if self._camera_stems is None:
             if self.is_zip:
-                names = self._index.camera_members
+                names = self._index.camera_members or set()  # a zip's index has them
             else:
                 folder = self._index.path(CAMERAS_DIR)
                 names = set(os.listdir(folder)) if os.path.isdir(folder) else set()
@@ -309,7 +316,7 @@ class Dataset:
         """The ground-truth camera ``cameras/camera_<stem>.json`` (raw dict, validated), or None."""
         base = camera_member_name(stem)
         name = self._camera_path(base)
-        present = base in self._index.camera_members if self.is_zip else os.path.isfile(name)
+        present = base in (self._index.camera_members or ()) if self.is_zip else os.path.isfile(name)
         if not present:
             return None
         return parse_camera_bytes(self._read(name), self._source(name))
@@ -319,7 +326,7 @@ class Dataset:
         """The content of ``match_info.json`` (a dict), or None when the dataset has none."""
         if self._match_info is ...:
             name = self._index.path(MATCH_INFO)
-            present = name in self._index.members if self.is_zip else os.path.isfile(name)
+            present = name in (self._index.members or ()) if self.is_zip else os.path.isfile(name)
             info = None
             if present:
                 source = self._source(name)
@@ -343,8 +350,3 @@ def decode_image(data: bytes, source: str) -> np.ndarray:
     if img is None or img.size == 0:
         raise DataError(source, "corrupt image: OpenCV cannot decode it (corrupt or unsupported format)")
     return img
-
-
-def open_dataset(path: str | os.PathLike, cache_size: int = 64) -> Dataset:
-    """Open a folder or ``.zip`` dataset (lazy index; see :class:`Dataset`)."""
-    return Dataset(path, cache_size=cache_size)

@@ -9,6 +9,7 @@ Layout::
                                          "snapshot": {what was on screen when reviewed},
                                          "updated": <unix time>}
         a step: the fields one user action changed, as they were before it ({"review": null, ...})
+    <edits>/frames/<split>/<stem>.json  the same, for a frame of a dataset in splits (stem "<split>/<stem>")
     <edits>/frames/<stem>.json.damaged  a file that failed validation, moved aside (kept, never deleted)
     <edits>/lock                        held by the one process writing here (its pid and URL inside)
 
@@ -100,8 +101,8 @@ def validate_keypoint(kid: Any, value: Any, source: str) -> tuple[str, list[floa
         return str(int(text)), None
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise DataError(source, f"keypoint {text}: expected [x, y] or null, got {describe(value)}")
-    xy = [as_number(v) for v in value]
-    if any(v is None or not math.isfinite(v) or abs(v) > MAX_COORDINATE for v in xy):
+    xy = [v for v in (as_number(v) for v in value) if v is not None and math.isfinite(v) and abs(v) <= MAX_COORDINATE]
+    if len(xy) != 2:
         raise DataError(source, f"keypoint {text}: [x, y] must be two finite pixel coordinates, got {value!r:.60}")
     return str(int(text)), xy
 
@@ -242,7 +243,7 @@ class EditsStore:
         self._cache: dict[str, dict] = {}
         self._locks: dict[str, threading.RLock] = {}
         self._locks_lock = threading.Lock()
-        self._lock_file = None
+        self._lock_file: int | None = None
         #: stem -> (merge key, time, undo steps) of the frame's last action that named a merge key
         self._merging: dict[str, tuple[object, float, int]] = {}
         if writable:
@@ -284,7 +285,7 @@ class EditsStore:
 
     def _remove_leftovers(self) -> None:
         """Temporary files of writes that a crash interrupted (``.<name>.<random>.tmp``)."""
-        for p in self.frames.glob(".*.tmp"):
+        for p in [*self.frames.glob(".*.tmp"), *self.frames.glob("*/.*.tmp")]:
             with contextlib.suppress(OSError):
                 p.unlink()
 
@@ -304,14 +305,14 @@ class EditsStore:
     def _load(self) -> None:
         if not self.frames.is_dir():
             return
-        for p in sorted(self.frames.glob("*.json")):
+        for p in sorted([*self.frames.glob("*.json"), *self.frames.glob("*/*.json")]):  # */: split folders
             try:
                 data = read_file(p)  # capped; a FIFO or a device is refused, never read
                 rec = validate_record(json.loads(data), str(p))
             except (OSError, ValueError, RecursionError) as exc:  # DataError and JSONDecodeError are ValueErrors
                 self._damaged(p, exc)
                 continue
-            self._cache[p.stem] = rec
+            self._cache[p.relative_to(self.frames).with_suffix("").as_posix()] = rec
 
     def _damaged(self, path: Path, exc: Exception) -> None:
         reason = exc.problem if isinstance(exc, DataError) else str(exc) or type(exc).__name__
@@ -384,8 +385,10 @@ class EditsStore:
             yield rec
             rec = {k: v for k, v in rec.items() if v is not None and k in FIELDS}
             rec["updated"] = time.time()
-            rec = validate_record(rec, f"{self.frames / stem}.json", self._checked_steps(stem))
-            atomic_write_text(self.frames / f"{stem}.json", _record_text(rec))
+            path = self.frames / f"{stem}.json"  # a split's frame: frames/<split>/<stem>.json
+            rec = validate_record(rec, str(path), self._checked_steps(stem))
+            path.parent.mkdir(exist_ok=True)
+            atomic_write_text(path, _record_text(rec))
             self._cache[stem] = rec
 
     def update(self, stem: str, **changes) -> dict:

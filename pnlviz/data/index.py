@@ -121,8 +121,10 @@ def index_folder(path: Path) -> DatasetIndex:
     return index
 
 
-def index_zip(path: Path, zf: zipfile.ZipFile) -> DatasetIndex:
-    """The frames of an open zip: at its top level, or inside its single top-level folder."""
+def index_zip(path: Path, zf: zipfile.ZipFile, root: str | None = None) -> DatasetIndex:
+    """The frames of an open zip: at its top level, or inside its single top-level folder; or,
+    with ``root`` (a member prefix such as ``"valid/"``), the frames in that folder (one split of
+    a zip holding several, :mod:`pnlviz.data.splits`)."""
     index = DatasetIndex(Path(path), "")
     names, seen = [], set()
     for n in zf.namelist():
@@ -134,7 +136,7 @@ def index_zip(path: Path, zf: zipfile.ZipFile) -> DatasetIndex:
         seen.add(n)
         names.append(n)
     candidates = [n for n in names if n.split("/", 1)[0] != CAMERAS_DIR]
-    index.root = find_root(candidates, lambda b: classify(b) is not None)
+    index.root = find_root(candidates, lambda b: classify(b) is not None) if root is None else root
     index.members, index.camera_members = set(names), set()
     cam_prefix = index.root + CAMERAS_DIR + "/"
     files = []

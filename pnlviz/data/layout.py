@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Collection, Iterable
 
-__all__ = ["clips", "clip_key", "natural_key", "sort_stems", "split_member", "find_root"]
+__all__ = ["clips", "clip_key", "natural_key", "sort_stems", "split_member", "find_root", "split_stem", "join_stem",
+           "member_name", "keyed_members"]
 
 _DIGITS = re.compile(r"([0-9]+)")
 
@@ -37,8 +38,8 @@ def clip_key(stem: str) -> tuple[str, int]:
     m = _FRAME_NUMBER.match(stem)
     if m is None:
         return stem, 0
-    prefix = m.group(1).rstrip("-_. ")
-    prefix = _FRAME_WORD.sub("", prefix).rstrip("-_. ")
+    prefix = m.group(1).rstrip("-_. /")  # "/": a split's frames (valid/00042) are the clip "valid"
+    prefix = _FRAME_WORD.sub("", prefix).rstrip("-_. /")
     return prefix, int(m.group(2))
 
 
@@ -82,3 +83,64 @@ def find_root(names: Iterable[str], is_wanted) -> str:
     if len(top_dirs) == 1:
         return top_dirs.pop()
     return ""
+
+
+# -- stems of datasets in splits (pnlviz.data.splits) ---------------------------------------------
+def split_stem(stem: str) -> tuple[str, str]:
+    """``"valid/00042"`` -> ``("valid", "00042")``; a plain stem -> ``("", stem)``."""
+    split, _, base = stem.rpartition("/")
+    return split, base
+
+
+def join_stem(split: str, stem: str) -> str:
+    """``("valid", "00042")`` -> ``"valid/00042"``; no split -> the stem."""
+    return f"{split}/{stem}" if split else stem
+
+
+def member_name(stem: str, name_of: Callable[[str], str]) -> str:
+    """The name of a per-frame output file: ``name_of(base)`` under the split's folder
+    (``member_name("valid/00042", lambda s: f"camera_{s}.json")`` -> ``"valid/camera_00042.json"``)."""
+    split, base = split_stem(stem)
+    return join_stem(split, name_of(base))
+
+
+def _last(prefix: str) -> str:
+    return prefix.rstrip("/").rpartition("/")[2]
+
+
+def keyed_members(found: dict[str, list[tuple[str, str]]],
+                  splits: Collection[str] = ()) -> tuple[list[tuple[str, str]], str | None]:
+    """Which per-frame files of an output (a camera zip, a prediction zip or folder) are used, and
+    the frame stem of each. ``found``: ``{folder prefix: [(stem, name)]}``, the prefix ``""``,
+    ``"a/"`` or ``"a/b/"``. Returns ``([(stem, name)], problem or None)``:
+
+    * files at the top level give their stems;
+    * files in a folder named after one of ``splits`` (the dataset's) give ``"<split>/<stem>"``;
+    * with no file at the top level: the files of a single folder give their stems (a zip of a
+      folder), and files in several folders side by side give ``"<folder>/<stem>"`` (the output
+      of a dataset in splits, :mod:`pnlviz.data.splits`);
+    * other files are not used, and ``problem`` says where they are.
+    """
+    used = list(found.get("", []))
+    folders = sorted(p for p in found if p)
+    if splits:
+        named = [p for p in folders if _last(p) in splits]
+        used += [(join_stem(_last(p), s), n) for p in named for s, n in found[p]]
+        folders = [p for p in folders if p not in named]
+        if used:
+            return used, _unused(folders)
+    elif used:
+        return used, _unused(folders)
+    if len(folders) == 1:
+        return list(found[folders[0]]), None
+    parents = {p.rstrip("/").rpartition("/")[0] for p in folders}
+    if folders and len(parents) == 1 and len({_last(p) for p in folders}) == len(folders):
+        return [(join_stem(_last(p), s), n) for p in folders for s, n in found[p]], None
+    return [], _unused(folders)
+
+
+def _unused(folders: list[str]) -> str | None:
+    if not folders:
+        return None
+    listed = ", ".join(repr(f) for f in folders[:3]) + (", ..." if len(folders) > 3 else "")
+    return f"files in other folders are not used ({listed}): expected them at the top level or in split folders"

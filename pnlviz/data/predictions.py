@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,8 +25,8 @@ import numpy as np
 from .atomic import atomic_open
 from .errors import DataError, member_source
 from .jsonio import as_number, describe, dumps, parse_json_bytes, read_file_bytes
-from .layout import find_root, is_junk, natural_key, sort_stems, split_member
-from .reading import bad_name_error, is_utf8, open_zip, read_zip_member
+from .layout import keyed_members, natural_key, sort_stems
+from .reading import frame_files, open_zip, read_zip_member
 from .zipwriter import ZipStream
 
 __all__ = [
@@ -83,7 +83,8 @@ class Predictions:
     def points_px(self, width: float, height: float) -> dict[tuple, tuple[float, float]]:
         """Every detected point in pixels, keyed ``("kp", id)`` for keypoints and ``("line", id,
         1 | 2)`` for line ends: two detections of a frame compare point by point."""
-        pts = {("kp", k): (x, y) for k, (x, y, _) in self.keypoints_px(width, height).items()}
+        pts: dict[tuple, tuple[float, float]] = {("kp", k): (x, y)
+                                                 for k, (x, y, _) in self.keypoints_px(width, height).items()}
         for k, (x1, y1, _, x2, y2, _) in self.lines_px(width, height).items():
             pts[("line", k, 1)], pts[("line", k, 2)] = (x1, y1), (x2, y2)
         return pts
@@ -179,33 +180,15 @@ def _is_frame_json(base: str) -> bool:
     return base.endswith(".json") and base != "match_info.json" and len(base) > 5
 
 
-def _folder_members(folder: Path, fail: Callable[[DataError], None]) -> dict[str, str]:
-    """``{stem: path}`` of the ``<stem>.json`` files of a folder (names not valid UTF-8 rejected)."""
-    members = {}
-    for e in os.scandir(folder):
-        if not (e.is_file() and not is_junk(e.name) and _is_frame_json(e.name)):
-            continue
-        if is_utf8(e.name):
-            members[e.name[:-5]] = e.path
-        else:
-            fail(bad_name_error(e.path))
-    return members
+def _frame_stem(base: str) -> str | None:
+    return base[:-5] if _is_frame_json(base) else None
 
 
-def _zip_members(zf) -> dict[str, str]:
-    names = [n for n in zf.namelist() if not is_junk(n)]
-    root = find_root(names, _is_frame_json)
-    members = {}
-    for n in names:
-        prefix, base = split_member(n)
-        if prefix == root and _is_frame_json(base):
-            members[base[:-5]] = n
-    return members
-
-
-def read_predictions(path: str | os.PathLike,
-                     on_error: Callable[[DataError], Any] | None = None) -> dict[str, Predictions]:
-    """Read a prediction zip (flat, or all files in one folder) or a folder of ``<stem>.json``.
+def read_predictions(path: str | os.PathLike, on_error: Callable[[DataError], Any] | None = None,
+                     splits: Collection[str] = ()) -> dict[str, Predictions]:
+    """Read a prediction zip or folder of ``<stem>.json`` (flat, all in one folder, or in split
+    folders: ``valid/00042.json`` is frame ``valid/00042``; ``splits``, the dataset's, names them
+    when only one is there; :func:`pnlviz.data.layout.keyed_members`).
 
     Returns ``{stem: Predictions}`` in natural stem order. A frame file that cannot be read or
     validated (or whose name is not valid UTF-8) raises DataError, or with ``on_error`` is passed
@@ -218,23 +201,20 @@ def read_predictions(path: str | os.PathLike,
 
     p = Path(path)
     out: dict[str, Predictions] = {}
-    if p.is_dir():
-        members = _folder_members(p, fail)
+    zf = None if p.is_dir() else open_zip(p)
+    try:
+        members = dict(keyed_members(frame_files(p, zf, _frame_stem, fail), splits)[0])
         for stem in sort_stems(members):
+            name = members[stem]
+            source = member_source(os.fspath(p), name) if zf is not None else name
             try:
-                out[stem] = parse_predictions_bytes(read_file_bytes(members[stem]), members[stem])
+                data = read_zip_member(zf, name, source) if zf is not None else read_file_bytes(name)
+                out[stem] = parse_predictions_bytes(data, source)
             except DataError as err:
                 fail(err)
-        return out
-    zpath = os.fspath(p)
-    with open_zip(p) as zf:
-        members = _zip_members(zf)
-        for stem in sort_stems(members):
-            source = member_source(zpath, members[stem])
-            try:
-                out[stem] = parse_predictions_bytes(read_zip_member(zf, members[stem], source), source)
-            except DataError as err:
-                fail(err)
+    finally:
+        if zf is not None:
+            zf.close()
     return out
 
 

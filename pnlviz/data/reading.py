@@ -13,14 +13,16 @@ import contextlib
 import os
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import IO
 
 from .errors import DataError
 from .filekind import open_regular, require_input
+from .layout import is_junk, split_member
 from .limits import MAX_IMAGE_BYTES, MAX_JSON_BYTES, format_bytes
 
 __all__ = [
+    "frame_files",
     "ZIP_MEMBER_ERRORS", "open_zip", "zip_member", "read_zip_member", "open_file", "read_file",
     "limit_for", "is_utf8", "bad_name_error",
 ]
@@ -125,3 +127,43 @@ def read_file(path: str | os.PathLike, limit: int = MAX_JSON_BYTES, source: str 
     if len(data) > limit:
         raise _too_large(source, len(data), limit)
     return data
+
+
+def frame_files(path: str | os.PathLike, zf: zipfile.ZipFile | None, stem_of: Callable[[str], str | None],
+                rejected: Callable[[DataError], None]) -> dict[str, list[tuple[str, str]]]:
+    """The per-frame files of an output zip (``zf``) or folder (``path``), grouped by folder:
+    ``{prefix: [(stem, member name or file path)]}`` for the names ``stem_of`` gives a stem
+    (prefixes ``""``, ``"a/"``, ``"a/b/"``: three levels at most). Junk names are skipped; a
+    folder's file whose name is not valid UTF-8 goes to ``rejected``. For
+    :func:`pnlviz.data.layout.keyed_members`."""
+    found: dict[str, list[tuple[str, str]]] = {}
+
+    def add(prefix: str, base: str, name: str) -> None:
+        stem = stem_of(base)
+        if stem is not None:
+            found.setdefault(prefix, []).append((stem, name))
+
+    if zf is not None:
+        for name in zf.namelist():
+            prefix, base = split_member(name)
+            if not is_junk(name) and prefix.count("/") <= 2:
+                add(prefix, base, name)
+        return found
+
+    def walk(folder: str, prefix: str) -> None:
+        with os.scandir(folder) as it:
+            entries = sorted(it, key=lambda e: e.name)
+        for e in entries:
+            if is_junk(e.name):
+                continue
+            if not is_utf8(e.name):
+                if stem_of(e.name) is not None:
+                    rejected(bad_name_error(e.path))
+            elif e.is_dir():
+                if prefix.count("/") < 2:
+                    walk(e.path, f"{prefix}{e.name}/")
+            elif e.is_file():
+                add(prefix, e.name, e.path)
+
+    walk(os.fspath(path), "")
+    return found

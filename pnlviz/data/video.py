@@ -10,11 +10,15 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .dataset import Frame
 from .errors import DataError
+
+if TYPE_CHECKING:  # imported when a frame is read
+    import cv2
 
 __all__ = ["VIDEO_SUFFIXES", "VideoDataset", "is_video"]
 
@@ -26,6 +30,7 @@ def is_video(path: str | os.PathLike) -> bool:
     """A file (not a folder or a zip of frames) whose name ends as a video's."""
     p = Path(path)
     return p.suffix.lower() in VIDEO_SUFFIXES and not p.is_dir()
+
 
 #: First bytes of still images: a JPEG or PNG named .mp4 is not a clip.
 _STILL_IMAGES = {b"\xff\xd8\xff": "a JPEG image", b"\x89PNG": "a PNG image", b"GIF8": "a GIF image",
@@ -74,6 +79,8 @@ class VideoDataset:
     """The frames of one video file, with the part of :class:`pnlviz.data.Dataset`'s interface the
     batch commands use (stems, frames, images, sizes; no annotations)."""
 
+    splits: tuple[str, ...] = ()  # one video is one split
+
     def __init__(self, path: str | os.PathLike):
         import cv2
 
@@ -99,7 +106,7 @@ class VideoDataset:
         self.name = self.path.stem
         self._stems = tuple(f"{self.name}-IMG_{i + 1:05d}" for i in range(count))
         self._index = {s: i for i, s in enumerate(self._stems)}
-        self._cap = None
+        self._cap: cv2.VideoCapture | None = None
         self._next = 0
         self.rejected: list = []
 

@@ -198,10 +198,12 @@ class ZipStream(_TempOutput):
         return self.path
 
     def _reorder(self) -> None:
+        key = self.key
+        assert key is not None  # close reorders only with a key
         tmp = self._new_temp()
         try:
             with zipfile.ZipFile(self._tmp) as src, zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as dst:
-                for info in sorted(src.infolist(), key=lambda i: self.key(i.filename)):
+                for info in sorted(src.infolist(), key=lambda i: key(i.filename)):
                     copy = zipfile.ZipInfo(info.filename, date_time=info.date_time)
                     copy.compress_type, copy.external_attr = info.compress_type, info.external_attr
                     dst.writestr(copy, src.read(info))

@@ -17,7 +17,7 @@ import shutil
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import torch
 from torch import nn
@@ -136,12 +136,15 @@ def _mismatch_message(model: nn.Module, state: Mapping[str, torch.Tensor], label
     return message
 
 
+ModuleT = TypeVar("ModuleT", bound=nn.Module)
+
+
 def load_checkpoint(
-    model: nn.Module,
+    model: ModuleT,
     path_or_state_dict: str | os.PathLike[str] | Mapping[str, Any],
     *,
     weights_only: bool = True,
-) -> nn.Module:
+) -> ModuleT:
     """Load weights into ``model`` strictly and return it.
 
     ``path_or_state_dict`` is a file written by ``torch.save`` or an in-memory

@@ -44,7 +44,7 @@ multiples of 32 (e.g. 960x540) work.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, cast
 
 import torch
 import torch.nn.functional as F
@@ -146,7 +146,8 @@ class HighResolutionModule(nn.Module):
                 if j > i:  # lower resolution -> 1x1 conv + BN, upsampled bilinearly in forward
                     row.append(nn.Sequential(nn.Conv2d(wj, wi, kernel_size=1, bias=False), _bn(wi)))
                 elif j == i:
-                    row.append(None)
+                    # torch types the items as modules; None (nothing to fuse) keeps the checkpoint's indices
+                    row.append(None)  # type: ignore[arg-type]
                 else:  # higher resolution -> (i - j) strided 3x3 convs
                     steps = [_conv_bn_relu(wj, wj, 2) for _ in range(i - j - 1)]
                     steps.append(_conv_bn_relu(wj, wi, 2, relu=False))
@@ -158,7 +159,7 @@ class HighResolutionModule(nn.Module):
         out = []
         for i, row in enumerate(self.fuse_layers):
             y = xs[i]
-            for j, f in enumerate(row):
+            for j, f in enumerate(cast(nn.ModuleList, row)):
                 if j == i:
                     continue
                 z = f(xs[j])
@@ -229,7 +230,8 @@ class PnLCalibNet(nn.Module):
         """Transition after ``stage``: identity for its branches, one new strided branch."""
         layers: list[nn.Module | None] = [None] * stage
         layers.append(nn.Sequential(_conv_bn_relu(WIDTHS[stage - 1], WIDTHS[stage], 2)))
-        return nn.ModuleList(layers)
+        # torch types the items as modules; None (the identity) keeps the checkpoint's indices
+        return nn.ModuleList(layers)  # type: ignore[arg-type]
 
     def features(self, x: torch.Tensor) -> torch.Tensor:
         """The 784-channel head input at half the input resolution."""

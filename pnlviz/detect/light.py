@@ -90,6 +90,13 @@ def _head(cin: int, cout: int) -> nn.Sequential:
     return nn.Sequential(_cbr(cin, HEAD_WIDTH), nn.Conv2d(HEAD_WIDTH, cout, 1))
 
 
+def _last_bias(head: nn.Sequential) -> torch.Tensor:
+    """The bias of a :func:`_head`'s output convolution."""
+    last = head[-1]
+    assert isinstance(last, nn.Conv2d) and last.bias is not None
+    return last.bias
+
+
 class LightNet(nn.Module):
     """Shared-trunk keypoint (58, softmax) + line (24, sigmoid) network at half resolution."""
 
@@ -114,10 +121,11 @@ class LightNet(nn.Module):
         self.line_head = _head(d[-1], LINE_CHANNELS)
         # Start from "nothing here" (each keypoint and line channel at p ~ 0.01), as focal-loss
         # detectors do: the loss then spends its first steps finding peaks, not emptying the maps.
+        kp_bias, line_bias = _last_bias(self.kp_head), _last_bias(self.line_head)
         with torch.no_grad():
-            self.kp_head[-1].bias.zero_()
-            self.kp_head[-1].bias[-1] = math.log(100.0 - (KEYPOINT_CHANNELS - 1))  # softmax: 1 / (43 + 57)
-            self.line_head[-1].bias.fill_(-math.log(99.0))
+            kp_bias.zero_()
+            kp_bias[-1] = math.log(100.0 - (KEYPOINT_CHANNELS - 1))  # softmax: 1 / (43 + 57)
+            line_bias.fill_(-math.log(99.0))
         self._cache: tuple | None = None
 
     # -- forward -----------------------------------------------------------------------------

@@ -277,7 +277,8 @@ def extract_lines(heatmaps, threshold=0.1, nms_kernel: int = 3, min_separation: 
     x, y = refine_peaks(a, chans, rows, cols, refine)
     out = {}
     for i in range(0, len(chans), 2):
-        out[chans[i] + 1] = tuple(float(v) for v in _order_pair(x[i], y[i], vals[i], x[i + 1], y[i + 1], vals[i + 1]))
+        x1, y1, p1, x2, y2, p2 = _order_pair(x[i], y[i], vals[i], x[i + 1], y[i + 1], vals[i + 1])
+        out[chans[i] + 1] = (float(x1), float(y1), float(p1), float(x2), float(y2), float(p2))
     return out
 
 

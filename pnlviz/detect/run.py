@@ -95,7 +95,8 @@ class Detector:
         """A detector running a :class:`pnlviz.detect.light.LightNet` (eval mode) for both heads."""
         net.eval()
         kw.setdefault("centre_aligned_resize", True)  # trained on frames rendered at its input size
-        return cls(net.kp_head_module(), net.line_head_module(), input_size=tuple(input_size), **kw)
+        w, h = input_size
+        return cls(net.kp_head_module(), net.line_head_module(), input_size=(w, h), **kw)
 
     def _tensor(self, images_bgr: list[np.ndarray]) -> torch.Tensor:
         W, H = self.input_size
@@ -110,7 +111,8 @@ class Detector:
         with torch.autocast(x.device.type, dtype=torch.float16, enabled=self.half):
             kp = self.kp_net(x) if self.kp_net is not None else None
             lines = self.line_net(x) if self.line_net is not None else None
-        return tuple(None if t is None else t.float().cpu().numpy() for t in (kp, lines))
+        return (None if kp is None else kp.float().cpu().numpy(),
+                None if lines is None else lines.float().cpu().numpy())
 
     def detect(self, images_bgr: list[np.ndarray]) -> list[Predictions]:
         """Detections of a batch of BGR frames, normalised (x_px = x W) for each frame's own size."""
@@ -174,7 +176,11 @@ def light_detector(weights: str | Path, input_size: tuple[int, int] | None = Non
     side = read_sidecar(weights)
     if input_size is None:
         size = side.get("input_size")
-        input_size = tuple(int(v) for v in size) if size else DEFAULT_INPUT_SIZE
+        if size:
+            w, h = (int(v) for v in size)
+            input_size = (w, h)
+        else:
+            input_size = DEFAULT_INPUT_SIZE
     tuned = {"kp_threshold": side.get("kp_threshold"), "line_threshold": side.get("line_threshold"),
              "refine": side.get("peak_refine"), "calibration": side.get("calibration")}
     for name, value in tuned.items():  # what the caller leaves at None comes from the sidecar

@@ -38,7 +38,8 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Callable
+from collections.abc import Sequence
+from typing import Any, Callable, Protocol
 
 import cv2
 import numpy as np
@@ -55,12 +56,27 @@ from pnlviz.detect.train_loss import augment, loss_fn
 __all__ = ["FrameCache", "Source", "TrainResult", "build_sources", "epoch_plan", "train", "write_sidecar"]
 
 
+class TrainFrames(Protocol):
+    """Frames to train on: :class:`FrameCache`, ``HomographyFrames``, ``AnnotatedFrames`` or
+    ``ExportedFrames`` (:mod:`pnlviz.detect.train_data`)."""
+
+    def __len__(self) -> int: ...
+
+    def sample(self, i: int, input_size: tuple[int, int], sigma: float = ..., view: View = ...) -> Any: ...
+
+
+def _pair(size: Sequence[int]) -> tuple[int, int]:
+    """A ``(W, H)`` size as a tuple (a ValueError unless it has two items)."""
+    w, h = size
+    return w, h
+
+
 @dataclass
 class Source:
     """One source of training frames, its share of an epoch and its augmentation overrides."""
 
     name: str
-    frames: object  # FrameCache | HomographyFrames | AnnotatedFrames | ExportedFrames
+    frames: TrainFrames
     weight: float
     augment: dict
 
@@ -88,10 +104,11 @@ def build_sources(config: TrainConfig, *, cache: "FrameCache | None" = None, cac
             raise ValueError(f"real source {k}: no 'path'")
         path = resolve_path(entry["path"], config.base_dir)
         exclude = [str(s) for s in entry.get("exclude", [])]
+        frames: TrainFrames
         if kind == "homography":
             hom = entry.get("homographies")
             frames = HomographyFrames(path, resolve_path(hom, config.base_dir) if hom else None,
-                                      source_size=tuple(entry.get("source_size", (1280, 720))), exclude=exclude)
+                                      source_size=_pair(entry.get("source_size", (1280, 720))), exclude=exclude)
         elif kind == "soccernet":
             frames = AnnotatedFrames(path, exclude=exclude)
         elif kind == "labels":
@@ -104,7 +121,7 @@ def build_sources(config: TrainConfig, *, cache: "FrameCache | None" = None, cac
                            {**base, **dict(entry.get("augment", {}))}))
     sources: list[Source] = []
     if cache is None and config.frames > 0:
-        cache = FrameCache(config.frames, config.data_seed, tuple(config.size), cache_dir, progress)
+        cache = FrameCache(config.frames, config.data_seed, _pair(config.size), cache_dir, progress)
     if cache is not None and len(cache):
         sources.append(Source(f"synthetic seed {config.data_seed}", cache, float(config.data_weight), base))
     sources += real
@@ -174,9 +191,13 @@ class FrameCache:
                     image = z["image"]
                     annotation = json.loads(str(z["annotation"]))
             else:
-                f = make_frame(i, seed, tuple(size))
+                f = make_frame(i, seed, _pair(size))
                 ok, jpg = cv2.imencode(".jpg", f["image"], [cv2.IMWRITE_JPEG_QUALITY, int(f["jpeg_quality"])])
-                image = cv2.imdecode(jpg, cv2.IMREAD_COLOR) if ok else f["image"]
+                image = f["image"]
+                if ok:
+                    decoded = cv2.imdecode(jpg, cv2.IMREAD_COLOR)
+                    assert decoded is not None  # what cv2 has just encoded
+                    image = decoded
                 annotation = f["annotation"]
                 if path is not None:
                     tmp = path.with_suffix(".tmp.npz")
@@ -295,7 +316,7 @@ def _train_loop(net: LightNet, sources: list[Source], config: TrainConfig, budge
     total_steps = max(1, steps_per_epoch * int(config.epochs))
     rng = np.random.default_rng(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
-    size = tuple(config.input_size)
+    size = _pair(config.input_size)
     run = _Run([], 0, False, 0.0, [], 0.0, bs)
     t0 = time.perf_counter()
     bar = tqdm(total=total_steps, desc="train", unit="step", disable=not progress)

@@ -178,7 +178,9 @@ def apply_view_image(img: np.ndarray, view: View, lines: list[np.ndarray] | None
     if view.jpeg is not None:
         ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(img), [cv2.IMWRITE_JPEG_QUALITY, int(view.jpeg)])
         if ok:
-            img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+            decoded = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+            assert decoded is not None  # what cv2 has just encoded
+            img = decoded
     return np.ascontiguousarray(img)
 
 
@@ -278,7 +280,7 @@ class HomographyFrames:
         skip = set(exclude or ())
         wanted = [s for s in (stems if stems is not None else gt) if s not in skip]
         self.source = str(folder)
-        self.source_size = tuple(int(v) for v in source_size)
+        self.source_size = (int(source_size[0]), int(source_size[1]))
         self.stems: list[str] = []
         self.homographies: list[np.ndarray] = []
         self.images: list[np.ndarray] = []
@@ -338,8 +340,9 @@ class AnnotatedFrames:
 
     def sample(self, i: int, input_size: tuple[int, int], sigma: float = 2.0, view: View = View()):
         stem = self.stems[i]
-        return annotation_example(self.dataset.image(stem), self.dataset.annotation(stem) or {}, input_size, sigma,
-                                  view)
+        image = self.dataset.image(stem)
+        assert image is not None  # the frames kept have an image
+        return annotation_example(image, self.dataset.annotation(stem) or {}, input_size, sigma, view)
 
 
 @functools.lru_cache(maxsize=4)
@@ -431,7 +434,9 @@ class ExportedFrames:
         from pnlviz.labels.types import KeypointLabel, KeypointLabels
 
         W, H = input_size
-        img = apply_view_image(_to_input(self.dataset.image(self.stems[i]), input_size), view)
+        image = self.dataset.image(self.stems[i])
+        assert image is not None  # the frames kept have an image
+        img = apply_view_image(_to_input(image, input_size), view)
         (w0, h0), points = self.keypoints[i]["size"], self.keypoints[i]["points"]
         # frame pixels -> input pixels (cv2.resize aligns pixel centres), then the view
         S = np.array([[W / w0, 0, 0.5 * W / w0 - 0.5], [0, H / h0, 0.5 * H / h0 - 0.5], [0, 0, 1.0]])

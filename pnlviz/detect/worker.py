@@ -17,6 +17,8 @@ import multiprocessing
 import os
 import threading
 import time
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
 from pathlib import Path
 
 from pnlviz.detect.default import DEFAULT_MODEL, read_sidecar
@@ -100,7 +102,8 @@ class DetectorProcess:
         #: the light model's checkpoint (its sidecar holds the calibration settings), else None
         self.light_weights = kw.get("light") or (DEFAULT_MODEL if weights_kp is None and weights_lines is None else None)
         self.light = self.light_weights is not None
-        self._proc = self._conn = None
+        self._proc: BaseProcess | None = None
+        self._conn: Connection | None = None
         self._lock = threading.Lock()
         self._calibration: dict | None = None
 
@@ -112,7 +115,7 @@ class DetectorProcess:
     def calibration(self) -> dict:
         """The calibration settings for these detections: the light model's sidecar (read here,
         without torch), else what the child reported on :meth:`load` ({} before)."""
-        if self.light:
+        if self.light_weights is not None:  # self.light
             return dict(read_sidecar(self.light_weights).get("calibration") or {})
         return dict(self._calibration or {})
 
@@ -129,6 +132,7 @@ class DetectorProcess:
             if not self.started:
                 self._start()
             proc, conn = self._proc, self._conn
+            assert proc is not None and conn is not None  # started above
             try:
                 conn.send((kind, payload))
                 while not conn.poll(0.5):
@@ -166,7 +170,7 @@ class DetectorProcess:
         """End the child: it finishes the frame it is on, if any, for at most two seconds."""
         proc, conn = self._proc, self._conn
         self._proc = self._conn = None
-        if proc is None:
+        if proc is None or conn is None:  # never started (the two are set together)
             return
         if self._lock.acquire(timeout=0.5):  # not while a request is being sent on the pipe
             try:

@@ -13,6 +13,13 @@ import trimesh
 from pnlviz.field.model import FieldModel, load_field_model
 
 
+def _concatenate(parts: list[trimesh.Trimesh]) -> trimesh.Trimesh:
+    """One mesh of ``parts`` (trimesh types the result as any geometry; meshes give a mesh)."""
+    mesh = trimesh.util.concatenate(parts)
+    assert isinstance(mesh, trimesh.Trimesh)
+    return mesh
+
+
 def _ribbon(points: np.ndarray, width: float, z: float) -> trimesh.Trimesh:
     """Flat strip of ``width`` centred on a 2D polyline (N, 2) at height ``z``."""
     p = np.asarray(points, float)[:, :2]
@@ -62,7 +69,7 @@ def markings_mesh(model: FieldModel | None = None, lift: float = 0.005) -> trime
         disc = trimesh.creation.cylinder(radius=0.11, height=0.001, sections=16)
         disc.apply_translation([x, y, -lift])
         parts.append(disc)
-    return trimesh.util.concatenate(parts)
+    return _concatenate(parts)
 
 
 def goals_mesh(model: FieldModel | None = None, post_radius: float = 0.06) -> trimesh.Trimesh:
@@ -70,7 +77,7 @@ def goals_mesh(model: FieldModel | None = None, post_radius: float = 0.06) -> tr
     model = model or load_field_model()
     parts = [_cylinder_between(seg.start, seg.end, post_radius)
              for seg in model.lines.values() if seg.plane.startswith("goal")]
-    return trimesh.util.concatenate(parts)
+    return _concatenate(parts)
 
 
 def nets_mesh(model: FieldModel | None = None) -> trimesh.Trimesh:
@@ -89,7 +96,7 @@ def nets_mesh(model: FieldModel | None = None) -> trimesh.Trimesh:
         ]
         for q in quads:
             parts.append(trimesh.Trimesh(np.array(q, float), [[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]], process=False))
-    return trimesh.util.concatenate(parts)
+    return _concatenate(parts)
 
 
 def grass_mesh(model: FieldModel | None = None, margin: float = 5.0) -> trimesh.Trimesh:

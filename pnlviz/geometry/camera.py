@@ -15,7 +15,9 @@ width as ``2 * principal_point[0]``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any, Literal
 
 import numpy as np
 
@@ -106,8 +108,10 @@ class Camera:
     radial: np.ndarray = field(default_factory=lambda: _NO_RADIAL)
     tangential: np.ndarray = field(default_factory=lambda: _NO_TANGENTIAL)
     thin_prism: np.ndarray = field(default_factory=lambda: _NO_THIN_PRISM)
+    # which lens terms are set (derived in __post_init__, not an argument, not compared)
+    _lens: Literal["none", "k1", "full"] = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, shape in (("R", (3, 3)), ("C", (3,)), ("radial", (6,)), ("tangential", (2,)), ("thin_prism", (4,))):
             value = getattr(self, name)
             if isinstance(value, np.ndarray) and value.base is None and not value.flags.writeable and value.dtype == float:
@@ -136,7 +140,7 @@ class Camera:
                    np.asarray(position, float), width, height, radial)
 
     @classmethod
-    def from_soccernet(cls, d: dict, width: float | None = None, height: float | None = None) -> "Camera":
+    def from_soccernet(cls, d: Mapping[str, Any], width: float | None = None, height: float | None = None) -> "Camera":
         """From a SoccerNet camera dict. The image size defaults to twice the principal point, as
         in the official evaluator."""
         pp = [float(v) for v in d["principal_point"]]
@@ -192,7 +196,8 @@ class Camera:
 
     @property
     def pan_tilt_roll_deg(self) -> tuple[float, float, float]:
-        return tuple(math.degrees(a) for a in pan_tilt_roll_from_rotation(self.R))
+        pan, tilt, roll = pan_tilt_roll_from_rotation(self.R)
+        return math.degrees(pan), math.degrees(tilt), math.degrees(roll)
 
     @property
     def has_distortion(self) -> bool:

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # imported at run time inside the function (camera imports this module's room)
+    from pnlviz.geometry.camera import Camera
 
 
 def apply_homography(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -51,7 +55,7 @@ def nearest_rotation(r1: np.ndarray, r2: np.ndarray) -> np.ndarray:
 
 
 def camera_from_ground_homography(H_field_to_image: np.ndarray, width: float, height: float, *,
-                                  refine: bool = False) -> "Camera | None":  # noqa: F821 (imported below)
+                                  refine: bool = False) -> Camera | None:
     """The pinhole camera whose ground-plane homography (field metres (X, Y, 1) at z = 0 ->
     pixels) is ``H_field_to_image``, for a ``width`` x ``height`` image; None when degenerate.
 

@@ -102,8 +102,19 @@ def _match_ids(model: FieldModel, world: np.ndarray, candidates: list[int], tol:
     return tuple(ids)
 
 
+def _matched(pair: CandidatePair, ids: list[int]) -> CandidatePair:
+    """``pair`` when its world points are the keypoints ``ids`` of its construction, else a ValueError."""
+    wanted = set(ids)
+    if set(i for i in pair.ids if i is not None) != wanted:
+        raise ValueError(f"catalogue: cannot match the {pair.kind} construction on {pair.circle} "
+                         f"to keypoints {sorted(wanted)}")
+    return pair
+
+
 def build_catalogue(model: FieldModel) -> Catalogue:
-    kp, kpe, kp3 = [], [], []
+    kp: list[LinePair] = []
+    kpe: list[LinePair] = []
+    kp3: list[int] = []
     kp1_groups: dict[tuple[str, str], list[int]] = {}
     kp2_groups: dict[tuple[str, int], list[int]] = {}
     belongs: dict[int, tuple[str, ...]] = {}
@@ -133,21 +144,15 @@ def build_catalogue(model: FieldModel) -> Catalogue:
                 elif item.startswith("penalty mark"):  # the centre of that penalty arc
                     on.append("Circle left" if item.endswith("left") else "Circle right")
             belongs[kid] = tuple(on)
-    kp1 = []
+    kp1: list[CandidatePair] = []
     for (line, circle), ids in kp1_groups.items():
         world = _line_circle_world(model, line, circle)
-        kp1.append(CandidatePair("Kp1", circle, line, None, world, _match_ids(model, world, ids)))
-    kp2 = []
+        kp1.append(_matched(CandidatePair("Kp1", circle, line, None, world, _match_ids(model, world, ids)), ids))
+    kp2: list[CandidatePair] = []
     for (circle, ext), ids in kp2_groups.items():
         arc = model.circles[circle]
         world = _tangent_world(arc.center[:2], arc.radius, model.keypoints[ext].xyz[:2])
-        kp2.append(CandidatePair("Kp2", circle, None, ext, world, _match_ids(model, world, ids)))
-    for pair in kp1 + kp2:
-        wanted = set(kp1_groups.get((pair.line, pair.circle), [])) if pair.kind == "Kp1" else \
-            set(kp2_groups[(pair.circle, pair.external)])
-        if set(i for i in pair.ids if i is not None) != wanted:
-            raise ValueError(f"catalogue: cannot match the {pair.kind} construction on {pair.circle} "
-                             f"to keypoints {sorted(wanted)}")
+        kp2.append(_matched(CandidatePair("Kp2", circle, None, ext, world, _match_ids(model, world, ids)), ids))
     if any(p.circle not in CIRCLE_CLASSES for p in kp1 + kp2):
         raise ValueError("catalogue: Kp1/Kp2 must refer to circle classes")
     return Catalogue(model, tuple(kp), tuple(kpe), tuple(kp1), tuple(kp2), tuple(kp3),

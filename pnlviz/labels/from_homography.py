@@ -194,6 +194,7 @@ def annotation_from_homography(H: np.ndarray, width: int, height: int, *, lr_dis
     model = model or _default_model()
     hl = labels_from_homography(H, width, height, lr_disambiguation=lr_disambiguation, model=model)
     Hm = hl.labels.homography
+    assert Hm is not None  # labels_from_homography records the homography it projected through
     scale = np.array([width - 1.0, height - 1.0])
     out: dict[str, list[dict[str, float]]] = {}
     for e in hl.extremities.values():

@@ -72,7 +72,11 @@ def annotation_to_pixels(annotation: Mapping[str, np.ndarray], width: int | None
     """Normalised SoccerNet annotation -> ``{canonical class: (N, 2) pixels}`` (x (W - 1), y (H - 1));
     unknown and ignored classes (``Goal unknown``, ``Line unknown``) are dropped. With ``width =
     height = None`` the points are taken as pixels already (only names are canonicalised)."""
-    scale = np.array([1.0, 1.0]) if width is None else np.array([width - 1, height - 1], dtype=float)
+    if width is None:
+        scale = np.array([1.0, 1.0])
+    else:
+        assert height is not None, "a width without a height"
+        scale = np.array([width - 1, height - 1], dtype=float)
     out: dict[str, np.ndarray] = {}
     for name, pts in annotation.items():
         canon = canonical_class_name(name)
@@ -191,7 +195,7 @@ class _Builder:
             self.conics[name] = _Conic(conic, pts)
 
     # ---------------------------------------------------------------- Kp, Kpe
-    def line_line(self):
+    def line_line(self) -> None:
         p = self.p
         mx, my = p.kp_margin * self.W, p.kp_margin * self.H
         strikes: dict[str, int] = {}
@@ -220,9 +224,9 @@ class _Builder:
         # it is not extended (Kpe) nor intersected with a circle (Kp1). With two such neighbours
         # it most likely is (e.g. the big and small box lines swapped): it is dropped altogether.
         self.suspect = {name for name in strikes}
-        for name, n in strikes.items():
-            if n >= 2:
-                self.out.notes.append(f"{name.strip()}: inconsistent with {n} neighbouring classes, not used")
+        for name, count in strikes.items():
+            if count >= 2:
+                self.out.notes.append(f"{name.strip()}: inconsistent with {count} neighbouring classes, not used")
                 del self.lines[name]
                 for pair in self.cat.kp:
                     if name in pair.lines and pair.id in self.labels:
@@ -252,37 +256,41 @@ class _Builder:
             c = self.conics.get(pair.circle)
             if c is None:
                 continue
+            line = external = None  # what the construction starts from: a line, or a keypoint's pixel
             if pair.kind == "Kp1":
+                assert pair.line is not None  # a Kp1 construction names its line
                 ln = self.lines.get(pair.line)
                 if ln is None or pair.line in self.suspect:
                     continue
-                cands = c.conic.intersect_line(ln.line)
+                line = ln.line
+                cands = c.conic.intersect_line(line)
             else:
+                assert pair.external is not None  # a Kp2 construction names its external keypoint
                 ext = self.labels.get(pair.external)
                 if ext is None or ext[1] != "Kp":
                     continue
-                cands = c.conic.tangent_points(ext[0])
+                external = ext[0]
+                cands = c.conic.tangent_points(external)
             if len(cands) != 2 or not np.all(np.isfinite(cands)) or np.linalg.norm(cands[0] - cands[1]) < 1e-6:
                 self.out.notes.append(f"{pair.kind} on {pair.circle}: no pair of candidates")
                 continue
             dist = np.min(np.linalg.norm(cands[:, None, :] - c.pts[None, :, :], axis=2), axis=1)
             usable = np.array([self.visible(q) for q in cands]) & (dist <= gap)
             if usable.any():
-                if pair.kind == "Kp1":
-                    gain = conic_candidates_gain(c.pts, cands, line=self.lines[pair.line].line)
-                else:
-                    gain = conic_candidates_gain(c.pts, cands, external=self.labels[pair.external][0])
+                gain = conic_candidates_gain(c.pts, cands, line=line, external=external)
                 usable &= gain <= self.p.max_conic_noise_gain
             out.append((pair, cands, usable))
         return out
 
     @staticmethod
-    def assigned(pair: CandidatePair, cands: np.ndarray, usable: np.ndarray, perm: tuple[int, int]):
+    def assigned(pair: CandidatePair, cands: np.ndarray, usable: np.ndarray, perm: tuple[int, int]
+                 ) -> list[tuple[int, np.ndarray, np.ndarray]]:
         """Labelled points of one assignment: list of (id, world xy, image xy)."""
         pts = []
         for j in range(2):
-            if pair.ids[j] is not None and usable[perm[j]]:
-                pts.append((pair.ids[j], pair.world[j], cands[perm[j]]))
+            kid = pair.ids[j]
+            if kid is not None and usable[perm[j]]:
+                pts.append((kid, pair.world[j], cands[perm[j]]))
         return pts
 
     # ---------------------------------------------------------------- homographies
@@ -347,7 +355,7 @@ class _Builder:
             return H
         return None
 
-    def grid_search(self, cands):
+    def grid_search(self, cands: list[tuple[CandidatePair, np.ndarray, np.ndarray]]) -> np.ndarray | None:
         if not cands:
             return None
         base_ids, base_world, base_img = self.ground_points(("Kp", "Kpe"))

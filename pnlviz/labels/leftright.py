@@ -67,6 +67,7 @@ def flip_annotation(annotation: dict) -> dict:
     out = {}
     for name, pts in annotation.items():
         canon = canonical_class_name(name) or name
+        flipped: np.ndarray | list[dict]
         if isinstance(pts, np.ndarray):
             flipped = np.array(pts, dtype=float, copy=True)
             flipped[:, 0] = 1.0 - flipped[:, 0]

@@ -208,7 +208,9 @@ class FrameResult:
 
     def matching(self, threshold: float) -> Matching:
         """The labelling the evaluator keeps at ``threshold``."""
-        return self.mirror if self.scores[float(threshold)].mirrored else self.direct
+        m = self.mirror if self.scores[float(threshold)].mirrored else self.direct
+        assert m is not None  # a frame with scores has both matchings
+        return m
 
 
 def _score(direct: Matching, mirror: Matching, threshold: float) -> ThresholdScore:
@@ -275,7 +277,7 @@ def _mean_like_evaluator(values: list[float | None], empty: list[bool] | None = 
     accuracy), so a float32 mean unless an empty frame makes it float64. NaN for no value."""
     items = [(0.0 if (empty and e) else np.float32(v)) for v, e in zip(values, empty or [False] * len(values))
              if v is not None]
-    return float(np.mean(items)) if items else float("nan")
+    return float(np.mean(np.asarray(items))) if items else float("nan")  # the array np.mean makes of them
 
 
 @dataclass
@@ -341,6 +343,16 @@ class Summary:
                              "recall": float(np.float64(c[0, 0]) / (c[0, 0] + c[1, 0]))}
         return out
 
+    def by_split(self) -> dict[str, Summary]:
+        """The scores of each split of a dataset in splits (frames ``<split>/<stem>``), in order
+        of first appearance; ``{}`` when no frame has a split."""
+        groups: dict[str, list[FrameResult]] = {}
+        for f in self.frames:
+            split, sep, _ = (f.stem or "").rpartition("/")  # a frame scored without a stem has no split
+            if sep:
+                groups.setdefault(split, []).append(f)
+        return {s: Summary(self.thresholds, frames) for s, frames in groups.items()}
+
     def as_dict(self) -> dict[str, Any]:
         """Aggregate scores as plain data (no per-frame rows)."""
         return {
@@ -401,9 +413,9 @@ def evaluate_dataset(gt: Dataset | str | os.PathLike, cameras: Mapping[str, Came
     thresholds = tuple(float(t) for t in thresholds)
     report = on_error or (lambda line: None)
     skipped_cams: list[str] = []
-    if isinstance(cameras, (str, os.PathLike)):
-        cameras, skipped_cams = read_cameras(cameras, on_error=report)
     ds = gt if isinstance(gt, Dataset) else open_dataset(gt)
+    if isinstance(cameras, (str, os.PathLike)):
+        cameras, skipped_cams = read_cameras(cameras, on_error=report, splits=ds.splits)
     skipped_ann: list[str] = []
 
     def bad_annotation(stem: str, err: DataError) -> None:

@@ -26,7 +26,7 @@ def jitter(cameras: Sequence[Camera | None], size: tuple[int, int] = EVAL_SIZE, 
     a missing camera in the triple, or no grid point seen by all three)."""
     W, H = size
     grid = pitch_grid(spacing)
-    proj = []
+    proj: list[tuple[np.ndarray, np.ndarray] | None] = []
     for cam in cameras:
         if cam is None:
             proj.append(None)

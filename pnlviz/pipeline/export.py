@@ -13,10 +13,17 @@ Layout (a folder or a zip):
   ``residual``: px to the frame's exported camera; ``flagged``: beyond the outlier gate
   (:mod:`pnlviz.pipeline.snapshot`), not ground truth;
 * ``cameras/camera_<stem>.json``: the calibrated camera at 960x540 (SoccerNet format);
+* ``homographies.json``: ``{stem: 3x3}``, each calibrated frame's homography from the ground plane
+  (X, Y, 1) in metres (SoccerNet world frame) to the frame's own pixels, without lens distortion
+  (the camera file has it); its inverse maps pixels to the pitch. The same matrix is in the
+  frame's keypoints file (``"homography"``, null without a camera);
 * ``coco_keypoints.json``: COCO keypoints, one "pitch" instance per frame with the 73 keypoints
   (v = 2 inside the image, 1 labelled outside it, 0 absent or flagged by the gate);
 * ``manifest.json``: what each exported frame carries and what was changed (names, not paths:
   the export does not say where the server's files live).
+
+A frame of a dataset in splits (stem ``<split>/<stem>``) keeps its split in every name:
+``annotations/valid/00042.json``, ``cameras/valid/camera_00042.json``.
 
 Only accepted and corrected frames are exported unless ``include_all``; a reviewed frame exports
 what its review recorded (its snapshot), whatever the reader's detections, and unreviewed ones
@@ -33,13 +40,16 @@ import zipfile
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from pnlviz.data import atomic_write_bytes
+from pnlviz.data.cameras import camera_member_name
 from pnlviz.data.annotations import annotation_to_json
 from pnlviz.data.jsonio import dumps
 from pnlviz.data.zipwriter import ZipStream
 from pnlviz.data.errors import DataError
 from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.geometry.camera import Camera
 from pnlviz.pipeline.reader import FrameReader, Settings
 from pnlviz.pipeline.snapshot import GATE_PX, REVIEWED, FrameLabels, gate, inside, reviewed_labels, view_labels
 from pnlviz.pipeline.view import FrameView, frame_view
@@ -57,18 +67,19 @@ class FrameExport:
     files: dict[str, bytes] = field(default_factory=dict)
     coco_image: dict | None = None
     coco_annotation: dict | None = None
+    homography: list[list[float]] | None = None
 
 
 def export_stems(reader: FrameReader, include_all: bool = False) -> list[str]:
     """The frames an export holds, in dataset order: the accepted and corrected ones, or all."""
     if include_all:
         return list(reader.stems)
-    return [s for s in reader.stems if reader.edits.review(s) in ("accepted", "corrected")]
+    return [s for s in reader.stems if reader.edits_folder.review(s) in ("accepted", "corrected")]
 
 
 def edits_entry(reader: FrameReader, stem: str) -> dict:
     """What the manifest says of a frame's edits: its review status and what was changed."""
-    rec = reader.edits.get(stem)
+    rec = reader.edits_folder.get(stem)
     return {"review": rec.get("review"), "annotation_edited": rec.get("annotation") is not None,
             "keypoints_edited": sorted(int(k) for k in (rec.get("keypoints") or {}))}
 
@@ -123,11 +134,12 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
         kps[str(kid)] = {"x": label.x, "y": label.y, "visible": inside(label, fl.size), "set": label.set,
                          "provenance": label.provenance, "residual": label.residual, "flagged": kid in flagged}
     reviewed = fl.basis != "unreviewed"
+    homography = frame_homography(fl.camera, fl.size)
     files[f"keypoints/{stem}.json"] = dumps({"image_size": [W, H], "reviewed": reviewed, "review": record.get("review"),
-                                             "keypoints": kps}).encode()
+                                             "keypoints": kps, "homography": homography}).encode()
     if fl.camera is not None:
-        files[f"cameras/camera_{stem}.json"] = dumps(fl.camera).encode()
-    flat = [0.0] * (3 * N_KEYPOINTS)
+        files["cameras/" + camera_member_name(stem)] = dumps(fl.camera).encode()
+    flat: list[object] = [0.0] * (3 * N_KEYPOINTS)
     for key, k in kps.items():
         i = int(key) - 1
         # COCO v: 2 visible ground truth, 1 labelled outside the image, 0 flagged by the gate
@@ -138,7 +150,16 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
              "stem": stem, "width": W, "height": H, "reviewed": reviewed}
     annotation = {"id": image_id, "image_id": image_id, "category_id": 1, "keypoints": flat,
                   "num_keypoints": sum(1 for i in range(N_KEYPOINTS) if flat[3 * i + 2] == 2)}
-    return FrameExport(stem, entry, files, image, annotation)
+    return FrameExport(stem, entry, files, image, annotation, homography)
+
+
+def frame_homography(camera: dict | None, size: tuple[int, int]) -> list[list[float]] | None:
+    """The 3x3 homography, ground plane metres -> pixels of a ``size`` frame, of a 960x540
+    SoccerNet camera dict (normalised so that its last entry is 1); None without a camera."""
+    if camera is None:
+        return None
+    H = Camera.from_soccernet(camera).scaled(*size).homography()
+    return (H / H[2, 2]).tolist()
 
 
 class ExportWriter:
@@ -152,10 +173,11 @@ class ExportWriter:
     def __init__(self, reader: FrameReader, out: Path | None, include_all: bool = False, gate_px: float = GATE_PX):
         self.out = None if out is None else Path(out)
         self._order = {s: i for i, s in enumerate(reader.stems)}
-        self.manifest = {"source": reader.data.resolve().name, "edits": reader.edits.root.name,
+        self.manifest: dict[str, Any] = {"source": reader.data.resolve().name, "edits": reader.edits_folder.root.name,
                          "exported": time.strftime("%Y-%m-%dT%H:%M:%S"), "include_all": include_all,
                          "gate_px_at_960x540": float(gate_px), "flagged": 0, "frames": {}}
         self._parts: list[tuple[int, str, dict, dict | None, dict | None]] = []
+        self._homographies: dict[str, list[list[float]]] = {}
         self.files: dict[str, bytes] = {}
         self._zip = None
         if self.out is not None and self.out.suffix == ".zip":
@@ -164,19 +186,23 @@ class ExportWriter:
     def add(self, part: FrameExport) -> None:
         for name, data in part.files.items():
             self._write(name, data)
+        if part.homography is not None:
+            self._homographies[part.stem] = part.homography
         self._parts.append((self._order[part.stem], part.stem, part.entry, part.coco_image, part.coco_annotation))
 
     def _write(self, name: str, data: bytes) -> None:
         if self._zip is not None:
             self._zip.add(name, data)
         elif self.out is not None:
-            atomic_write_bytes(self.out / name, data)
+            path = self.out / name
+            path.parent.mkdir(parents=True, exist_ok=True)  # annotations/<split>/ of a dataset in splits
+            atomic_write_bytes(path, data)
         else:
             self.files[name] = data
 
     def close(self) -> dict[str, bytes]:
         """Write the COCO file and the manifest and finish the output; the files (for ``out=None``)."""
-        coco = {"images": [], "annotations": [],
+        coco: dict[str, list] = {"images": [], "annotations": [],
                 "categories": [{"id": 1, "name": "pitch", "keypoints": [str(i) for i in range(1, N_KEYPOINTS + 1)],
                                 "skeleton": []}]}
         for _, stem, entry, image, annotation in sorted(self._parts, key=lambda p: p[0]):
@@ -186,6 +212,8 @@ class ExportWriter:
                 coco["images"].append(image)
                 coco["annotations"].append(annotation)
         self._write("coco_keypoints.json", dumps(coco).encode())
+        order = sorted(self._homographies, key=self._order.__getitem__)
+        self._write("homographies.json", dumps({s: self._homographies[s] for s in order}, indent=1).encode())
         self._write("manifest.json", dumps(self.manifest, indent=1).encode())
         if self._zip is not None:
             self._zip.close()

@@ -81,7 +81,8 @@ class FrameReader:
         #: detections made since the predictions were read (the app's detector), looked up after them
         self.detected: dict[str, object] = {}
         self.edits = edits
-        self.size = tuple(size)
+        w, h = size
+        self.size = (w, h)
         self.detection_settings = dict(detection_settings or {})
         self.annotations, self.reference_cameras = annotations, reference_cameras
         self.stems = list(ds.stems)
@@ -101,14 +102,20 @@ class FrameReader:
 
         ds = VideoDataset(data) if is_video(data) else open_dataset(data)
         if not len(ds):
-            raise DataError(str(data), "no frames (expected <stem>.jpg / <stem>.json files)")
-        predictions = read_predictions(detections) if detections else None
+            ds.require_frames()
+        predictions = read_predictions(detections, splits=ds.splits) if detections else None
         recorded = (read_predictions_info(detections).get("calibration") if detections else None)
-        source = str(predictions_info_path(detections)) if recorded else "detector settings"
+        source = str(predictions_info_path(detections)) if recorded and detections else "detector settings"
         settings = check_settings(recorded or detector_settings or {}, source)  # fails here, not on a frame
         CalibParams().updated(settings)
         store = EditsStore(edits or default_edits_dir(data), writable=writable)
         return cls(ds, predictions=predictions, edits=store, size=size, detection_settings=settings, data=data)
+
+    @property
+    def edits_folder(self) -> EditsStore:
+        """The edits folder, for what needs one (a reader from :meth:`open` always has one)."""
+        assert self.edits is not None, "this reader has no edits folder"
+        return self.edits
 
     def close(self) -> None:
         """Release the edits folder and the dataset's files."""
@@ -167,6 +174,7 @@ class FrameReader:
             record = self.edits.get(stem) if self.edits is not None else {}
         edit = record.get("annotation")
         if edit is not None:
+            assert self.edits is not None  # an edited annotation comes from the edits folder
             return parse_annotation(edit, f"{self.edits.frames / stem}.json")
         return self.ds.annotation(stem) if stem in self.ds else None
 

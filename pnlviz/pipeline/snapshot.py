@@ -186,9 +186,9 @@ def reviewed_labels(reader, stem: str, record: Mapping, model: FieldModel | None
         dets, settings, basis = None, FrameSettings(source="annotation"), "edits"
     inputs = replace(read.inputs, detections=dets)
     fc = calibrate_frame(inputs, settings, model)
-    camera = fc.result.camera if fc.ok else None
+    camera = fc.camera
     labels = labels_of(fc.observations, fc.origin, inputs.annotation, inputs.keypoint_edits, camera, model)
-    failure = None if fc.ok else fc.failure.message
+    failure = None if fc.failure is None else fc.failure.message  # a frame has a failure when not ok
     internal = fc.failure.message if fc.failure is not None and fc.failure.code == "internal" else None
     return FrameLabels(inputs.size, labels, _camera_json(camera), failure, basis, error=read.image_error or internal)
 

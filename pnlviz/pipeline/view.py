@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -14,6 +15,7 @@ from pnlviz.calib.calibrate import CalibrationResult
 from pnlviz.calib.frame import calibrate_frame
 from pnlviz.calib.observations import Observations
 from pnlviz.conventions import EVAL_SIZE
+from pnlviz.data.predictions import Predictions
 from pnlviz.field.model import FieldModel
 from pnlviz.geometry.camera import Camera
 from pnlviz.pipeline.reader import FrameReader, Settings
@@ -29,14 +31,14 @@ class FrameView:
     index: int
     has_image: bool  # the pixels are not kept here (23k cached views must fit in memory): AppState.image()
     size: tuple[int, int]  # (W, H) of the image or of the --size fallback
-    annotation: dict[str, np.ndarray] | None
+    annotation: Mapping[str, np.ndarray] | None
     observations: Observations | None
     result: CalibrationResult | None
     jac: dict[int, float] = field(default_factory=dict)  # JaC@5/10/20 against the annotation
     error: str | None = None  # a problem reading the frame
     ms: float = 0.0
     reference_camera: Camera | None = None  # a known camera (e.g. synthetic ground truth), scaled to the frame
-    detections: object | None = None  # the frame's PnLCalib detections (pnlviz.data.Predictions), if any
+    detections: Predictions | None = None  # the frame's PnLCalib detections, if any
     origin: str | None = None  # where the observations came from: annotation, detections, both or edits
     settings: Settings = Settings()
 
@@ -64,9 +66,11 @@ def frame_view(reader: FrameReader, stem: str, settings: Settings, model: FieldM
     engine_error = fc.failure.message if fc.failure is not None and fc.failure.code == "internal" else None
     ann = read.inputs.annotation
     jac = {}
-    if fc.ok and ann:
-        fr = evaluate_frame(fc.result.camera.scaled(*EVAL_SIZE), ann)
+    camera = fc.camera  # None unless fc.ok
+    if camera is not None and ann:
+        fr = evaluate_frame(camera.scaled(*EVAL_SIZE), ann)
         jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
     return FrameView(stem, idx, read.has_image, read.inputs.size, ann, fc.observations, fc.result, jac,
                      error=read.image_error or engine_error, ms=fc.ms, reference_camera=read.reference_camera,
-                     detections=read.inputs.detections, origin=fc.origin, settings=settings)
+                     # the engine's inputs hold them untyped (calib does not import data)
+                     detections=cast("Predictions | None", read.inputs.detections), origin=fc.origin, settings=settings)

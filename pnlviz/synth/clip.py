@@ -111,7 +111,7 @@ def plan_clip(seed: int, frames: int, size: tuple[int, int] = EVAL_SIZE, cuts: i
         pos = pos + speed[:, None] * np.column_stack([np.cos(heading), np.sin(heading)])
         pos[:, 0] = np.clip(pos[:, 0], -HALF_LENGTH - 2, HALF_LENGTH + 2)
         pos[:, 1] = np.clip(pos[:, 1], -HALF_WIDTH - 2, HALF_WIDTH + 2)
-    return ClipPlan(int(seed), tuple(size), cameras, shot_of, scene, feet)
+    return ClipPlan(int(seed), (size[0], size[1]), cameras, shot_of, scene, feet)
 
 
 def clip_frame(plan: ClipPlan, t: int) -> dict:

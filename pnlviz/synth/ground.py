@@ -17,7 +17,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from pnlviz.field.model import load_field_model
+from pnlviz.field.model import Arc, load_field_model
 from pnlviz.geometry.camera import Camera
 
 from .raycast import F32, box_coverage, interval_coverage, pixel_windows
@@ -79,7 +79,7 @@ class _Stripe:
 class _ArcPiece:
     """A piece of a circle or arc marking (``full``: a whole circle, no angle test)."""
 
-    arc: object
+    arc: Arc
     full: bool
     points: np.ndarray
 

@@ -54,10 +54,11 @@ def ray_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         uu, vv = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
         d = camera.pixel_rays(np.stack([uu.ravel(), vv.ravel()], axis=1))
         d = d / (d @ R[2])[:, None]  # camera-frame z = 1
-        return tuple(d[:, k].reshape(H, W).astype(F32) for k in range(3))
+        x, y, z = (d[:, k].reshape(H, W).astype(F32) for k in range(3))
+        return x, y, z
     R32 = R.astype(F32)
-    return tuple(np.broadcast_to(R32[0, k] * xn + R32[1, k] * yn + R32[2, k], (H, W)).astype(F32)
-                 for k in range(3))
+    x, y, z = (np.broadcast_to(R32[0, k] * xn + R32[1, k] * yn + R32[2, k], (H, W)).astype(F32) for k in range(3))
+    return x, y, z
 
 
 # ----------------------------------------------------------------------------- coverage and windows
@@ -92,7 +93,7 @@ def _frustum_bounds(camera: Camera) -> tuple[float, float]:
 
 
 def pixel_windows(camera: Camera, points: np.ndarray, margin_m: float, extra_px: float = 3.0, *,
-             closed: bool = False, near: float = 0.2):
+             closed: bool = False, near: float = 0.2) -> list[tuple[slice, slice] | None]:
     """Pixel windows around the polylines through groups of world points (G, K, 3) (closed
     polygons with ``closed``): a list of (slice_v, slice_u), or None where nothing of a group is
     in view. Each chord is clipped to the (slightly enlarged) view frustum in camera space first,
@@ -121,7 +122,7 @@ def pixel_windows(camera: Camera, points: np.ndarray, margin_m: float, extra_px:
     uv = uv.reshape(G, -1, 2, 2)
     depth = depth.reshape(G, -1, 2)
     f = max(camera.fx, camera.fy)
-    out = []
+    out: list[tuple[slice, slice] | None] = []
     for g in range(G):
         sel = ok[g]
         if not sel.any():

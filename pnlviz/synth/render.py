@@ -41,7 +41,7 @@ def camera_effects(image: np.ndarray, scene: Scene, rng: np.random.Generator) ->
     scene says so), vignetting, colour gain and sensor noise; BGR float (0..1) in, uint8 out."""
     look = scene.look
     H, W = image.shape[:2]
-    img = cv2.GaussianBlur(image, (0, 0), look.blur_sigma)
+    img: np.ndarray = cv2.GaussianBlur(image, (0, 0), look.blur_sigma)  # float, as ``image``
     if look.motion_blur is not None:
         # A line kernel of odd size, point-symmetric about its centre pixel: blurs without
         # shifting the image (the markings stay centred on the ground truth).

@@ -46,6 +46,7 @@ def _distinct_kit(rng: np.random.Generator, others: list[np.ndarray]) -> np.ndar
         d = min((float(np.abs(c - o).sum()) for o in others), default=9.0)
         if d > best_d:
             best, best_d = c, d
+    assert best is not None  # the first draw beats -1
     return best
 
 
@@ -237,7 +238,7 @@ def _visible_ground_points(camera: Camera, rng: np.random.Generator, n: int) -> 
 
 def _sample_players(camera: Camera, rng: np.random.Generator) -> list[Player]:
     n = int(rng.integers(5, 21))
-    kits = []
+    kits: list[Kit] = []
     for _ in range(5):  # two teams, two goalkeepers, referee
         shirt = _distinct_kit(rng, [k.shirt for k in kits])
         shorts = shirt if rng.random() < 0.4 else _kit_colour(rng)

@@ -137,7 +137,7 @@ def write_frame(out_dir: str | os.PathLike, index: int, seed: int, size: tuple[i
     if clip_frames is not None:
         from .clip import clip_frame
 
-        frame = clip_frame(_clip_plan(seed, clip_frames, tuple(size)), index)
+        frame = clip_frame(_clip_plan(seed, clip_frames, (size[0], size[1])), index)
     else:
         frame = make_frame(index, seed, size)
     stem = frame["stem"] if clip_frames is not None else frame_stem(index)
@@ -157,7 +157,7 @@ def _clip_plan(seed: int, frames: int, size: tuple[int, int]):
     """The clip's plan, drawn once per process."""
     from .clip import plan_clip
 
-    key = (int(seed), int(frames), tuple(size))
+    key = (int(seed), int(frames), (size[0], size[1]))
     if key not in _PLANS:
         _PLANS.clear()
         _PLANS[key] = plan_clip(*key)
@@ -193,6 +193,7 @@ def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int
     check_output_folder(root, force)
     (root / CAMERA_DIR).mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(root)
+    jobs: list[tuple]  # write_frame's arguments
     if clip:
         jobs = [(str(root), i, int(seed), (width, height), n) for i in range(n)]
     else:

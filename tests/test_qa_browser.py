@@ -1,0 +1,35 @@
+"""The label-error finder in the app, with real events: the suspects filter goes to the frame
+it flags, F applies the suggested fix as an edit, Ctrl+Z takes it back."""
+
+import json
+
+from test_app_browser import browser, data, open_page, tab, wait_for_text, wait_until  # noqa: F401
+
+
+def test_suspects_filter_then_f_fixes_the_frame_and_ctrl_z_undoes_it(data, browser, serve):  # noqa: F811
+    path = data / "00000.json"
+    ann = json.loads(path.read_text())
+    ann["Circle left"] = ann.pop("Circle right")  # the penalty arc named from the other side
+    path.write_text(json.dumps(ann))
+    app = serve(data)
+    app._worker.join(timeout=120)  # the background pass over every frame has ended
+    st = app.state
+    assert st.triage.lookup("00000").suspect >= 1 and st.triage.lookup("00002").suspect < 1
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    session.queue.enqueue(lambda: session.goto(st.find("00002")))
+    wait_until(lambda: session.stem == "00002")
+    page.get_by_label("filter").click()
+    page.get_by_role("option", name="suspects", exact=True).click()
+    wait_until(lambda: session.stem == "00000")
+
+    def classes():
+        return set(st.view("00000").annotation)
+
+    page.mouse.move(700, 450)
+    page.keyboard.press("f")
+    wait_until(lambda: "Circle right" in classes() and "Circle left" not in classes(), timeout=30)
+    wait_for_text(page, "fix applied")
+    page.keyboard.press("Control+z")
+    wait_until(lambda: "Circle left" in classes(), timeout=30)
+    page.close()
