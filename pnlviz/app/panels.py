@@ -225,9 +225,11 @@ class Panels:
             actions = {"play": clip.play, "pause": clip.pause, "worst": lambda: clip.jump_worst(restart=True),
                        "next worst": clip.jump_worst}
             self.clip_buttons.on_click(on(lambda e: actions.get(e.target.value, lambda: None)()))
-            self.shot_box.on_update(on(lambda _: clip.set_shot_model(self.shot_box.value)))
-            shot_actions = {"accept shot": clip.accept_shot, "cut here": clip.toggle_cut}
-            self.shot_buttons.on_click(on(lambda e: shot_actions.get(e.target.value, lambda: None)()))
+            box, buttons = self.shot_box, self.shot_buttons
+            if box is not None and buttons is not None:  # made with the clip slider
+                box.on_update(on(lambda _: clip.set_shot_model(box.value)))
+                shot_actions = {"accept shot": clip.accept_shot, "cut here": clip.toggle_cut}
+                buttons.on_click(on(lambda e: shot_actions.get(e.target.value, lambda: None)()))
         self._bind_keys()
 
     def _bind_keys(self) -> None:

@@ -101,7 +101,8 @@ def _in_view(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, bool]:
     return uv[0], ok
 
 
-def carried_points(shot: range, edits: Mapping[int, Mapping[str, object]], cameras: Sequence[Camera | None],
+def carried_points(shot: range, edits: Mapping[int, Mapping[str, Sequence[float] | None]],
+                   cameras: Sequence[Camera | None],
                    model: FieldModel) -> dict[int, dict[int, np.ndarray]]:
     """``{frame: {id: (x, y)}}``: every keypoint placed by hand on a frame of ``shot`` carried to
     the frames before and after it through their cameras (``cameras[t]`` for frame t of the clip)
@@ -117,8 +118,11 @@ def carried_points(shot: range, edits: Mapping[int, Mapping[str, object]], camer
             X = model.keypoint_xyz(np.array([kid]))[0]
             for step in (-1, 1):
                 t = u + step
-                while t in shot and str(kid) not in (edits.get(t) or {}) and cameras[t] is not None:
-                    uv, ok = _in_view(cameras[t], X)
+                while t in shot and str(kid) not in (edits.get(t) or {}):
+                    cam = cameras[t]
+                    if cam is None:
+                        break
+                    uv, ok = _in_view(cam, X)
                     if not ok:
                         break
                     if dist.get((t, kid), 1 << 30) > abs(t - u):
@@ -154,13 +158,13 @@ class ClipSolver:
     model: FieldModel | None = None
     #: the keypoint edits made so far: ``{frame: {"id": [x, y] | None}}`` (``cameras``, when given,
     #: are the frames' own cameras with them)
-    keypoint_edits: Mapping[int, Mapping[str, object]] | None = None
+    keypoint_edits: Mapping[int, Mapping[str, Sequence[float] | None]] | None = None
 
     def __post_init__(self):
-        self.model = self.model or load_field_model()
+        self.field_model: FieldModel = self.model or load_field_model()
         self.T = len(self.observations)
         self.base = list(self.observations)
-        self.edits: dict[int, dict[str, object]] = {}
+        self.edits: dict[int, dict[str, list[float] | None]] = {}
         for t, e in (self.keypoint_edits or {}).items():
             if e:
                 self.edits[int(t)] = {str(int(k)): (None if v is None else [float(v[0]), float(v[1])])
@@ -231,10 +235,10 @@ class ClipSolver:
         if obs is None:
             W, H = self.size
             obs = Observations(int(W), int(H))
-        return apply_keypoint_edits(obs, edits, self.model)
+        return apply_keypoint_edits(obs, edits, self.field_model)
 
     # ------------------------------------------------------------------ edits
-    def set_edits(self, t: int, edits: Mapping[str, object] | None, solve: bool = True) -> int:
+    def set_edits(self, t: int, edits: Mapping[str, Sequence[float] | None] | None, solve: bool = True) -> int:
         """Frame ``t``'s keypoint edits (``{"id": [x, y] | None}``; None or empty: none): its own
         camera recalibrated, its shot solved again (warm) unless ``solve`` is off. Returns the shot."""
         if edits:
@@ -250,7 +254,7 @@ class ClipSolver:
 
     def set_keypoint(self, t: int, kid: int, xy: Sequence[float] | None, solve: bool = True) -> int:
         """Keypoint ``kid`` of frame ``t`` moved or placed at ``xy`` (pixels) or hidden (None)."""
-        edits = dict(self.edits.get(t) or {})
+        edits: dict[str, Sequence[float] | None] = dict(self.edits.get(t) or {})
         edits[str(int(kid))] = None if xy is None else [float(xy[0]), float(xy[1])]
         return self.set_edits(t, edits, solve)
 
@@ -281,7 +285,7 @@ class ClipSolver:
         cams = self.cameras_of()
         carried: dict[int, dict[int, np.ndarray]] = {}
         for s in self._shots:
-            carried.update(carried_points(s.frames, self.edits, cams, self.model))
+            carried.update(carried_points(s.frames, self.edits, cams, self.field_model))
         out = []
         for t in range(self.T):
             obs, cam = self.frame_observations(t), cams[t]
@@ -296,7 +300,7 @@ class ClipSolver:
             for kid, uv in carried.get(t, {}).items():
                 if kid not in labels:
                     labels[kid] = ClipLabel(float(uv[0]), float(uv[1]), "shot", 0.0,
-                                            self.model.keypoints[kid].group)
+                                            self.field_model.keypoints[kid].group)
             out.append(labels)
         return out
 
@@ -305,7 +309,7 @@ class ClipSolver:
         if obs is None or obs.n_keypoints == 0:
             return None
         try:
-            r = calibrate(obs, self.calib_params, self.model)
+            r = calibrate(obs, self.calib_params, self.field_model)
         except Exception:  # noqa: BLE001 - a frame without its own camera is placed by its shot
             return None
         return r.camera if r.ok else None
@@ -329,7 +333,7 @@ class ClipSolver:
             return float("inf")
         if obs is None:
             return 0.0
-        r_kp, r_ln = ShotModel(flatten([obs], self.model), 1, self.size, replace(self.params, fit_k1=True)
+        r_kp, r_ln = ShotModel(flatten([obs], self.field_model), 1, self.size, replace(self.params, fit_k1=True)
                                ).data_residuals(camera_vector(cam))
         r = np.concatenate([np.hypot(r_kp[:, 0], r_kp[:, 1]), np.abs(r_ln)])
         return float(np.median(r)) if len(r) else 0.0
@@ -345,6 +349,6 @@ class ClipSolver:
         if start is None and all(c is None for c in own):
             s.fit = None
         else:
-            s.fit = fit_shot(obs, own, self.size, self.params, self.model, start=start)
+            s.fit = fit_shot(obs, own, self.size, self.params, self.field_model, start=start)
         s.seconds = time.perf_counter() - t0
         self._labels = None

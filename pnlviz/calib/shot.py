@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse
@@ -87,10 +87,11 @@ class ShotData:
     ln_A: np.ndarray  # (M, 3) world ends of the line
     ln_B: np.ndarray
     ln_q: np.ndarray  # (M, 2) observed pixels
-    kp_pin: np.ndarray | None = None  # (N,) True for keypoints placed or moved by hand (None: none)
+    #: (N,) True for keypoints placed or moved by hand (none when left out)
+    kp_pin: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     def __post_init__(self):
-        if self.kp_pin is None or len(self.kp_pin) != len(self.kp_t):
+        if len(self.kp_pin) != len(self.kp_t):
             self.kp_pin = np.zeros(len(self.kp_t), bool)
 
     def subset(self, kp_keep: np.ndarray, ln_keep: np.ndarray) -> ShotData:

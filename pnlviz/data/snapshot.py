@@ -98,8 +98,9 @@ def validate_snapshot(obj: Any, source: str) -> dict:
            "failure": None if failure is None else str(failure)[:500]}
     shot = obj.get("shot")
     if shot is not None:
-        if not isinstance(shot, Mapping) or not isinstance(as_number(shot.get("shot")), (int, float)):
+        index = as_number(shot.get("shot")) if isinstance(shot, Mapping) else None
+        if index is None or not math.isfinite(index):
             raise DataError(source, f'snapshot: "shot" must be an object with the shot\'s index, got {describe(shot)}')
-        out["shot"] = {"clip": str(shot.get("clip", ""))[:200], "shot": int(as_number(shot["shot"])),
+        out["shot"] = {"clip": str(shot.get("clip", ""))[:200], "shot": int(index),
                        "first": str(shot.get("first", ""))[:200], "last": str(shot.get("last", ""))[:200]}
     return out

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from pnlviz.calib.clip import ClipSolver, CutEdits
 from pnlviz.calib.frame import calib_params, detection_settings_apply, observations_for
+from pnlviz.calib.observations import Observations
 from pnlviz.calib.shot import TemporalParams
 from pnlviz.calib.temporal import image_changes
 from pnlviz.conventions import EVAL_SIZE
@@ -43,7 +44,7 @@ def dataset_clips(stems: Sequence[str]) -> dict[str, list[str]]:
 
 def _cuts_path(reader: FrameReader, clip: str) -> Path:
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in clip)[:120] or "_"
-    return reader.edits.root / CLIPS_DIR / f"{safe}.json"
+    return reader.edits_folder.root / CLIPS_DIR / f"{safe}.json"
 
 
 def read_cuts(reader: FrameReader, clip: str) -> CutEdits:
@@ -88,15 +89,18 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
     model = model or load_field_model()
     settings = settings or reader.default_settings()
     fs = reader.frame_settings(settings)
-    base, origins, edits, origin0 = [], [], {}, None
-    size = None
+    base: list[Observations | None] = []
+    origins: list[str] = []
+    edits: dict[int, dict] = {}
+    origin0: str | None = None
+    size: tuple[int, int] | None = None
     for t, stem in enumerate(stems):
         read = reader.read(stem)
         if read.inputs is None:
             base.append(None)
             origins.append("detection")
             continue
-        size = size or tuple(read.inputs.size)
+        size = size or (int(read.inputs.size[0]), int(read.inputs.size[1]))
         obs, origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, model)
         origin0 = origin0 or origin
         base.append(obs)
@@ -104,7 +108,8 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
         if read.inputs.keypoint_edits:
             edits[t] = dict(read.inputs.keypoint_edits)
     cp = calib_params(fs, origin0)
-    return ClipSolver(base, size or tuple(reader.size), TemporalParams(fit_k1=cp.refine_k1), cp, changes=changes,
+    frame_size = size or (int(reader.size[0]), int(reader.size[1]))
+    return ClipSolver(base, frame_size, TemporalParams(fit_k1=cp.refine_k1), cp, changes=changes,
                       cuts=read_cuts(reader, clip), origins=origins, model=model, keypoint_edits=edits,
                       cameras=None if cameras is None else list(cameras))
 
@@ -120,7 +125,7 @@ def shot_snapshot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Seq
     read = reader.read(stem)
     origin = None
     if read.inputs is not None:
-        origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, solver.model)[1]
+        origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, solver.field_model)[1]
     dets = reader.detections(stem) if origin in ("detections", "both") else None
     camera = solver.camera(t)
     k = solver.shot_of(t)
@@ -143,10 +148,11 @@ def accept_shot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Seque
     done = []
     for t in solver.shots[k]:
         stem = stems[t]
-        with reader.edits.lock(stem):
+        with reader.edits_folder.lock(stem):
             snap = shot_snapshot(reader, solver, clip, stems, t, settings)
-            if reader.edits.review(stem) != "corrected":  # the review is the undo step; the snapshot goes with it
-                reader.edits.act(stem, lambda rec: rec.__setitem__("review", "accepted"), corrected=False)
-            reader.edits.update(stem, snapshot=snap)
+            # the review is the undo step; the snapshot goes with it
+            if reader.edits_folder.review(stem) != "corrected":
+                reader.edits_folder.act(stem, lambda rec: rec.__setitem__("review", "accepted"), corrected=False)
+            reader.edits_folder.update(stem, snapshot=snap)
         done.append(stem)
     return done
