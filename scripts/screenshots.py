@@ -118,11 +118,27 @@ def clip_calibrated(page, tab) -> None:
     tab.queue.enqueue(tab.show)
 
 
+def shot_model(page, tab) -> None:
+    """The clip under its shot model: every frame calibrated, the shots solved, a point moved by
+    hand on a frame before this one (a keyframe on the strip), the panel redrawn."""
+    from pnlviz.app.shots import clip_shots
+
+    clip_calibrated(page, tab)
+    st = tab.state
+    shots = clip_shots(st)
+    place = shots.place(tab.stem, tab.settings, build=False)
+    shots.build(place.clip, tab.settings)
+    other = place.stems[max(0, place.t - 6)]  # a keyframe six frames before this one
+    obs = st.view(other, tab.settings).observations
+    st.move_keypoint(other, int(obs.kp_ids[0]), float(obs.kp_xy[0, 0]) + 1.0, float(obs.kp_xy[0, 1]), tab.settings)
+    tab.queue.enqueue(tab.show)
+
+
 def main() -> None:
     import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--only", choices=("sample", "failed", "clip"), default=None, help="one session only")
+    ap.add_argument("--only", choices=("sample", "failed", "clip", "shots"), default=None, help="one session only")
     only = ap.parse_args().only
     OUT.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp())
@@ -148,6 +164,8 @@ def main() -> None:
             session(browser, failed, tmp / "edits2", [("failed_frame", "00003", None)])
         if only in (None, "clip"):
             session(browser, tmp / "clip", tmp / "edits3", [("workspace_clip", "clip11-IMG_0012", clip_calibrated)])
+        if only in (None, "shots"):
+            session(browser, tmp / "clip", tmp / "edits4", [("timeline_shots", "clip11-IMG_0012", shot_model)])
         browser.close()
     shutil.rmtree(tmp)
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from pnlviz.app.modes import PointKind, Selection
 from pnlviz.app.overlay import Overlay
+from pnlviz.app.shots import SHOT_SUBSET
 from pnlviz.app.state import AppState, FrameView
 
 
@@ -45,9 +46,13 @@ def calibration_card(view: FrameView, state: AppState) -> str:
          f"pan {pan:.2f}, tilt {tilt:.2f}, roll {roll:.2f} deg"),
         f"keypoints: {len(errs)}, median error {np.median(errs):.2f} px" if len(errs) else "keypoints: none",
         f"lines/circles: {len(line_errs)}, worst {line_errs.max():.1f} px" if len(line_errs) else "lines: none",
-        (f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, {len(res.inliers)} inliers; "
-         f"PnL set: {len(res.pnl_lines)} lines/circles"),
     ]
+    if res.subset == SHOT_SUBSET:
+        lines.append("the **shot model**'s camera (one centre and lens for the shot, solved with every hand edit "
+                     "of it; the frame's own camera: the Clip panel's toggle)")
+    else:
+        lines.append(f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, "
+                     f"{len(res.inliers)} inliers; PnL set: {len(res.pnl_lines)} lines/circles")
     lines += pin_lines(res)
     if view.jac:
         lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))

@@ -124,6 +124,7 @@ class Panels:
     def _clip_folder(self, gui, clips) -> None:
         """The clip timeline, for a video (a dataset without clips has none)."""
         self.clip_text = self.clip_strip = self.clip_slider = self.clip_buttons = None
+        self.shot_box = self.shot_buttons = None
         if not clips:
             return
         from pnlviz.app.timeline import strip_image
@@ -133,6 +134,9 @@ class Panels:
             self.clip_strip = gui.add_image(strip_image([], None), format="png")
             self.clip_slider = gui.add_slider("clip frame", min=1, max=2, step=1, initial_value=1)
             self.clip_buttons = gui.add_button_group("clip", ("play", "pause", "worst", "next worst"))
+            self.shot_box = gui.add_checkbox("shot model", initial_value=True,
+                                             hint="show the shot's camera (off: the frame's own camera, to compare)")
+            self.shot_buttons = gui.add_button_group("shot", ("accept shot", "cut here"))
 
     def _review_folder(self, gui) -> None:
         with gui.add_folder("Review"):
@@ -221,6 +225,11 @@ class Panels:
             actions = {"play": clip.play, "pause": clip.pause, "worst": lambda: clip.jump_worst(restart=True),
                        "next worst": clip.jump_worst}
             self.clip_buttons.on_click(on(lambda e: actions.get(e.target.value, lambda: None)()))
+            box, buttons = self.shot_box, self.shot_buttons
+            if box is not None and buttons is not None:  # made with the clip slider
+                box.on_update(on(lambda _: clip.set_shot_model(box.value)))
+                shot_actions = {"accept shot": clip.accept_shot, "cut here": clip.toggle_cut}
+                buttons.on_click(on(lambda e: shot_actions.get(e.target.value, lambda: None)()))
         self._bind_keys()
 
     def _bind_keys(self) -> None:

@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from pnlviz.app.cards import clip_text
+from pnlviz.app.shots import clip_shots
 from pnlviz.app.timeline import strip_image, worst_frames
 from pnlviz.app.workspace import update_changed
 
@@ -29,16 +30,29 @@ class ClipPlayer:
         self.clip_of = {i: name for name, members in clips.items() for i in members}
         self.playing = False
         self._worst = 0  # how far "next worst" has gone down the current clip's list
+        #: a clip frame shows its shot's camera (:mod:`pnlviz.app.shots`); off: its own camera
+        self.shot_model = True
 
     def members(self) -> list[int]:
         """Dataset indices of the frames of the tab's clip, in frame order ([] outside a clip)."""
         name = self.clip_of.get(self.tab.index)
         return self.clips.get(name, []) if name is not None else []
 
+    def _shot_strip(self):
+        """(errors, cuts, keyframes) of the clip under its shot model, None without one (yet)."""
+        if not self.shot_model or not self.members():
+            return None
+        st = self.tab.state
+        return clip_shots(st).strip(st.stems[self.tab.index], self.tab.settings)
+
     def errors(self) -> list[float]:
-        """Each clip frame's error (the median residual, ``inf`` without a camera, NaN not
-        calibrated yet), from the frames' summaries (:meth:`pnlviz.app.triage.Triage.lookup`):
+        """Each clip frame's error under its shot model when it has one (its observations' median
+        distance to the shot's camera); else its own (the median residual, ``inf`` without a
+        camera, NaN not calibrated yet), from the frames' summaries (:meth:`pnlviz.app.triage.Triage.lookup`):
         a lookup per clip frame, not a pass over every frame."""
+        shot = self._shot_strip()
+        if shot is not None:
+            return shot[0]
         st = self.tab.state
         summaries = [st.triage.lookup(st.stems[i], self.tab.settings) for i in self.members()]
         return [float("nan") if s is None else s.error for s in summaries]
@@ -54,9 +68,11 @@ class ClipPlayer:
             update_changed(p.clip_text, content="this frame is not part of a clip")
             return
         pos = members.index(self.tab.index)
-        errors = self.errors()
-        update_changed(p.clip_text, content=clip_text(self.clip_of[self.tab.index], pos, errors, self.playing))
-        strip = strip_image(errors, pos)
+        shot = self._shot_strip()
+        errors = shot[0] if shot is not None else self.errors()
+        text = clip_text(self.clip_of[self.tab.index], pos, errors, self.playing)
+        update_changed(p.clip_text, content=text + self._shot_text(pos, shot))
+        strip = strip_image(errors, pos, cuts=shot[1] if shot else (), keyframes=shot[2] if shot else ())
         if p.clip_strip.image is None or not np.array_equal(p.clip_strip.image, strip):
             p.clip_strip.image = strip
         p.clip_slider.max = max(2, len(members))
@@ -83,6 +99,40 @@ class ClipPlayer:
             return
         self._worst = 0 if restart else (self._worst + 1) % len(ranked)
         self.tab.goto(members[ranked[self._worst]])
+
+    def _shot_text(self, pos: int, shot) -> str:
+        if not self.shot_model:
+            return "  \nshot model **off**: the frame's own camera"
+        if shot is None:
+            return "  \nshot model: solving the clip's shots..."
+        starts = [0, *shot[1]]
+        k = sum(1 for s in starts if s <= pos)
+        n = len(shot[2])
+        return f"  \nshot {k} of {len(starts)} · {n} keyframe{'' if n == 1 else 's'} (corrected by hand)"
+
+    # ------------------------------------------------------------------ the shot model
+    def set_shot_model(self, on) -> None:
+        """Show the shot's camera (``on``) or the frame's own camera, to compare."""
+        self.shot_model = bool(on)
+        self.tab.show()
+
+    def accept_shot(self) -> None:
+        """Review the frame's whole shot at once: every frame accepted with what its shot shows."""
+        if not self.members():
+            return
+        done = clip_shots(self.tab.state).accept(self.tab.stem, self.tab.settings)
+        self.tab.notify("shot accepted", f"{len(done)} frames reviewed ({done[0]} .. {done[-1]})" if done
+                        else "nothing to accept", error=False)
+        self.tab.show()
+
+    def toggle_cut(self) -> None:
+        """A cut before this frame added by hand, or removed when there is one."""
+        cut = clip_shots(self.tab.state).toggle_cut(self.tab.stem, self.tab.settings) if self.members() else None
+        if cut is None:
+            self.tab.notify("no cut", "a cut goes before a frame of a clip other than its first", error=False)
+        else:
+            self.tab.notify("cut added" if cut else "cut removed", f"before {self.tab.stem}", error=False)
+        self.tab.show()
 
     # ------------------------------------------------------------------ playing
     def play(self) -> None:

@@ -27,6 +27,7 @@ from pnlviz.app.pagesync import PageSync
 from pnlviz.app.panels import Panels
 from pnlviz.app.playback import ClipPlayer
 from pnlviz.app.scene import OVERVIEW, Scene3D, behind_camera
+from pnlviz.app.shots import clip_shots
 from pnlviz.app.state import SOURCES, FrameView, Settings
 from pnlviz.app.tabqueue import ActionGuard, TabQueue
 from pnlviz.app.viewcontrol import ViewControl
@@ -85,7 +86,12 @@ class Session:
         return self.state.stems[self.frames.index]
 
     def view(self) -> FrameView:
-        return self.state.view(self.stem, self.settings)
+        """The tab's frame as it shows it: a clip frame under its shot model (unless the clip
+        panel's toggle shows the frame's own camera), any other frame its own view."""
+        view = self.state.view(self.stem, self.settings)
+        if self.clip.shot_model and self.index in self.clip.clip_of:
+            view = clip_shots(self.state).shot_view(view, self.settings)
+        return view
 
     def notify(self, title: str, body: str, error: bool = True) -> None:
         """A notification in this tab (printed when the session has no browser)."""

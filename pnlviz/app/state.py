@@ -292,8 +292,15 @@ class AppState:
             record = self.edits.get(stem)
             if record.get("review") not in REVIEWED:
                 return None
-            view = self.view(stem, settings or self.default_settings)
-            snap = take_snapshot(view, record, self.applied_detection_settings(view.origin, view.settings), self.model)
+            snap = None
+            if (record.get("snapshot") or {}).get("shot") is not None:  # reviewed with its shot: as it shows now
+                from pnlviz.app.shots import clip_shots
+
+                snap = clip_shots(self).snapshot(stem, settings or self.default_settings)
+            if snap is None:
+                view = self.view(stem, settings or self.default_settings)
+                snap = take_snapshot(view, record, self.applied_detection_settings(view.origin, view.settings),
+                                     self.model)
             if snap != record.get("snapshot"):
                 self.edits.update(stem, snapshot=snap)
         return snap

@@ -52,10 +52,11 @@ def frame_error(view) -> float:
 
 
 def strip_image(errors: Sequence[float], current: int | None, width: int = 320, height: int = 26,
-                scale: float = STRIP_SCALE_PX) -> np.ndarray:
+                scale: float = STRIP_SCALE_PX, cuts: Sequence[int] = (), keyframes: Sequence[int] = ()) -> np.ndarray:
     """An RGB strip, one band per frame in order: green (0 px) through yellow to red (``scale`` px
     and more), dark red for no camera, grey for not calibrated yet; the current frame framed in
-    white."""
+    white; a cut (before frame t, a shot's first frame) a black line across the strip with a
+    white tick above and below; a keyframe (corrected by hand) a cyan mark along the top."""
     e = np.asarray(errors, float)
     n = max(len(e), 1)
     img = np.zeros((height, width, 3), np.uint8)
@@ -70,6 +71,16 @@ def strip_image(errors: Sequence[float], current: int | None, width: int = 320, 
             colour = (int(255 * min(1.0, 2 * t)), int(255 * min(1.0, 2 * (1 - t))), 40)
         a, b = edges[i], max(edges[i + 1], edges[i] + 1)
         img[3:height - 3, a:b] = colour
+    for t in keyframes:
+        if 0 <= t < n:
+            a, b = edges[t], max(edges[t + 1], edges[t] + 1)
+            img[3:8, a:b] = (0, 220, 255)
+    for t in cuts:
+        if 0 < t < n:
+            x = min(width - 2, edges[t])
+            img[:, max(0, x - 1):x + 1] = 0
+            img[:3, max(0, x - 1):x + 1] = 255
+            img[-3:, max(0, x - 1):x + 1] = 255
     if current is not None and 0 <= current < n:
         a, b = edges[current], max(edges[current + 1], edges[current] + 1)
         img[:, max(0, a - 1):min(width, b + 1)][[0, 1, 2, -3, -2, -1]] = 255

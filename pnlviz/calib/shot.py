@@ -7,7 +7,8 @@ move, only pan, tilt, roll and the zoom (focal length) change, and they change s
 * **parameters** ``[C (3), k1, pan_0, tilt_0, roll_0, log f_0, pan_1, ...]``: one centre ``C`` and
   one ``k1`` for the shot; per frame ``t`` pan, tilt, roll (radians, SoccerNet angles) and
   ``log f`` (square pixels, principal point at the centre);
-* **data residuals** (pixels, divided by ``noise_px``): keypoints, reprojected minus observed;
+* **data residuals** (pixels, divided by ``noise_px``): keypoints, reprojected minus observed
+  (a pinned keypoint, placed or moved by hand, weighs ``pin_weight`` times more);
   points observed on straight lines, their distance to the image of the line (computed in
   undistorted coordinates, where the image of a 3D line is straight). The projection and the
   undistortion are those of the per-frame refinements (:mod:`pnlviz.geometry.projection`), with
@@ -25,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse
@@ -70,6 +71,9 @@ class TemporalParams:
     cut_image: float = 0.025
     #: Levenberg-Marquardt iterations per solve
     max_iterations: int = 50
+    #: weight of a pinned keypoint (placed or moved by hand on one frame) in the shot's solve; a
+    #: pin is never dropped as an outlier (as on a single frame, :mod:`pnlviz.calib.pins`)
+    pin_weight: float = 7.0
 
 
 @dataclass
@@ -83,27 +87,34 @@ class ShotData:
     ln_A: np.ndarray  # (M, 3) world ends of the line
     ln_B: np.ndarray
     ln_q: np.ndarray  # (M, 2) observed pixels
+    #: (N,) True for keypoints placed or moved by hand (none when left out)
+    kp_pin: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __post_init__(self):
+        if len(self.kp_pin) != len(self.kp_t):
+            self.kp_pin = np.zeros(len(self.kp_t), bool)
 
     def subset(self, kp_keep: np.ndarray, ln_keep: np.ndarray) -> ShotData:
         return ShotData(self.kp_t[kp_keep], self.kp_X[kp_keep], self.kp_xy[kp_keep], self.ln_t[ln_keep],
-                        self.ln_A[ln_keep], self.ln_B[ln_keep], self.ln_q[ln_keep])
+                        self.ln_A[ln_keep], self.ln_B[ln_keep], self.ln_q[ln_keep], self.kp_pin[kp_keep])
 
     def frame(self, t: int) -> ShotData:
         """Frame ``t``'s observations alone, as a shot of one frame."""
         k, l = self.kp_t == t, self.ln_t == t
         return ShotData(np.zeros(k.sum(), int), self.kp_X[k], self.kp_xy[k], np.zeros(l.sum(), int), self.ln_A[l],
-                        self.ln_B[l], self.ln_q[l])
+                        self.ln_B[l], self.ln_q[l], self.kp_pin[k])
 
 
 def flatten(observations: Sequence[Observations | None], model: FieldModel) -> ShotData:
     """The shot's observations (None: a frame without any) as one :class:`ShotData`."""
-    kt, kX, kx, lt, lA, lB, lq = [], [], [], [], [], [], []
+    kt, kX, kx, kp, lt, lA, lB, lq = [], [], [], [], [], [], [], []
     for t, obs in enumerate(observations):
         if obs is None:
             continue
         kt.append(np.full(obs.n_keypoints, t))
         kX.append(obs.kp_xyz)
         kx.append(obs.kp_xy)
+        kp.append(obs.pins)
         for name, pts in obs.lines.items():
             seg = model.lines.get(name)
             if seg is None or len(pts) == 0:
@@ -118,7 +129,7 @@ def flatten(observations: Sequence[Observations | None], model: FieldModel) -> S
         return np.concatenate(parts) if parts else np.zeros(shape)
 
     return ShotData(cat(kt, (0,)).astype(int), cat(kX, (0, 3)), cat(kx, (0, 2)), cat(lt, (0,)).astype(int),
-                    cat(lA, (0, 3)), cat(lB, (0, 3)), cat(lq, (0, 2)))
+                    cat(lA, (0, 3)), cat(lB, (0, 3)), cat(lq, (0, 2)), cat(kp, (0,)).astype(bool))
 
 
 class ShotModel:
@@ -129,6 +140,8 @@ class ShotModel:
         self.d, self.T, self.params = data, T, params
         self.cx, self.cy = size[0] / 2.0, size[1] / 2.0
         self.prior_scale = np.array([math.radians(params.accel_deg)] * 3 + [params.accel_log_f])
+        # each keypoint residual's scale: the noise, smaller for a pin (it weighs pin_weight times more)
+        self.kp_scale = np.repeat(np.where(data.kp_pin, params.noise_px / params.pin_weight, params.noise_px), 2)
 
     def unpack(self, x: np.ndarray):
         C, k1 = x[:3], (x[3] if self.params.fit_k1 else 0.0)
@@ -158,7 +171,7 @@ class ShotModel:
         per = self.unpack(x)[2]
         acc = (per[:-2] - 2 * per[1:-1] + per[2:]) / self.prior_scale if self.T >= 3 else np.zeros((0, 4))
         k1 = [x[3] / self.params.k1_sigma] if self.params.fit_k1 else []
-        return np.concatenate([r_kp.ravel() / self.params.noise_px, r_ln / self.params.noise_px, acc.ravel(), k1])
+        return np.concatenate([r_kp.ravel() / self.kp_scale, r_ln / self.params.noise_px, acc.ravel(), k1])
 
     def column_groups(self) -> list[np.ndarray]:
         """Columns that share no row, to be differentiated together: each shared parameter alone;

@@ -33,7 +33,13 @@ from .observations import Observations
 from .shot import ShotData, ShotModel, TemporalParams, flatten, jacobian
 from .solver import SolverParams, levenberg_marquardt
 
-__all__ = ["ShotFit", "fit_shot"]
+__all__ = ["ShotFit", "camera_vector", "fit_shot"]
+
+#: the relative decrease of the cost a solve from a previous solution stops at (1e-10 from the
+#: per-frame cameras): the cameras it gives differ by hundredths of a pixel
+WARM_TOL = 1e-6
+#: ... and its iterations at most (the page waits for it: the next edit goes on from where it is)
+WARM_ITERATIONS = 15
 
 
 @dataclass
@@ -84,7 +90,7 @@ def _rebased(cam: Camera, C: np.ndarray) -> np.ndarray:
     return np.array([*pan_tilt_roll_from_rotation(R), math.log(f)])
 
 
-def _camera_vector(cam: Camera) -> np.ndarray:
+def camera_vector(cam: Camera) -> np.ndarray:
     """``[C, k1, pan, tilt, roll, log f]`` of one camera (its x focal length)."""
     return np.concatenate([cam.C, [cam.radial[0]], pan_tilt_roll_from_rotation(cam.R), [math.log(cam.fx)]])
 
@@ -99,8 +105,9 @@ def _agreeing(data: ShotData, cameras: Sequence[Camera | None], size, params: Te
     for t, cam in enumerate(cameras):
         if cam is None:
             continue
-        r_kp, r_ln = ShotModel(data.frame(t), 1, size, one).data_residuals(_camera_vector(cam))
-        kp_keep[data.kp_t == t] = np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.start_outlier_px
+        r_kp, r_ln = ShotModel(data.frame(t), 1, size, one).data_residuals(camera_vector(cam))
+        mine = data.kp_t == t
+        kp_keep[mine] = (np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.start_outlier_px) | data.kp_pin[mine]
         ln_keep[data.ln_t == t] = np.abs(r_ln) <= params.start_outlier_px
     return kp_keep, ln_keep
 
@@ -117,10 +124,10 @@ def _cameras(x: np.ndarray, model: ShotModel, size: tuple[float, float]) -> list
     return out
 
 
-def _solve(m: ShotModel, x: np.ndarray, params: TemporalParams) -> tuple[np.ndarray, float, int]:
+def _solve(m: ShotModel, x: np.ndarray, params: TemporalParams, tol: float = 1e-10) -> tuple[np.ndarray, float, int]:
     """The shot solved from ``x`` by the one solver, soft-L1 (``robust``), its Jacobian by grouped
     finite differences at accepted steps only. Returns the solution, its cost and the number of
-    evaluations of the residuals."""
+    evaluations of the residuals. ``tol``: the relative decrease of the cost to stop at."""
     sparsity = m.sparsity().tocsc()
     groups = m.column_groups()
     nfev = 0
@@ -135,37 +142,55 @@ def _solve(m: ShotModel, x: np.ndarray, params: TemporalParams) -> tuple[np.ndar
         nfev += len(groups)
         return jacobian(m.residuals, x, r, sparsity, groups)
 
-    solver = SolverParams(loss="soft_l1", f_scale=params.robust, max_iter=params.max_iterations, tol=1e-10,
+    solver = SolverParams(loss="soft_l1", f_scale=params.robust, max_iter=params.max_iterations, tol=tol,
                           step_tol=1e-10 * float(np.linalg.norm(x)), max_trials=12)
     x, info = levenberg_marquardt(evaluate, lambda x, dx: x + dx, x, solver, jacobian=derivative)
     return x, float(info["cost"]), nfev
 
 
+def _start_vector(start: ShotFit, T: int) -> np.ndarray:
+    """The parameter vector of a previous solution of the same shot (``T`` frames)."""
+    if len(start.cameras) != T:
+        raise ValueError(f"a warm start needs a solution of the same {T} frames, got {len(start.cameras)}")
+    per = np.column_stack([start.angles, np.log(start.focal)])
+    return np.concatenate([start.C, [start.k1], per.ravel()])
+
+
 def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Camera | None],
              size: tuple[float, float], params: TemporalParams = TemporalParams(),
-             model: FieldModel | None = None) -> ShotFit:
+             model: FieldModel | None = None, start: ShotFit | None = None) -> ShotFit:
     """The broadcast camera of one shot (see the module docstring): ``observations[t]`` and the
     per-frame ``cameras[t]`` (None where a frame has none) of its T frames, in time order, for
-    images of ``size`` (W, H). Returns a camera for every frame."""
+    images of ``size`` (W, H). Returns a camera for every frame. Pinned keypoints (placed or moved
+    by hand, ``Observations.kp_pinned``) weigh ``pin_weight`` times more and are never dropped.
+
+    ``start``: a previous solution of the same shot (warm start, after an edit): the solve starts
+    from it, with the observations it agrees with, instead of from the per-frame cameras."""
     model = model or load_field_model()
     T = len(observations)
     if len(cameras) != T:
         raise ValueError("one camera (or None) per frame")
     data = flatten(observations, model)
-    C0, k10, per0 = initial(cameras, T)
-    x = np.concatenate([C0, [k10 if params.fit_k1 else 0.0], per0.ravel()])
-    nfev = 0
     whole = ShotModel(data, T, size, params)
-    # start from the observations each frame's own camera agrees with (all of a frame without one):
-    # a detector's wrong ids and lines would otherwise pull the first solve off
-    kp_keep, ln_keep = _agreeing(data, cameras, size, params)
+    if start is not None:
+        x = _start_vector(start, T)
+        kp_keep, ln_keep = _kept(whole, x, params)
+    else:
+        C0, k10, per0 = initial(cameras, T)
+        x = np.concatenate([C0, [k10 if params.fit_k1 else 0.0], per0.ravel()])
+        # start from the observations each frame's own camera agrees with (all of a frame without one):
+        # a detector's wrong ids and lines would otherwise pull the first solve off
+        kp_keep, ln_keep = _agreeing(data, cameras, size, params)
+    nfev = 0
+    # from a previous solution an edit moves the cameras a little: a looser stop is as good
+    tol = WARM_TOL if start is not None else 1e-10
+    if start is not None:
+        params = replace(params, max_iterations=min(params.max_iterations, WARM_ITERATIONS))
     for _ in range(3):
-        x, cost, n = _solve(ShotModel(data.subset(kp_keep, ln_keep), T, size, params), x, params)
+        x, cost, n = _solve(ShotModel(data.subset(kp_keep, ln_keep), T, size, params), x, params, tol)
         nfev += n
         # then those the shot's camera agrees with, until the set stops changing
-        r_kp, r_ln = whole.data_residuals(x)
-        new_kp = np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.outlier_px
-        new_ln = np.abs(r_ln) <= params.outlier_px
+        new_kp, new_ln = _kept(whole, x, params)
         if np.array_equal(new_kp, kp_keep) and np.array_equal(new_ln, ln_keep):
             break
         kp_keep, ln_keep = new_kp, new_ln
@@ -178,3 +203,9 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
     C, k1, per = whole.unpack(x)
     return ShotFit(_cameras(x, whole, size), C.copy(), float(k1), per[:, :3].copy(), np.exp(per[:, 3]), res, dropped,
                    cost, nfev)
+
+
+def _kept(whole: ShotModel, x: np.ndarray, params: TemporalParams) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of the observations within ``outlier_px`` of the shot's camera ``x``, and every pin."""
+    r_kp, r_ln = whole.data_residuals(x)
+    return (np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.outlier_px) | whole.d.kp_pin, np.abs(r_ln) <= params.outlier_px

@@ -16,6 +16,9 @@ def add_serve_parser(sub) -> None:
                                    "sample in examples/sample. Edits and review statuses are saved at once "
                                    "in an edits folder beside the data (never over it).")
     add_app_data_args(p)
+    p.add_argument("--video", type=Path, help="a video file (mp4, ...) instead of --data: its frames are decoded when "
+                                              "shown, detected and calibrated in the background, and corrected as "
+                                              "one clip under its shot model (edits in <video>.edits beside it)")
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint: detect in the app (background)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint: detect in the app (background)")
     p.add_argument("--weights", type=Path, default=None,
@@ -73,7 +76,10 @@ def run_serve(args) -> int:
     from pnlviz.data.edits import EditsFolderError
     from pnlviz.detect.worker import DetectorLoadError, DetectorProcessError
 
-    data, args.edits = app_data(args)
+    if args.video is not None and args.data is not None:
+        print("error: --video goes instead of --data", file=sys.stderr)
+        return 2
+    data, args.edits = (args.video, args.edits) if args.video is not None else app_data(args)
     _quiet_handshakes()
     try:
         detector = _detector(args)

@@ -8,10 +8,15 @@ Layout::
      "detections": {PnLCalib frame object} | null,       # the detections used, if any
      "size": [W, H],                                     # the frame's pixels
      "edits": "<digest of the record's annotation and keypoints>",
-     "labels": {"<id>": {"x", "y", "set", "provenance": "annotation"|"detection"|"hand",
+     "labels": {"<id>": {"x", "y", "set", "provenance": "annotation"|"detection"|"hand"|"shot",
                          "residual": px | null}},        # pixels of the frame
      "camera": {SoccerNet camera at 960x540} | null,
-     "failure": "why no camera" | null}
+     "failure": "why no camera" | null,
+     "shot": {"clip": name, "shot": index, "first": stem, "last": stem} | absent}
+
+"shot" is there when the frame was reviewed with its shot (a clip's shot model,
+:mod:`pnlviz.pipeline.clip`): the camera is the shot's, and a label of provenance "shot" is a
+point placed by hand on another frame of the shot, carried here through the shot's cameras.
 
 Pure format: building one from a frame's view is :mod:`pnlviz.pipeline.snapshot`'s job.
 """
@@ -28,7 +33,7 @@ from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe
 from pnlviz.data.predictions import parse_predictions
 
-PROVENANCES = ("annotation", "detection", "hand")
+PROVENANCES = ("annotation", "detection", "hand", "shot")
 SNAPSHOT_SOURCES = ("annotation", "detections", "both")
 
 
@@ -85,9 +90,17 @@ def validate_snapshot(obj: Any, source: str) -> dict:
     if camera is not None and not isinstance(camera, Mapping):
         raise DataError(source, f'snapshot: "camera" must be a SoccerNet camera object, got {describe(camera)}')
     failure = obj.get("failure")
-    return {"settings": {"source": settings["source"], "pnl": bool(settings.get("pnl", True)),
-                         "alpha": _number(settings.get("alpha", 0.6), "alpha", source)},
-            "detection_settings": dict(ds), "detections": detections, "size": list(size),
-            "edits": str(obj.get("edits", ""))[:64], "labels": _labels(obj.get("labels") or {}, source),
-            "camera": None if camera is None else dict(camera),
-            "failure": None if failure is None else str(failure)[:500]}
+    out = {"settings": {"source": settings["source"], "pnl": bool(settings.get("pnl", True)),
+                        "alpha": _number(settings.get("alpha", 0.6), "alpha", source)},
+           "detection_settings": dict(ds), "detections": detections, "size": list(size),
+           "edits": str(obj.get("edits", ""))[:64], "labels": _labels(obj.get("labels") or {}, source),
+           "camera": None if camera is None else dict(camera),
+           "failure": None if failure is None else str(failure)[:500]}
+    shot = obj.get("shot")
+    if shot is not None:
+        index = as_number(shot.get("shot")) if isinstance(shot, Mapping) else None
+        if index is None or not math.isfinite(index):
+            raise DataError(source, f'snapshot: "shot" must be an object with the shot\'s index, got {describe(shot)}')
+        out["shot"] = {"clip": str(shot.get("clip", ""))[:200], "shot": int(index),
+                       "first": str(shot.get("first", ""))[:200], "last": str(shot.get("last", ""))[:200]}
+    return out

@@ -20,7 +20,17 @@ from .errors import DataError
 if TYPE_CHECKING:  # imported when a frame is read
     import cv2
 
-__all__ = ["VideoDataset"]
+__all__ = ["VIDEO_SUFFIXES", "VideoDataset", "is_video"]
+
+#: file name endings opened as videos (``pnlviz serve --video``, :func:`is_video`)
+VIDEO_SUFFIXES = (".mp4", ".m4v", ".mov", ".avi", ".mkv", ".webm", ".mpg", ".mpeg", ".ts")
+
+
+def is_video(path: str | os.PathLike) -> bool:
+    """A file (not a folder or a zip of frames) whose name ends as a video's."""
+    p = Path(path)
+    return p.suffix.lower() in VIDEO_SUFFIXES and not p.is_dir()
+
 
 #: First bytes of still images: a JPEG or PNG named .mp4 is not a clip.
 _STILL_IMAGES = {b"\xff\xd8\xff": "a JPEG image", b"\x89PNG": "a PNG image", b"GIF8": "a GIF image",
@@ -125,6 +135,9 @@ class VideoDataset:
 
     def annotation(self, stem: str, keep_unknown: bool = False):
         return None
+
+    def camera_dict(self, stem: str) -> dict | None:
+        return None  # a video has no known cameras
 
     def image_size(self, stem: str) -> tuple[int, int] | None:
         return (self.width, self.height) if stem in self._index else None

@@ -8,8 +8,10 @@ Layout (a folder or a zip):
 * ``keypoints/<stem>.json``: keypoint labels, ``{"image_size": [W, H], "reviewed": bool, "review":
   status, "keypoints": {"id": {"x", "y", "visible", "set", "provenance", "residual", "flagged"}}}``
   in pixels, corrected keypoints included (hidden ones left out); ``provenance``: annotation,
-  detection or hand; ``residual``: px to the frame's exported camera; ``flagged``: beyond the
-  outlier gate (:mod:`pnlviz.pipeline.snapshot`), not ground truth;
+  detection, hand, or shot (a frame reviewed with its clip's shot model, :mod:`pnlviz.pipeline.clip`:
+  a point placed by hand on another frame of the shot, carried here through the shot's cameras);
+  ``residual``: px to the frame's exported camera; ``flagged``: beyond the outlier gate
+  (:mod:`pnlviz.pipeline.snapshot`), not ground truth;
 * ``cameras/camera_<stem>.json``: the calibrated camera at 960x540 (SoccerNet format);
 * ``homographies.json``: ``{stem: 3x3}``, each calibrated frame's homography from the ground plane
   (X, Y, 1) in metres (SoccerNet world frame) to the frame's own pixels, without lens distortion
@@ -113,6 +115,9 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
     flagged = gate(fl, gate_px)
     entry = {**edits_entry(reader, stem), "calibrated": fl.camera is not None, "error": fl.error,
              "labels": fl.basis, "flagged": len(flagged)}
+    shot = (record.get("snapshot") or {}).get("shot")
+    if shot is not None and fl.basis == "snapshot":
+        entry["shot"] = shot  # reviewed with its shot: the camera is the shot model's
     try:
         ann = reader.annotation(stem, record)
     except DataError as exc:

@@ -96,8 +96,11 @@ class FrameReader:
         settings recorded beside it, else ``detector_settings``) and the edits folder ``edits``
         (default: :func:`pnlviz.data.edits.default_edits_dir`), opened read-only unless
         ``writable``. DataError for a dataset without frames or a bad file; ValueError for an
-        unknown calibration setting."""
-        ds = open_dataset(data)
+        unknown calibration setting. A video file (:func:`pnlviz.data.video.is_video`) is read as
+        a dataset of its frames, decoded when asked for (one clip: ``<video>-IMG_<n>``)."""
+        from pnlviz.data.video import VideoDataset, is_video
+
+        ds = VideoDataset(data) if is_video(data) else open_dataset(data)
         if not len(ds):
             ds.require_frames()
         predictions = read_predictions(detections, splits=ds.splits) if detections else None

@@ -1,0 +1,197 @@
+"""The shot models of the app's clips (no GUI here): what a clip frame shows is its shot's camera
+(:class:`pnlviz.calib.clip.ClipSolver`, built by :func:`pnlviz.pipeline.clip.clip_solver`), and
+an edit on any frame of a shot solves the shot again, so every frame of it updates.
+
+A clip's model is built in the background once every frame of the clip has its detections (the
+frames' own cameras come from their views: the triage pass has computed most of them); until then
+a clip frame shows its own camera. It follows the edits folder: a frame whose keypoint edits
+change (an edit, an undo, another tab) is handed to the solver, which solves its shot from the
+previous solution (well under a second for a 90-frame shot); new detections of a frame drop the
+model, built again. Accepting a shot reviews all its frames at once
+(:func:`pnlviz.pipeline.clip.accept_shot`).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, replace
+
+from pnlviz.calib.calibrate import CalibrationResult
+from pnlviz.calib.clip import ClipSolver
+from pnlviz.pipeline.clip import accept_shot, clip_changes, clip_solver, dataset_clips, set_cut, shot_snapshot
+
+__all__ = ["SHOT_SUBSET", "ClipShots", "ShotPlace", "clip_shots"]
+
+#: the ``subset`` of a result that is a clip frame's shot camera (the card says so)
+SHOT_SUBSET = "shot"
+
+
+@dataclass(frozen=True)
+class ShotPlace:
+    """Where a frame is: its clip, the clip's stems in frame order, its index there, and the
+    clip's model (None while it is being built)."""
+
+    clip: str
+    stems: list[str]
+    t: int
+    solver: ClipSolver | None
+
+
+class ClipShots:
+    """The clips' shot models of one :class:`pnlviz.app.state.AppState`, shared by its tabs."""
+
+    def __init__(self, state):
+        self.state = state
+        self.clips = dataset_clips(state.stems)
+        self._where = {s: (name, t) for name, members in self.clips.items() for t, s in enumerate(members)}
+        self._solvers: dict[tuple, ClipSolver] = {}
+        self._building: set[tuple] = set()
+        self._lock = threading.RLock()
+
+    def place(self, stem: str, settings, build: bool = True) -> ShotPlace | None:
+        """The frame's clip and model (None outside a clip); ``build``: start building the model
+        in the background when there is none (once the clip's frames all have detections)."""
+        where = self._where.get(stem)
+        if where is None:
+            return None
+        clip, t = where
+        key = (clip, settings)
+        with self._lock:
+            solver = self._solvers.get(key)
+            if solver is None and build and key not in self._building and self._ready(clip):
+                self._building.add(key)
+                threading.Thread(target=self._build, args=(key,), name="pnlviz-shots", daemon=True).start()
+        return ShotPlace(clip, self.clips[clip], t, solver)
+
+    def _ready(self, clip: str) -> bool:
+        return not any(self.state.needs_detection(s) for s in self.clips[clip])
+
+    def build(self, clip: str, settings) -> ClipSolver:
+        """The clip's model under ``settings`` (built now, in this thread, when there is none)."""
+        key = (clip, settings)
+        with self._lock:
+            if key in self._solvers:
+                return self._solvers[key]
+        stems = self.clips[clip]
+        st = self.state
+        cams = []
+        for s in stems:
+            view = st.view(s, settings, keep=False)
+            cams.append(view.result.camera if view.result is not None and view.result.ok else None)
+        solver = clip_solver(st.reader, clip, stems, settings, changes=clip_changes(st.reader, stems),
+                             model=st.model, cameras=cams)
+        with self._lock:
+            self._solvers[key] = solver
+        return solver
+
+    def _build(self, key: tuple) -> None:
+        try:
+            self.build(*key)
+        finally:
+            with self._lock:
+                self._building.discard(key)
+        for s in self.clips[key[0]]:
+            self.state._changed(s)  # what the clip's frames show changed: the tabs showing one redraw
+
+    def changed(self, stem: str) -> None:
+        """A frame changed (its edits, its review, its detections): its clip's models follow."""
+        where = self._where.get(stem)
+        if where is None:
+            return
+        clip, t = where
+        record = self.state.edits.get(stem)
+        with self._lock:
+            for key, solver in list(self._solvers.items()):
+                if key[0] != clip:
+                    continue
+                if stem in self.state.detected and not solver.base[t]:  # detections came: built again
+                    del self._solvers[key]
+                    continue
+                edits = dict(record.get("keypoints") or {})
+                if edits != solver.edits.get(t, {}):
+                    k = solver.set_edits(t, edits)
+                    if key[1] == self.state.default_settings:
+                        self._refresh_reviewed(clip, solver, k, key[1])
+
+    def _refresh_reviewed(self, clip: str, solver: ClipSolver, k: int, settings) -> None:
+        """The frames of shot ``k`` reviewed with their shot record what it shows now."""
+        stems = self.clips[clip]
+        for t in solver.shots[k]:
+            snap = (self.state.edits.get(stems[t]).get("snapshot") or {})
+            if snap.get("shot") is not None:
+                self.state.edits.update(stems[t], snapshot=shot_snapshot(self.state.reader, solver, clip, stems, t,
+                                                                          settings))
+
+    def snapshot(self, stem: str, settings) -> dict | None:
+        """The review snapshot of a frame reviewed with its shot, as the shot shows it now (None
+        outside a clip)."""
+        place = self.place(stem, settings, build=False)
+        if place is None:
+            return None
+        self.changed(stem)
+        solver = place.solver or self.build(place.clip, settings)
+        return shot_snapshot(self.state.reader, solver, place.clip, place.stems, place.t, settings)
+
+    def shot_view(self, view, settings):
+        """``view`` (a frame's own :class:`pnlviz.pipeline.view.FrameView`) as its shot model
+        shows it: the shot's camera and the residuals of the frame's points to it; ``view``
+        itself outside a clip or while the model is being built."""
+        place = self.place(view.stem, settings)
+        if place is None or place.solver is None or view.observations is None:
+            return view
+        cam = place.solver.camera(place.t)
+        if cam is None:
+            return view
+        labels = place.solver.labels(place.t)
+        residuals = {k: lab.residual for k, lab in labels.items()
+                     if lab.residual is not None and lab.provenance != "shot"}
+        result = CalibrationResult(estimate=cam, subset=SHOT_SUBSET, point_residuals=residuals,
+                                   pinned=[k for k, lab in labels.items() if lab.provenance == "hand"])
+        return replace(view, result=result, jac={})
+
+    def strip(self, stem: str, settings) -> tuple[list[float], list[int], list[int]] | None:
+        """The clip's strip under its model: each frame's error to its shot's camera, the cuts
+        (first frames of the shots after the first) and the keyframes; None without a model."""
+        place = self.place(stem, settings, build=False)
+        if place is None or place.solver is None:
+            return None
+        s = place.solver
+        return [s.frame_error(t) for t in range(s.T)], [r.start for r in s.shots[1:]], s.keyframes
+
+    def accept(self, stem: str, settings) -> list[str]:
+        """Accept the frame's whole shot (built now if needed); the stems reviewed."""
+        place = self.place(stem, settings, build=False)
+        if place is None:
+            return []
+        solver = place.solver or self.build(place.clip, settings)
+        k = solver.shot_of(place.t)
+        return accept_shot(self.state.reader, solver, place.clip, place.stems, k, settings)
+
+    def toggle_cut(self, stem: str, settings) -> bool | None:
+        """Add a cut before the frame (remove it when there is one); True when there is one now,
+        None outside a clip or at its first frame."""
+        place = self.place(stem, settings, build=False)
+        if place is None or place.t == 0:
+            return None
+        solver = place.solver or self.build(place.clip, settings)
+        cut = place.t not in {r.start for r in solver.shots}
+        with self._lock:
+            set_cut(self.state.reader, solver, place.clip, place.t, cut)
+            for key, other in list(self._solvers.items()):  # the other settings' models follow the saved cuts
+                if key[0] == place.clip and other is not solver:
+                    del self._solvers[key]
+        return cut
+
+
+_CREATE = threading.Lock()
+
+
+def clip_shots(state) -> ClipShots:
+    """The clips' shot models of an :class:`pnlviz.app.state.AppState`, made on first use and
+    following every change of its frames from then on."""
+    with _CREATE:
+        shots = getattr(state, "_clip_shots", None)
+        if shots is None:
+            shots = state._clip_shots = ClipShots(state)
+            state.subscribe(shots.changed)
+    return shots

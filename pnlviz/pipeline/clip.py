@@ -1,0 +1,158 @@
+"""A clip of a dataset under its shot model, for every caller (the app, export, scripts): the
+clip's :class:`pnlviz.calib.clip.ClipSolver` built from a :class:`pnlviz.pipeline.reader.FrameReader`
+(each frame's own observations, its keypoint edits from the edits folder, the cuts changed by
+hand), and a whole shot reviewed at once (:func:`accept_shot`): every frame of it records a review
+snapshot of what the shot model shows (the shot's camera, the labels with their provenance:
+``detection`` / ``annotation``, ``hand``, ``shot``), which is what an export writes.
+
+The cuts a hand added or removed are kept in the edits folder, beside the frames' records:
+``<edits>/clips/<clip>.json``, ``{"cuts": {"added": [frame index, ...], "removed": [...]}}``
+(a cut before the clip's t-th frame, 0-based, is named by t).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+from pnlviz.calib.clip import ClipSolver, CutEdits
+from pnlviz.calib.frame import calib_params, detection_settings_apply, observations_for
+from pnlviz.calib.observations import Observations
+from pnlviz.calib.shot import TemporalParams
+from pnlviz.calib.temporal import image_changes
+from pnlviz.conventions import EVAL_SIZE
+from pnlviz.data import atomic_write_text
+from pnlviz.data.errors import DataError
+from pnlviz.data.layout import clips
+from pnlviz.data.predictions import predictions_to_json
+from pnlviz.data.snapshot import edits_digest
+from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.pipeline.reader import FrameReader, Settings
+
+__all__ = ["accept_shot", "clip_changes", "clip_solver", "dataset_clips", "read_cuts", "set_cut", "shot_snapshot"]
+
+CLIPS_DIR = "clips"
+
+
+def dataset_clips(stems: Sequence[str]) -> dict[str, list[str]]:
+    """``{clip: [stems in frame order]}`` of the named clips (``<clip>-IMG_<n>``) of two frames or
+    more among a dataset's ``stems``."""
+    return {name: list(members) for name, members in clips(stems).items() if name and len(members) >= 2}
+
+
+def _cuts_path(reader: FrameReader, clip: str) -> Path:
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in clip)[:120] or "_"
+    return reader.edits_folder.root / CLIPS_DIR / f"{safe}.json"
+
+
+def read_cuts(reader: FrameReader, clip: str) -> CutEdits:
+    """The cuts a hand changed in ``clip`` (none when nothing was saved, or the file is unreadable)."""
+    path = _cuts_path(reader, clip)
+    try:
+        return CutEdits.from_json(json.loads(path.read_text()).get("cuts"))
+    except (OSError, ValueError, TypeError, AttributeError):
+        return CutEdits()
+
+
+def set_cut(reader: FrameReader, solver: ClipSolver, clip: str, t: int, cut: bool) -> None:
+    """A cut before frame ``t`` of ``clip`` added or removed by hand: saved, and the solver's
+    shots changed (the shots it touches solved again)."""
+    solver.set_cut(t, cut)
+    path = _cuts_path(reader, clip)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps({"cuts": solver.cuts.to_json()}))
+
+
+def clip_changes(reader: FrameReader, stems: Sequence[str]) -> list[float | None] | None:
+    """The image change from each frame of a clip to the next (None when no frame has an image)."""
+    def images():
+        for s in stems:
+            try:
+                yield reader.ds.image(s) if reader.ds.frame(s).has_image else None
+            except DataError:
+                yield None
+
+    if not any(reader.ds.frame(s).has_image for s in stems):
+        return None
+    return image_changes(images())
+
+
+def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: Settings | None = None, *,
+                changes: Sequence[float | None] | None = None, model: FieldModel | None = None,
+                cameras: Sequence | None = None) -> ClipSolver:
+    """The clip ``stems`` (in frame order) under its shot model: each frame's own observations
+    under ``settings`` (default: the reader's), its keypoint edits and the clip's hand cuts from
+    the edits folder, ``changes`` (:func:`clip_changes`) to find the cuts; ``cameras``: the
+    frames' own cameras under ``settings`` with their edits, when known (else calibrated here)."""
+    model = model or load_field_model()
+    settings = settings or reader.default_settings()
+    fs = reader.frame_settings(settings)
+    base: list[Observations | None] = []
+    origins: list[str] = []
+    edits: dict[int, dict] = {}
+    origin0: str | None = None
+    size: tuple[int, int] | None = None
+    for t, stem in enumerate(stems):
+        read = reader.read(stem)
+        if read.inputs is None:
+            base.append(None)
+            origins.append("detection")
+            continue
+        size = size or (int(read.inputs.size[0]), int(read.inputs.size[1]))
+        obs, origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, model)
+        origin0 = origin0 or origin
+        base.append(obs)
+        origins.append("annotation" if origin == "annotation" else "detection")
+        if read.inputs.keypoint_edits:
+            edits[t] = dict(read.inputs.keypoint_edits)
+    cp = calib_params(fs, origin0)
+    frame_size = size or (int(reader.size[0]), int(reader.size[1]))
+    return ClipSolver(base, frame_size, TemporalParams(fit_k1=cp.refine_k1), cp, changes=changes,
+                      cuts=read_cuts(reader, clip), origins=origins, model=model, keypoint_edits=edits,
+                      cameras=None if cameras is None else list(cameras))
+
+
+def shot_snapshot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Sequence[str], t: int,
+                  settings: Settings | None = None) -> dict:
+    """The review snapshot of frame ``t`` of the clip as its shot model shows it (format:
+    :mod:`pnlviz.data.snapshot`): the shot's camera and the frame's labels with provenance."""
+    settings = settings or reader.default_settings()
+    fs = reader.frame_settings(settings)
+    stem = stems[t]
+    record = reader.edits.get(stem) if reader.edits is not None else {}
+    read = reader.read(stem)
+    origin = None
+    if read.inputs is not None:
+        origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, solver.field_model)[1]
+    dets = reader.detections(stem) if origin in ("detections", "both") else None
+    camera = solver.camera(t)
+    k = solver.shot_of(t)
+    shot = solver.shots[k]
+    return {"settings": {"source": settings.source, "pnl": settings.pnl, "alpha": settings.alpha},
+            "detection_settings": dict(detection_settings_apply(origin, fs)), "size": [int(v) for v in solver.size],
+            "detections": predictions_to_json(dets) if dets is not None else None, "edits": edits_digest(record),
+            "labels": {str(kid): {"x": lab.x, "y": lab.y, "set": lab.set, "provenance": lab.provenance,
+                                  "residual": lab.residual} for kid, lab in solver.labels(t).items()},
+            "camera": None if camera is None else camera.scaled(*EVAL_SIZE).to_soccernet(),
+            "failure": None if camera is not None else "the shot has no camera here",
+            "shot": {"clip": clip, "shot": k, "first": stems[shot.start], "last": stems[shot.stop - 1]}}
+
+
+def accept_shot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Sequence[str], k: int,
+                settings: Settings | None = None) -> list[str]:
+    """Review shot ``k`` of the clip at once: every frame of it accepted (a frame corrected by hand
+    stays "corrected"), with the snapshot of what the shot model shows (one undo step per frame).
+    Returns the stems reviewed."""
+    done = []
+    for t in solver.shots[k]:
+        stem = stems[t]
+        with reader.edits_folder.lock(stem):
+            snap = shot_snapshot(reader, solver, clip, stems, t, settings)
+            # the review is the undo step; the snapshot goes with it
+            if reader.edits_folder.review(stem) != "corrected":
+                reader.edits_folder.act(stem, lambda rec: rec.__setitem__("review", "accepted"), corrected=False)
+            reader.edits_folder.update(stem, snapshot=snap)
+        done.append(stem)
+    return done
