@@ -91,7 +91,7 @@ def fix_frame(state, stem: str, settings=None):
     qa = check_frame(view.annotation, view.size, calibration=FrameCalibration(view.observations, view.origin, None,
                                                                               view.result))
     finding = next((f for f in qa.findings if f.fix is not None), None)
-    if finding is not None:
+    if finding is not None and finding.fix is not None:
         state.set_annotation(stem, apply_fix(view.annotation, finding.fix))
     return finding
 

@@ -30,10 +30,11 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from pnlviz.calib.frame import Failure, FrameInputs, FrameSettings, calibrate_frame
+from pnlviz.calib.frame import Failure, FrameCalibration, FrameInputs, FrameSettings, calibrate_frame
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.qa_checks import (KINDS, Finding, QAParams, class_findings, detection_findings, distances,
                                     judge_class, missing_findings, projected_classes)
@@ -61,7 +62,7 @@ class FrameQA:
         return [f.kind for f in self.findings]
 
     def to_json(self, stem: str | None = None) -> dict:
-        out = {} if stem is None else {"stem": stem}
+        out: dict[str, Any] = {} if stem is None else {"stem": stem}
         out.update(score=round(float(self.score), 4), findings=[f.to_json() for f in self.findings])
         return out
 
@@ -103,7 +104,8 @@ def _judge_classes(cam: Camera, data: FrameData, px: dict[str, np.ndarray], para
         if worst[cls] <= far:  # no point off: nothing to judge again
             closest = max(closest, worst[cls] / far)
             continue
-        cam_c, skip = cam, {cls}
+        cam_c: Camera | None = cam
+        skip: set[str] = {cls}
         if cls in fitted:  # without the class, and without the other gross suspects when enough is left
             cam_c, skip = loo_camera(cam, data, suspects | {cls}, params), suspects | {cls}
             if cam_c is None:
@@ -123,7 +125,7 @@ def _judge_classes(cam: Camera, data: FrameData, px: dict[str, np.ndarray], para
 def _camera_without(cam: Camera, data: FrameData, findings: list[Finding], params: QAParams) -> Camera:
     """The camera refitted without the classes found wrong (the camera itself when none are, or
     when the others cannot fix one)."""
-    bad = {f.cls for f in findings if f.kind in ("wrong_class", "off_projection")}
+    bad = {f.cls for f in findings if f.kind in ("wrong_class", "off_projection") and f.cls is not None}
     if not bad:
         return cam
     return loo_camera(cam, data, bad, params) or cam
@@ -148,14 +150,15 @@ def frame_camera(ann: dict[str, np.ndarray], size: tuple[int, int], settings: Fr
     fc = calibrate_frame(FrameInputs(size, ann), fast, model)
     if fc.ok:
         return fc, None
-    if fc.failure.code in ("too_few_keypoints", "degenerate", "no_inliers") and priors:
+    if fc.failure is not None and fc.failure.code in ("too_few_keypoints", "degenerate", "no_inliers") and priors:
         slow = calibrate_frame(FrameInputs(size, ann), settings, model)
         if slow.ok or len(ann) < 3:
             return slow, None
-    best, best_fit = (fc, None), np.inf
+    best: tuple[FrameCalibration, str | None] = (fc, None)
+    best_fit = np.inf
     for cls in ann if len(ann) >= 3 else ():
         fc_c = calibrate_frame(FrameInputs(size, {k: v for k, v in ann.items() if k != cls}), fast, model)
-        if fc_c.ok and fc_c.result.line_residuals:
+        if fc_c.ok and fc_c.result is not None and fc_c.result.line_residuals:
             fit = float(np.median(list(fc_c.result.line_residuals.values())))
             if fit < best_fit:
                 best, best_fit = (fc_c, cls), fit
@@ -182,19 +185,20 @@ def check_frame(annotation: Mapping[str, np.ndarray], size: tuple[int, int] = EV
     else:
         fc, _ = frame_camera(ann, size, settings, model, params.prior_search) if ann else (None, None)
     if fc is None or not fc.ok:
-        res = None if fc is None else fc.result
-        failure = None if fc is None else (fc.failure or Failure(getattr(res, "failure_code", None) or "failed",
-                                                                 getattr(res, "failure", None) or "not calibrated"))
-        why = "no annotated class with geometry" if fc is None else failure.message
-        f = Finding("no_camera", f"the annotation gives no camera: {why}", 1.0,
-                    evidence={"failure": "no_input" if fc is None else failure.code})
+        why, code = "no annotated class with geometry", "no_input"
+        if fc is not None:
+            res = fc.result
+            failure = fc.failure or Failure(getattr(res, "failure_code", None) or "failed",
+                                            getattr(res, "failure", None) or "not calibrated")
+            why, code = failure.message, failure.code
+        f = Finding("no_camera", f"the annotation gives no camera: {why}", 1.0, evidence={"failure": code})
         return FrameQA(frame_score([f]), [f], None, 1e3 * (time.perf_counter() - t0))
     cam = fc.result.camera
     data = FrameData.build(fc.observations, model)
     px = {k: v * [W - 1, H - 1] for k, v in ann.items()}
     findings, closest = _judge_classes(cam, data, px, params, model)
     judge = _camera_without(cam, data, findings, params)
-    renamed = {f.fix["to"] for f in findings if f.kind == "wrong_class"}
+    renamed = {f.fix["to"] for f in findings if f.kind == "wrong_class" and f.fix is not None}
     flagged = {f.cls for f in findings}
     proj = projected_classes(judge, model)
     agree = [float(np.max(distances(p, proj.get(n)))) for n, p in px.items() if n not in flagged]
@@ -217,13 +221,15 @@ def apply_fix(annotation: Mapping[str, np.ndarray], fix: Mapping) -> dict[str, n
     its points (normalised)."""
     out = {k: np.asarray(v, float).reshape(-1, 2).copy() for k, v in annotation.items()}
     op, cls = fix.get("op"), fix.get("class")
+    if not isinstance(cls, str):
+        raise ValueError(f"fix {fix!r}: 'class' must name a class")
     if cls not in out and op != "add_class":
         raise ValueError(f"fix {fix!r}: the annotation has no class {cls!r}")
     if op == "rename":
         pts = out.pop(cls)
         out[fix["to"]] = np.vstack([out[fix["to"]], pts]) if fix["to"] in out else pts
     elif op == "drop_points":
-        keep = np.ones(len(out[cls]), bool)
+        keep = np.ones(len(out[cls]), dtype=np.bool_)
         keep[np.asarray(fix["points"], int)] = False
         if keep.any():
             out[cls] = out[cls][keep]

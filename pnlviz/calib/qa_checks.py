@@ -9,6 +9,7 @@ Distances are pixels of the frame; thresholds are given at 960 px width and scal
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -56,7 +57,7 @@ class Finding:
     fix: dict | None = None
 
     def to_json(self) -> dict:
-        out = {"kind": self.kind}
+        out: dict[str, Any] = {"kind": self.kind}
         if self.cls is not None:
             out["class"] = self.cls
         if self.keypoint is not None:
@@ -176,10 +177,10 @@ def class_findings(v: ClassVerdict, width: float, height: float, params: QAParam
     worst, n = float(np.max(v.d)), len(v.d)
     if worst <= far:
         return []
-    ev = {"points": n, "max_px": _r(worst), "median_px": _r(np.median(v.d)), "others_px": _r(v.others),
+    ev: dict[str, Any] = {"points": n, "max_px": _r(worst), "median_px": _r(np.median(v.d)), "others_px": _r(v.others),
           "camera_std_px": _r(v.spread), "left_out": v.loo}
     confidence = 1.0 if v.loo else 0.5
-    if v.alt is not None and np.max(v.d_alt) <= tol and np.max(v.d_alt) * params.rename_ratio < worst:
+    if v.alt is not None and v.d_alt is not None and np.max(v.d_alt) <= tol and np.max(v.d_alt) * params.rename_ratio < worst:
         ev.update(alt=v.alt, alt_max_px=_r(np.max(v.d_alt)))
         sev = min(params.max_severity, worst / tol) * confidence
         return [Finding("wrong_class", f"{v.cls!r} fits the pitch as {v.alt!r} ({_relation(v.cls, v.alt)}): "
@@ -196,6 +197,7 @@ def class_findings(v: ClassVerdict, width: float, height: float, params: QAParam
     sev = min(params.max_severity, float(np.median(v.d)) / tol) * confidence
     if sev < 1.0:
         return []
+    fix: dict[str, Any]
     if v.snapped is not None and np.all(np.isfinite(v.snapped)):
         norm = np.clip(v.snapped / [width - 1, height - 1], 0.0, 1.0)
         fix = {"op": "move_points", "class": v.cls, "points": _points_json(norm)}

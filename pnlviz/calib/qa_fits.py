@@ -50,6 +50,7 @@ def first_order_loo(cam: Camera, data: FrameData, params: QAParams) -> dict[str,
     P, model = prob.problem, prob.model
     state = model.start()
     r, J = P.evaluate(state, jac=True)
+    assert J is not None  # asked for
     w = robust_weights(r, "cauchy", params.px(3.0, obs.width))
     ok = np.isfinite(r) & np.all(np.isfinite(J), axis=1)
     Jw, rw = np.where(ok[:, None], J * w[:, None], 0.0), np.where(ok, r * w, 0.0)
@@ -116,6 +117,7 @@ class CameraSpread:
         if prob.n_res < prob.n_free + 2:
             return
         r, J = prob.problem.evaluate(self.state, jac=True)
+        assert J is not None  # asked for
         ok = np.isfinite(r) & np.all(np.isfinite(J), axis=1)
         Jw = J[ok] * robust_weights(r[ok], "cauchy", params.px(3.0, obs.width))[:, None]
         A = Jw.T @ Jw
