@@ -189,7 +189,8 @@ def vote(cands: list[Candidate], kind: Kind, params) -> Candidate | None:
     obs = kind.data.obs
     tau = params.px(params.vote_tau, obs.width)
     taus = getattr(kind, "vote_taus", None) if obs.pins.any() else None  # per-observation bounds with pins
-    pin_tau = params.px(params.pin_vote_px, obs.width)
+    # only a kind with per-observation bounds has pins' own (the homography's parameters have none)
+    pin_tau = params.px(params.pin_vote_px, obs.width) if taus is not None else tau
     residuals = kind.scorer(cands[0].estimate)
     for c in cands:
         r = residuals(c.estimate)
