@@ -227,6 +227,15 @@ class _NoDataset:
         return False
 
 
+def worker_reader(ds, predictions, size: tuple[int, int], source: str, edits: Path | None):
+    """The :func:`frame_reader` a batch worker opens, with the edits folder ``edits`` read-only
+    (None: no edits)."""
+    from pnlviz.data.edits import EditsStore
+
+    store = EditsStore(edits, writable=False) if edits is not None else None
+    return frame_reader(ds, predictions, size, source, store)
+
+
 @dataclass
 class CalibrateJob(BatchJob):
     """The frames' calibration on any worker: ``ds`` (re-opened lazily where it runs), the
@@ -240,10 +249,7 @@ class CalibrateJob(BatchJob):
     edits: Path | None = None
 
     def open_state(self):
-        from pnlviz.data.edits import EditsStore
-
-        edits = EditsStore(self.edits, writable=False) if self.edits is not None else None
-        return frame_reader(self.ds, self.predictions, self.size, self.settings.source, edits)
+        return worker_reader(self.ds, self.predictions, self.size, self.settings.source, self.edits)
 
     def run_chunk(self, reader, stems: list[str]) -> list:
         return [calibrate_stem(reader, stem, self.settings) for stem in stems]

@@ -63,12 +63,10 @@ class QAJob(BatchJob):
     edits: Path | None = None
 
     def open_state(self):
-        from pnlviz.commands.calibrate import frame_reader
-        from pnlviz.data.edits import EditsStore
+        from pnlviz.commands.calibrate import worker_reader
         from pnlviz.field import load_field_model
 
-        edits = EditsStore(self.edits, writable=False) if self.edits is not None else None
-        return frame_reader(self.ds, self.predictions, self.size, "annotation", edits), load_field_model()
+        return worker_reader(self.ds, self.predictions, self.size, "annotation", self.edits), load_field_model()
 
     def run_chunk(self, state, stems: list[str]) -> list:
         reader, model = state

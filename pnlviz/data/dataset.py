@@ -197,6 +197,9 @@ class Dataset:
             return read_zip_member(self._zip(), name, self._source(name), limit_for(name))
 
     # ------------------------------------------------------------ annotations
+    def _has_annotation(self, stem: str) -> bool:
+        return stem in self._annotations
+
     def _parse_annotation(self, stem: str, keep_unknown: bool) -> Annotation | None:
         name = self.frame(stem).annotation_path
         if name is None:
@@ -236,7 +239,7 @@ class Dataset:
         """
         self.skipped = []
         for stem in self._stems:
-            if stem not in self._annotations:
+            if not self._has_annotation(stem):
                 continue
             try:
                 ann = self._parse_annotation(stem, keep_unknown)

@@ -93,28 +93,54 @@ class DatasetIndex:
         self.rejected.sort(key=str)
 
 
+@dataclass
+class FolderScan:
+    """One listing of a folder (hidden names left out): ``files`` the frame files ``(name,
+    path)``, ``subdirs`` its folders but ``cameras/``, ``zips`` its ``*.zip`` files (split zips,
+    :mod:`pnlviz.data.splits`), ``broken`` the entries that cannot be read (a symlink loop)."""
+
+    files: list[tuple[str, str]] = field(default_factory=list)
+    subdirs: list[str] = field(default_factory=list)
+    zips: list[str] = field(default_factory=list)
+    broken: list[DataError] = field(default_factory=list)
+
+
+def scan_folder(root: Path) -> FolderScan:
+    scan = FolderScan()
+    with os.scandir(root) as it:
+        for entry in it:
+            if entry.name.startswith("."):
+                continue
+            try:
+                is_dir = entry.is_dir()  # follows a symlink: a loop raises ELOOP
+            except OSError as e:
+                scan.broken.append(DataError(entry.path, f"cannot read: {os_error_text(e)}: skipped"))
+                continue
+            if is_dir:
+                if entry.name != CAMERAS_DIR:
+                    scan.subdirs.append(entry.path)
+            elif classify(entry.name) is not None:
+                scan.files.append((entry.name, entry.path))
+            elif entry.name.lower().endswith(".zip") and len(entry.name) > 4:
+                scan.zips.append(entry.path)
+    return scan
+
+
+def frame_folder(path: str | os.PathLike, *, stop_at_zips: bool = False) -> tuple[Path, FolderScan]:
+    """The folder holding a dataset's frames and its listing: ``path`` itself, or its single
+    subfolder when it has no frame file (nor, with ``stop_at_zips``, a zip)."""
+    root = Path(path)
+    scan = scan_folder(root)
+    if not scan.files and len(scan.subdirs) == 1 and not (stop_at_zips and scan.zips):
+        root = Path(scan.subdirs[0])
+        scan = scan_folder(root)
+    return root, scan
+
+
 def index_folder(path: Path) -> DatasetIndex:
     """The frames of a folder: at its top level, or inside its single subfolder."""
-    root = Path(path)
-    for _ in range(2):  # the folder itself, or the single folder inside it
-        subdirs, files, broken = [], [], []
-        with os.scandir(root) as it:
-            for entry in it:
-                if entry.name.startswith("."):
-                    continue
-                try:
-                    is_dir = entry.is_dir()  # follows a symlink: a loop raises ELOOP
-                except OSError as e:
-                    broken.append(DataError(entry.path, f"cannot read: {os_error_text(e)}: skipped"))
-                    continue
-                if is_dir:
-                    if entry.name != CAMERAS_DIR:
-                        subdirs.append(entry.path)
-                elif classify(entry.name) is not None:
-                    files.append((entry.name, entry.path))
-        if files or len(subdirs) != 1:
-            break
-        root = Path(subdirs[0])
+    root, scan = frame_folder(path)
+    files, broken = scan.files, scan.broken
     index = DatasetIndex(None, os.fspath(root))
     index._sort(files)
     index.rejected = sorted(index.rejected + broken, key=str)

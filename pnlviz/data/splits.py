@@ -25,10 +25,8 @@ from __future__ import annotations
 
 import os
 import zipfile
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -36,7 +34,7 @@ from .annotations import Annotation
 from .dataset import Dataset, Frame
 from .errors import DataError
 from .filekind import os_error_text
-from .index import CAMERAS_DIR, classify
+from .index import CAMERAS_DIR, classify, frame_folder
 from .layout import is_junk, join_stem, sort_stems, split_member, split_stem
 from .reading import open_zip
 
@@ -53,34 +51,11 @@ class SplitPart:
     root: str | None = None
 
 
-def _frame_files(names: list[str]) -> bool:
-    return any(classify(n) is not None for n in names)
-
-
 def _folder_splits(path: Path) -> tuple[list[SplitPart], list[DataError]] | None:
-    root = path
-    for _ in range(2):  # the folder itself, or the single folder inside it
-        files, subdirs, zips = [], [], []
-        with os.scandir(root) as it:
-            for entry in it:
-                if entry.name.startswith("."):
-                    continue
-                try:
-                    if entry.is_dir():
-                        if entry.name != CAMERAS_DIR:
-                            subdirs.append(Path(entry.path))
-                    elif entry.name.lower().endswith(".zip") and len(entry.name) > 4:
-                        zips.append(Path(entry.path))
-                    else:
-                        files.append(entry.name)
-                except OSError:
-                    continue  # the plain index reports it
-        if _frame_files(files):
-            return None
-        if len(subdirs) == 1 and not zips:
-            root = subdirs[0]
-            continue
-        break
+    _, scan = frame_folder(path, stop_at_zips=True)
+    if scan.files:
+        return None
+    subdirs, zips = [Path(p) for p in scan.subdirs], [Path(p) for p in scan.zips]
     if not zips and len(subdirs) < 2:
         return None
     parts: dict[str, SplitPart] = {}
@@ -178,22 +153,13 @@ class SplitDataset(Dataset):
         d, base = self._part(stem)
         return d.annotation(base, keep_unknown)
 
-    def iter_annotations(self, on_error: Callable[[str, DataError], Any] | None = None,
-                         keep_unknown: bool = False) -> Iterator[tuple[str, Annotation]]:
-        self.skipped = []
-        for stem in self._stems:
-            d, base = self._part(stem)
-            if not d.frame(base).has_annotation:
-                continue
-            try:
-                ann = d._parse_annotation(base, keep_unknown)
-            except DataError as err:
-                self.skipped.append((stem, err))
-                if on_error is not None:
-                    on_error(stem, err)
-                continue
-            if ann is not None:
-                yield stem, ann
+    def _has_annotation(self, stem: str) -> bool:  # for the base class's iter_annotations
+        d, base = self._part(stem)
+        return d._has_annotation(base)
+
+    def _parse_annotation(self, stem: str, keep_unknown: bool) -> Annotation | None:
+        d, base = self._part(stem)
+        return d._parse_annotation(base, keep_unknown)
 
     def image(self, stem: str) -> np.ndarray | None:
         d, base = self._part(stem)
