@@ -43,7 +43,7 @@ from .cameras import camera_member_name, camera_stem, parse_camera_bytes
 from .errors import DataError, member_source
 from .imagesize import header_size
 from .jsonio import describe, parse_json_bytes
-from .index import CAMERAS_DIR, IMAGE_EXTENSIONS, MATCH_INFO, index_folder, index_zip
+from .index import CAMERAS_DIR, IMAGE_EXTENSIONS, MATCH_INFO, FolderScan, index_folder, index_zip
 from .layout import sort_stems
 from .reading import bad_name_error, is_utf8, limit_for, open_file, open_zip, read_file, read_zip_member, zip_member
 
@@ -84,7 +84,7 @@ class Dataset:
     """Lazily indexed frames of a folder or zip; see the module docstring.
 
     Use :func:`pnlviz.data.open_dataset` to create one (``root``: for a zip, the member prefix
-    of its frames, found when None). ``len(ds)``, ``ds.stems`` (natural order),
+    of its frames, found when None; ``listing``: a folder's listing the caller has already made). ``len(ds)``, ``ds.stems`` (natural order),
     ``ds.frame(stem)``, ``ds.annotation(stem)``, ``ds.image(stem)``, ``ds.image_size(stem)``,
     ``ds.camera_dict(stem)``, ``ds.camera_stems()``, ``ds.match_info``,
     ``ds.iter_annotations(on_error=...)``, ``ds.rejected`` (files not used, one DataError each),
@@ -96,7 +96,8 @@ class Dataset:
     #: ``()`` for a plain one.
     splits: tuple[str, ...] = ()
 
-    def __init__(self, path: str | os.PathLike, cache_size: int = 64, root: str | None = None):
+    def __init__(self, path: str | os.PathLike, cache_size: int = 64, root: str | None = None,
+                 listing: tuple[Path, FolderScan] | None = None):
         self.path = Path(path)
         self.cache_size = cache_size
         #: ``(stem, DataError)`` of the frames the last :meth:`iter_annotations` skipped.
@@ -116,7 +117,7 @@ class Dataset:
             self._zf = open_zip(self.path, not_zip="not a folder or a valid .zip archive")
             self._index = index_zip(self.path, self._zf, root)
         else:
-            self._index = index_folder(self.path)
+            self._index = index_folder(self.path, listing)
         self.rejected = self._index.rejected
         self._images, self._annotations = self._index.images, self._index.annotations
         self._stems = tuple(sort_stems(set(self._images) | set(self._annotations)))

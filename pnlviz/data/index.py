@@ -137,9 +137,10 @@ def frame_folder(path: str | os.PathLike, *, stop_at_zips: bool = False) -> tupl
     return root, scan
 
 
-def index_folder(path: Path) -> DatasetIndex:
-    """The frames of a folder: at its top level, or inside its single subfolder."""
-    root, scan = frame_folder(path)
+def index_folder(path: Path, listing: tuple[Path, FolderScan] | None = None) -> DatasetIndex:
+    """The frames of a folder: at its top level, or inside its single subfolder (``listing``:
+    :func:`frame_folder`'s result when the caller has it already)."""
+    root, scan = listing or frame_folder(path)
     files, broken = scan.files, scan.broken
     index = DatasetIndex(None, os.fspath(root))
     index._sort(files)

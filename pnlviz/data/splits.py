@@ -34,7 +34,7 @@ from .annotations import Annotation
 from .dataset import Dataset, Frame
 from .errors import DataError
 from .filekind import os_error_text
-from .index import CAMERAS_DIR, classify, frame_folder
+from .index import CAMERAS_DIR, FolderScan, classify, frame_folder
 from .layout import is_junk, join_stem, sort_stems, split_member, split_stem
 from .reading import open_zip
 
@@ -51,8 +51,7 @@ class SplitPart:
     root: str | None = None
 
 
-def _folder_splits(path: Path) -> tuple[list[SplitPart], list[DataError]] | None:
-    _, scan = frame_folder(path, stop_at_zips=True)
+def _folder_splits(scan: FolderScan) -> tuple[list[SplitPart], list[DataError]] | None:
     if scan.files:
         return None
     subdirs, zips = [Path(p) for p in scan.subdirs], [Path(p) for p in scan.zips]
@@ -90,12 +89,14 @@ def _zip_splits(path: Path) -> list[SplitPart] | None:
     return [SplitPart(p.rstrip("/").rpartition("/")[2], path, p) for p in sorted(prefixes)]
 
 
-def find_splits(path: str | os.PathLike) -> tuple[list[SplitPart], list[DataError]] | None:
+def find_splits(path: str | os.PathLike,
+                listing: tuple[Path, FolderScan] | None = None) -> tuple[list[SplitPart], list[DataError]] | None:
     """The splits of a dataset folder or zip (rules in the module docstring), with the splits
-    left out and why; None when it is a plain dataset."""
+    left out and why; None when it is a plain dataset. ``listing``: the folder's
+    ``frame_folder(path, stop_at_zips=True)`` when the caller has it already."""
     p = Path(path)
     if p.is_dir():
-        return _folder_splits(p)
+        return _folder_splits((listing or frame_folder(p, stop_at_zips=True))[1])
     if not p.exists():
         return None
     parts = _zip_splits(p)
@@ -192,9 +193,13 @@ def _open_part(part: SplitPart, cache_size: int) -> Dataset:
 def open_dataset(path: str | os.PathLike, cache_size: int = 64) -> Dataset:
     """Open a folder or ``.zip`` dataset, plain or in splits (lazy index; see :class:`Dataset` and
     this module's docstring for the split layouts)."""
-    found = find_splits(path)
+    p = Path(path)
+    # one listing of a folder for both: the splits, else (no zip beside a single subfolder, so the
+    # same folder) the plain index
+    listing = frame_folder(p, stop_at_zips=True) if p.is_dir() else None
+    found = find_splits(p, listing)
     if found is None:
-        return Dataset(path, cache_size=cache_size)
+        return Dataset(path, cache_size=cache_size, listing=listing)
     parts, rejected = found
     opened: dict[str, Dataset] = {}
     for part in parts:
