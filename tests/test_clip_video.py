@@ -64,6 +64,27 @@ def test_a_video_is_served_as_a_dataset_of_frames(video, tmp_path):
         assert st.image(st.stems[5]).shape == (H, W, 3)
 
 
+def test_two_threads_asking_for_a_clip_model_get_the_same_one(video, tmp_path):
+    """The tab's background build and a caller racing it share one model: an edit handed to it is
+    the one the tab shows (two models would leave the page on the stale one)."""
+    import threading
+
+    from pnlviz.app.state import AppState
+
+    path, preds, _ = video
+    with AppState(path, detections=preds, edits=tmp_path / "edits") as st:
+        shots = clip_shots(st)
+        settings = st.default_settings
+        got: list = []
+        threads = [threading.Thread(target=lambda: got.append(shots.build("match", settings))) for _ in range(3)]
+        for th in threads:
+            th.start()
+        for th in threads:
+            th.join()
+        assert len(got) == 3 and got[0] is got[1] is got[2]
+        assert shots.place(st.stems[4], settings, build=False).solver is got[0]
+
+
 def test_a_shot_of_a_video_is_corrected_once_and_exported_with_provenance(video, tmp_path):
     path, preds, plan = video
     model = load_field_model()

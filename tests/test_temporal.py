@@ -218,6 +218,22 @@ def test_a_video_file_goes_through_detect_and_calibrate(tmp_path, capsys):
     assert np.abs(ds.image("match-IMG_00003").astype(int) - frames[2]).mean() < 12
     assert np.abs(ds.image("match-IMG_00004").astype(int) - frames[3]).mean() < 12
     assert np.abs(ds.image("match-IMG_00002").astype(int) - frames[1]).mean() < 12
+    # threads sharing the dataset (the app's view, triage and shot builds) each get their own frame
+    import threading
+
+    wrong: list[int] = []
+
+    def read(t: int) -> None:
+        for _ in range(4):
+            if np.abs(ds.image(ds.stems[t]).astype(int) - frames[t]).mean() >= 12:
+                wrong.append(t)
+
+    threads = [threading.Thread(target=read, args=(t,)) for t in (1, 6, 10)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert wrong == []
     preds = tmp_path / "preds.zip"
     assert main(["detect", "--video", str(video), "--out", str(preds), "--no-progress", "--threads", "1"]) == 0
     assert sorted(read_predictions(preds)) == list(ds.stems)

@@ -46,6 +46,7 @@ class ClipShots:
         self._where = {s: (name, t) for name, members in self.clips.items() for t, s in enumerate(members)}
         self._solvers: dict[tuple, ClipSolver] = {}
         self._building: set[tuple] = set()
+        self._gates: dict[tuple, threading.Lock] = {}
         self._lock = threading.RLock()
 
     def place(self, stem: str, settings, build: bool = True) -> ShotPlace | None:
@@ -67,21 +68,36 @@ class ClipShots:
         return not any(self.state.needs_detection(s) for s in self.clips[clip])
 
     def build(self, clip: str, settings) -> ClipSolver:
-        """The clip's model under ``settings`` (built now, in this thread, when there is none)."""
+        """The clip's model under ``settings`` (built now, in this thread, when there is none).
+
+        One model per clip and settings: a caller that comes while another thread builds it waits
+        for that build and gets the same model (two builds racing would leave the tabs showing one
+        model and the edits going to the other)."""
         key = (clip, settings)
         with self._lock:
-            if key in self._solvers:
-                return self._solvers[key]
-        stems = self.clips[clip]
-        st = self.state
-        cams = []
-        for s in stems:
-            view = st.view(s, settings, keep=False)
-            cams.append(view.result.camera if view.result is not None and view.result.ok else None)
-        solver = clip_solver(st.reader, clip, stems, settings, changes=clip_changes(st.reader, stems),
-                             model=st.model, cameras=cams)
-        with self._lock:
-            self._solvers[key] = solver
+            solver = self._solvers.get(key)
+            if solver is not None:
+                return solver
+            gate = self._gates.setdefault(key, threading.Lock())
+        with gate:
+            with self._lock:
+                solver = self._solvers.get(key)
+            if solver is not None:
+                return solver
+            stems = self.clips[clip]
+            st = self.state
+            cams = []
+            for s in stems:
+                view = st.view(s, settings, keep=False)
+                cams.append(view.result.camera if view.result is not None and view.result.ok else None)
+            solver = clip_solver(st.reader, clip, stems, settings, changes=clip_changes(st.reader, stems),
+                                 model=st.model, cameras=cams)
+            with self._lock:
+                self._solvers[key] = solver
+                for t, s in enumerate(stems):  # edits made while it was built
+                    edits = dict(st.edits.get(s).get("keypoints") or {})
+                    if edits != solver.edits.get(t, {}):
+                        solver.set_edits(t, edits)
         return solver
 
     def _build(self, key: tuple) -> None:

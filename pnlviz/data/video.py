@@ -9,6 +9,7 @@ as clip ``<video stem>``, frame ``i + 1``: detections of a video calibrate as on
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -108,6 +109,7 @@ class VideoDataset:
         self._index = {s: i for i, s in enumerate(self._stems)}
         self._cap: cv2.VideoCapture | None = None
         self._next = 0
+        self._lock = threading.Lock()  # one capture: a seek and its read are one step for a thread
         self.rejected: list = []
 
     # -- the Dataset surface -------------------------------------------------------------------
@@ -147,25 +149,32 @@ class VideoDataset:
         import cv2
 
         i = self._index[stem]
-        if self._cap is None:
-            self._cap = cv2.VideoCapture(str(self.path))
-            self._next = 0
-        if i != self._next:
-            self._cap.set(cv2.CAP_PROP_POS_FRAMES, i)
-            self._next = i
-        ok, img = self._cap.read()
+        with self._lock:
+            if self._cap is None:
+                self._cap = cv2.VideoCapture(str(self.path))
+                self._next = 0
+            if i != self._next:
+                self._cap.set(cv2.CAP_PROP_POS_FRAMES, i)
+                self._next = i
+            ok, img = self._cap.read()
+            self._next = i + 1 if ok else -1
         if not ok or img is None:
             raise DataError(f"{self.path} frame {i + 1}", "cannot be decoded (the video ends early or is damaged)")
-        self._next = i + 1
         return img
 
     def close(self) -> None:
-        if self._cap is not None:
-            self._cap.release()
-            self._cap = None
+        with self._lock:
+            if self._cap is not None:
+                self._cap.release()
+                self._cap = None
 
     def __getstate__(self) -> dict:  # process pools: re-open the capture in the worker
         state = dict(self.__dict__)
         state["_cap"] = None
         state["_next"] = 0
+        del state["_lock"]
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
