@@ -217,24 +217,14 @@ def report(rows, times, top: int) -> list[dict]:
     return ranked
 
 
-def _fix_points(qa, f) -> np.ndarray:
-    """Where the finding's fix puts the class (pixels): the suggested points, or the camera's
-    projection of the new name near the annotated points."""
-    if f.fix is None:
-        return np.zeros((0, 2))
-    if f.fix["op"] in ("move_points", "add_class"):
-        return np.asarray(f.fix["points"]) * SCALE
-    if f.fix["op"] == "rename" and qa.camera is not None:
-        uv, _ = qa.camera.project(load_field_model().sample_polylines(4.0, 2.0)[f.fix["to"]])
-        return uv[np.isfinite(uv).all(axis=1) & (uv[:, 0] >= 0) & (uv[:, 0] < SIZE[0]) & (uv[:, 1] >= 0)
-                  & (uv[:, 1] < SIZE[1])]
-    return np.zeros((0, 2))
-
-
 def figure(rows: list[dict], path: Path) -> None:
+    """Each row's frame with its top finding drawn as the app draws it: the class where the
+    annotation put it (pink), where the judging camera expects it (green, the fix's points circled),
+    over the pitch through that camera (white) and the rest of the annotation (thin)."""
     import cv2
 
-    from pnlviz.viz import blank_canvas, caption, contact_sheet, draw_annotation, draw_pitch
+    from pnlviz.calib.qa import finding_marks
+    from pnlviz.viz import blank_canvas, caption, contact_sheet, draw_annotation, draw_findings, draw_pitch
 
     tiles = []
     for r in rows:
@@ -242,11 +232,10 @@ def figure(rows: list[dict], path: Path) -> None:
         im = blank_canvas(*SIZE)
         if q.camera is not None:
             draw_pitch(im, q.camera, colour=(255, 255, 255))
-        draw_annotation(im, r["ann"], labels=True, thickness=2)
+        draw_annotation(im, r["ann"], labels=True, thickness=1)
+        marks = finding_marks(q, r["ann"], SIZE)[:1]
+        draw_findings(im, marks)
         f = q.findings[0]
-        where = _fix_points(q, f)
-        for p in where:
-            cv2.circle(im, (int(p[0]), int(p[1])), 7, (0, 0, 255), 2, cv2.LINE_AA)
         to = f" -> {f.fix['to']}" if f.fix and f.fix["op"] == "rename" else ""
         caption(im, f"SN22 {r['stem']}: {f.kind}: {f.cls or f.keypoint}{to}")
         tiles.append(im)

@@ -1,8 +1,9 @@
 """Scale: a 23,000-frame SN23-sized dataset calibrated on 1 and 2 workers, and the light detector
-on 1,000 frames on 1 and 2 workers, and an export of 4,000 frames on 1 and 2 workers.
+on 1,000 frames on 1 and 2 workers, and an export of 4,000 frames on 1 and 2 workers; with
+``--qa``, the label-error finder over the 23,000 frames on 2 worker processes and on 2 dask workers.
 
     python benchmarks/bench_scale.py [--frames 23000] [--detect 1000] [--export 4000]
-                                     [--skip-calibrate] [--skip-detect]
+                                     [--skip-calibrate] [--skip-detect] [--qa]
 
 * Calibration from labels: a zip of ``--frames`` SoccerNet annotations (the 400 real SN22 test
   annotations of ``../shared/data/sn22_test_subset`` repeated under new stems; no images needed),
@@ -12,6 +13,10 @@ on 1,000 frames on 1 and 2 workers, and an export of 4,000 frames on 1 and 2 wor
   for byte.
 * Detection: ``--detect`` frames (the bundled sample's images, linked under new stems),
   ``pnlviz detect --threads 1`` locally and on the 2-worker cluster (1 torch thread per worker).
+* Label QA (``--qa``): ``pnlviz qa --workers 2`` and ``pnlviz qa --scheduler`` on the same
+  cluster over the ``--frames`` annotations; wall time, frames/s, peak memory of the command's
+  process and its worker processes, and whether the two outputs list the same frames, scores and
+  findings (the timings aside).
 * Export: ``pnlviz export --all`` of ``--export`` of those annotations (every frame calibrated,
   its label files written), locally and on the cluster; the outputs are compared member by member
   (the manifest's export date left out).
@@ -69,6 +74,16 @@ def _local_then_cluster(cmd: list[str], outputs: Path, name: str, scheduler: str
     return t1, peak, t2, same(a, b)
 
 
+def _same_qa(a: Path, b: Path) -> bool:
+    import json
+
+    def rows(path: Path) -> list[dict]:  # each frame's line, its time aside
+        return [{k: v for k, v in r.items() if k != "ms"} for r in map(json.loads, path.read_text().splitlines())
+                if "stem" in r]
+
+    return rows(a) == rows(b)
+
+
 def _worker_peaks(client) -> list[float]:
     return sorted(round(v / 1024) for v in client.run(
         lambda: __import__("resource").getrusage(__import__("resource").RUSAGE_SELF).ru_maxrss).values())
@@ -99,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--export", type=int, default=4000, help="frames to export (0: no export run)")
     ap.add_argument("--skip-calibrate", action="store_true")
     ap.add_argument("--skip-detect", action="store_true")
+    ap.add_argument("--qa", action="store_true", help="the label-error finder over the --frames annotations too")
     args = ap.parse_args(argv)
     try:
         import distributed
@@ -124,6 +140,21 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"| 2 dask workers | {t2:.0f} | {args.frames / t2:.0f} | {t1 / t2:.2f} | "
                       f"{' and '.join(f'{w} MB' for w in workers)} per worker |")
                 print(f"outputs identical byte for byte: {same}")
+            if args.qa:
+                a, b = tmp / "qa_local.jsonl", tmp / "qa_cluster.jsonl"
+                cmd = pnlviz + ["qa", "--data", str(data), "--no-progress"]
+                before = _peak_mb_children()
+                q1, _ = _run(cmd + ["--out", str(a), "--workers", "2"])
+                q1_peak = _peak_mb_children()
+                q2, _ = _run(cmd + ["--out", str(b), "--scheduler", c.scheduler_address, "--chunk", "64"])
+                workers = _worker_peaks(client)
+                print("| qa (label errors, from labels) | wall (s) | frames/s | peak memory |")
+                print("|---|---|---|---|")
+                print(f"| 2 worker processes | {q1:.0f} | {args.frames / q1:.0f} | "
+                      f"{q1_peak:.0f} MB (largest process so far{'' if q1_peak > before else ': an earlier one'}) |")
+                print(f"| 2 dask workers | {q2:.0f} | {args.frames / q2:.0f} | "
+                      f"{' and '.join(f'{w} MB' for w in workers)} per worker (since the cluster started) |")
+                print(f"same frames, scores and findings: {_same_qa(a, b)}")
             if args.export:
                 exports = tmp / "export_set.zip"
                 build_annotations(src, args.export, exports)

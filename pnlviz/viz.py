@@ -74,6 +74,35 @@ def draw_annotation(image: np.ndarray, annotation: Mapping[str, np.ndarray], *, 
     return image
 
 
+#: a label-error finding (pnlviz.calib.qa): the class where the annotation put it, where the
+#: judging camera expects it, and the points its fix is about (RGB; the app uses the same)
+FINDING_ANNOTATED_RGB = (255, 40, 120)
+FINDING_EXPECTED_RGB = (150, 255, 0)
+
+
+def ring(centre, radius: float, sides: int = 16) -> np.ndarray:
+    """A closed polygon of ``sides`` around ``centre`` (a circle drawn as segments)."""
+    t = np.linspace(0.0, 2.0 * np.pi, sides + 1)
+    return np.asarray(centre, float) + radius * np.stack([np.cos(t), np.sin(t)], axis=1)
+
+
+def draw_findings(image: np.ndarray, marks, thickness: int = 2) -> np.ndarray:
+    """Draw label-error findings (:func:`pnlviz.calib.qa.finding_marks`, pixels of this image):
+    the class as annotated (pink), where the camera expects it (green), the fix's points circled
+    (green). In place."""
+    pink, green = FINDING_ANNOTATED_RGB[::-1], FINDING_EXPECTED_RGB[::-1]
+    for m in marks:
+        for part in m.expected:
+            cv2.polylines(image, [_to_int(part)], False, green, thickness, cv2.LINE_AA, shift=4)
+        if len(m.annotated) >= 2:
+            cv2.polylines(image, [_to_int(m.annotated)], False, pink, thickness + 1, cv2.LINE_AA, shift=4)
+        for p in m.annotated:
+            cv2.circle(image, tuple(_to_int(p)[0, 0]), 4 << 4, pink, -1, cv2.LINE_AA, shift=4)
+        for p in m.points:
+            cv2.polylines(image, [_to_int(ring(p, 8.0))], True, green, thickness, cv2.LINE_AA, shift=4)
+    return image
+
+
 def caption(image: np.ndarray, text: str) -> np.ndarray:
     """Write ``text`` on a dark band at the top-left (non-ASCII characters as ``?``). In place."""
     text = cv_text(text)

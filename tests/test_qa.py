@@ -110,6 +110,42 @@ def test_a_marking_left_out_is_found_where_the_camera_puts_it(left):
     restored(bad, f)
 
 
+def test_each_finding_is_drawn_where_the_annotation_put_it_and_where_the_camera_expects_it(left):
+    from pnlviz.app.overlay import finding_segments
+    from pnlviz.calib.qa import finding_marks
+    from pnlviz.geometry.distance import closest_on_polyline
+
+    cam, ann = left
+    model = load_field_model()
+
+    def truth(cls):
+        uv, _ = cam.project(model.sample_polylines(0.5, 0.25)[cls])
+        return uv[np.isfinite(uv).all(axis=1)]
+
+    cls = "Big rect. left top"
+    bad = {**ann, cls: ann[cls] + np.array([0.0, 25.0]) / SCALE}  # off its paint
+    bad["Big rect. left main"] = np.vstack([ann["Big rect. left main"], ann["Small rect. left main"]])  # + strays
+    del bad["Big rect. left bottom"]  # left out
+    qa = check_frame(bad)
+    marks = {m.finding.kind: m for m in finding_marks(qa, bad, (960, 540), model)}
+    assert set(marks) == {"off_projection", "split_class", "missing_class"}, [f.message for f in qa.findings]
+    off = marks["off_projection"]
+    np.testing.assert_allclose(off.annotated, bad[cls] * SCALE)  # as annotated: 25 px below the paint
+    expected = np.vstack(off.expected)  # where the camera expects it: on the paint
+    assert np.max(closest_on_polyline(expected, truth(cls)).distance) < 3
+    assert np.min(closest_on_polyline(off.annotated, expected).distance) > 15
+    np.testing.assert_allclose(off.points, np.asarray(off.finding.fix["points"]) * SCALE)  # where the fix moves them
+    split = marks["split_class"]  # the fix's points: the two strays it drops
+    np.testing.assert_allclose(split.points, ann["Small rect. left main"] * SCALE)
+    gone = marks["missing_class"]  # nothing annotated; the camera puts it on the paint
+    assert len(gone.annotated) == 0 and gone.expected
+    assert np.max(closest_on_polyline(np.vstack(gone.expected), truth("Big rect. left bottom")).distance) < 3
+    # the app draws the same marks as two layers; a clean frame has none
+    seg = finding_segments(list(marks.values()))
+    assert len(seg["finding_annotated"]) >= len(bad[cls]) - 1 and len(seg["finding_expected"]) > 0
+    assert finding_marks(check_frame(ann), ann, (960, 540), model) == []
+
+
 def _detections(cam, ids):
     from pnlviz.data import Predictions
 

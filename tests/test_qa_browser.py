@@ -1,5 +1,6 @@
 """The label-error finder in the app, with real events: the suspects filter goes to the frame
-it flags, F applies the suggested fix as an edit, Ctrl+Z takes it back."""
+it flags, the finding is drawn on it and listed, F applies the suggested fix as an edit, Ctrl+Z
+takes it back."""
 
 import json
 
@@ -26,10 +27,19 @@ def test_suspects_filter_then_f_fixes_the_frame_and_ctrl_z_undoes_it(data, brows
     def classes():
         return set(st.view("00000").annotation)
 
+    def drawn(layer):
+        overlay = session.painter.overlay
+        return overlay is not None and len(overlay.segments.get(layer, ())) > 0
+
+    # the finding on the frame: the arc where the annotation put it, where the camera expects it
+    wait_until(lambda: drawn("finding_annotated") and drawn("finding_expected"))
+    wait_for_text(page, "label errors")
+    wait_for_text(page, "'Circle left' fits the pitch as 'Circle right'")
     page.mouse.move(700, 450)
     page.keyboard.press("f")
     wait_until(lambda: "Circle right" in classes() and "Circle left" not in classes(), timeout=30)
     wait_for_text(page, "fix applied")
+    wait_until(lambda: not drawn("finding_annotated"))  # fixed: nothing left to draw
     page.keyboard.press("Control+z")
     wait_until(lambda: "Circle left" in classes(), timeout=30)
     page.close()

@@ -1,5 +1,5 @@
 """The texts of a tab's panel, as pure functions of what they show (markdown, or the rows of a
-dropdown): the calibration card, the title and status lines, the points list, the selected
+dropdown): the calibration card and the label-error findings under it, the title and status lines, the points list, the selected
 point, the review progress, the clip line, the zoom.
 """
 
@@ -58,6 +58,17 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))
     lines.append(f"computed in {view.ms:.0f} ms")
     return "\n\n".join(lines)
+
+
+def findings_text(marks) -> str:
+    """Markdown of a frame's label-error findings (:func:`pnlviz.calib.qa.finding_marks`), the
+    first fix's key; empty without findings."""
+    if not marks:
+        return ""
+    rows = [f"- **{m.finding.kind.replace('_', ' ')}**: {m.finding.message}" for m in marks]
+    has_fix = any(m.finding.fix is not None for m in marks)
+    return ("\n\n**label errors** (pink: as annotated, green: where the camera expects it"
+            + ("; **F** applies the first fix" if has_fix else "") + ")\n\n" + "\n".join(rows))
 
 
 def pin_lines(res) -> list[str]:

@@ -1,6 +1,6 @@
 """Drawing one tab: its frame's image on the image plane (and the frames either side of it sent
-ahead), the overlays and points over it, the panel's texts, and in the 3D view the camera over
-the pitch. Only what changed is sent (:func:`pnlviz.app.workspace.update_changed`), inside one
+ahead), the overlays and points over it (the label-error finder's findings among them), the
+panel's texts, and in the 3D view the camera over the pitch. Only what changed is sent (:func:`pnlviz.app.workspace.update_changed`), inside one
 message batch per draw.
 """
 
@@ -33,6 +33,7 @@ class Painter:
         self.layers = Layers()
         self.opacity = 1.0
         self._top_key: tuple | None = None  # what the panel's bird's-eye view was drawn from
+        self._judged: tuple[FrameView, list] | None = None  # the last view judged and its findings' marks
         self.shown: FrameView | None = None
         self.overlay: Overlay | None = None
         self.drawn = 0
@@ -52,7 +53,8 @@ class Painter:
             self.show_overlay(view)
             self.show_panel(view)
             if tab.view_control.mode is Mode.THREE_D:
-                tab.scene3d.show(view, render(view, tab.state.image(view.stem), self.layers))
+                tab.scene3d.show(view, render(view, tab.state.image(view.stem), self.layers,
+                                              findings=self.findings(view)))
 
     def _atomic(self):
         tab = self.tab
@@ -111,11 +113,31 @@ class Painter:
         kps = self.tab.state.edits.get(stem).get("keypoints") or {}
         return {int(k) for k, v in kps.items() if v is None}
 
+    def findings(self, view: FrameView) -> list:
+        """The label-error finder's findings on ``view`` as marks to draw
+        (:func:`pnlviz.calib.qa.finding_marks`; judged once per view): none when the findings layer
+        is off, or for a frame calibrated from anything but its annotation."""
+        if not self.layers.findings:
+            return []
+        if self._judged is None or self._judged[0] is not view:
+            from pnlviz.app.triage import judge_view
+            from pnlviz.calib.qa import finding_marks
+
+            try:
+                qa = judge_view(view)
+            except Exception:  # noqa: BLE001 - a bug in the finder must not stop the frame being shown
+                qa = None
+            marks = finding_marks(qa, view.annotation or {}, view.size, self.tab.state.model) if qa else []
+            self._judged = (view, marks)
+        return self._judged[1]
+
     def show_overlay(self, view: FrameView, preview: bool = False) -> None:
         """The overlays of ``view``; a ``preview`` (while a point is dragged) is not kept as the
-        frame's overlay."""
+        frame's overlay, nor judged by the label-error finder (its findings are drawn again when
+        the point is let go)."""
         tab = self.tab
-        overlay = overlay_geometry(view, self.layers, tab.state.model, hidden=self.hidden_ids(view.stem))
+        overlay = overlay_geometry(view, self.layers, tab.state.model, hidden=self.hidden_ids(view.stem),
+                                   findings=() if preview else self.findings(view))
         colors = self.blended(overlay, view) if self.opacity < 1.0 else None
         tab.workspace.show_overlay(overlay, colors, keypoints=self.layers.keypoints, ghosts=self.layers.ghosts,
                                    line_points=tab.editor.drag_mode is DragMode.LINE_POINTS, ids=self.layers.ids)
@@ -149,7 +171,7 @@ class Painter:
         update_changed(p.status, content=cards.status_line(view, st.edits.review(view.stem), st.edits.get(view.stem),
                                                            tab.guard.save_error, tab.app.detection_status(view.stem)))
         update_changed(p.filter_text, content=cards.filter_text(view.stem, n, frames.outside_filter, flt))
-        update_changed(p.card, content=cards.calibration_card(view, st))
+        update_changed(p.card, content=cards.calibration_card(view, st) + cards.findings_text(self.findings(view)))
         self.show_points_list(view)
         self.show_selected()
         self.show_progress()

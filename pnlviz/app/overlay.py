@@ -1,7 +1,8 @@
 """What the app draws over a frame, as geometry in image pixels: the pitch projected through the
 known, the initial (voted) and the refined camera, the annotated lines, the detector's lines, the
-keypoints coloured by set, their residuals, and "ghosts" (catalogue keypoints the camera puts in
-the frame that nobody observed: click one to choose its id, drag it to place it).
+keypoints coloured by set, their residuals, "ghosts" (catalogue keypoints the camera puts in
+the frame that nobody observed: click one to choose its id, drag it to place it), and the label-error
+finder's findings (the class where the annotation put it and where the camera expects it).
 
 :func:`overlay_geometry` is pure; :mod:`pnlviz.app.workspace` turns it into scene primitives
 that are updated in place (the frame image itself is sent once per frame). :func:`render` draws
@@ -19,7 +20,17 @@ import numpy as np
 from pnlviz.app.state import FrameView
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.polylines import project_polylines
-from pnlviz.viz import blank_canvas, caption, class_colour, draw_annotation, draw_pitch
+from pnlviz.viz import (
+    FINDING_ANNOTATED_RGB,
+    FINDING_EXPECTED_RGB,
+    blank_canvas,
+    caption,
+    class_colour,
+    draw_annotation,
+    draw_findings,
+    draw_pitch,
+    ring,
+)
 
 #: RGB colours of the keypoint sets, as in the paper's figure (Kp red, Kpe yellow, Kp1 blue,
 #: Kp2 pink, Kp3 green)
@@ -48,6 +59,8 @@ LEGEND = {
     "ghosts": (GHOST_RGB, "not observed: click to choose, drag to place"),
     "pins": (PIN_RGB, "box: pinned (placed by hand); the camera is fitted to it"),
     "flagged": (FLAGGED_RGB, "orange box: pinned, but the camera cannot agree with it"),
+    "finding_annotated": (FINDING_ANNOTATED_RGB, "label error: the class where the annotation put it"),
+    "finding_expected": (FINDING_EXPECTED_RGB, "label error: where the camera expects it; circled: the fix"),
 }
 
 
@@ -62,6 +75,7 @@ class Layers:
     reference_pitch: bool = True
     detected_lines: bool = True
     ghosts: bool = True
+    findings: bool = True
 
 
 @dataclass
@@ -158,10 +172,21 @@ def _ghosts(view: FrameView, model: FieldModel, hidden: set[int]) -> Markers:
                    np.tile(np.array(GHOST_RGB, np.uint8), (len(keep), 1)), [str(ids[i]) for i in keep])
 
 
+def finding_segments(marks) -> dict[str, Segments]:
+    """Label-error findings (:func:`pnlviz.calib.qa.finding_marks`) as two layers: the classes as
+    annotated, and where the camera expects them with the fix's points circled."""
+    annotated = [m.annotated for m in marks if len(m.annotated) >= 2]
+    annotated += [ring(p, 3.0, 8) for m in marks for p in m.annotated]
+    expected = [part for m in marks for part in m.expected] + [ring(p, 8.0) for m in marks for p in m.points]
+    return {"finding_annotated": Segments.from_polylines(annotated, FINDING_ANNOTATED_RGB),
+            "finding_expected": Segments.from_polylines(expected, FINDING_EXPECTED_RGB)}
+
+
 def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldModel | None = None,
-                     hidden: Set[int] = frozenset()) -> Overlay:
+                     hidden: Set[int] = frozenset(), findings=()) -> Overlay:
     """The overlays of ``view`` that ``layers`` asks for. ``hidden``: keypoint ids marked not
-    visible (no ghost is offered for them)."""
+    visible (no ghost is offered for them); ``findings``: the frame's label-error findings to
+    draw (:func:`pnlviz.calib.qa.finding_marks`)."""
     model = model or load_field_model()
     W, H = view.size
     res = view.result
@@ -204,15 +229,19 @@ def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldMod
             if layers.residuals and good.any():
                 seg["residuals"] = Segments(np.stack([obs.kp_xy[good], proj[good]], axis=1),
                                             np.tile(np.array(RESIDUAL_RGB, np.uint8), (int(good.sum()), 1)))
+    if layers.findings and findings:
+        seg.update(finding_segments(findings))
     ghosts = _ghosts(view, model, set(hidden)) if layers.ghosts else Markers()
     pinned = [int(k) for k in obs.kp_ids[obs.pins]] if obs is not None else []
     flagged = dict(res.flagged) if res is not None and res.ok else {}
     return Overlay(seg, markers, ghosts, line_points, residuals, pinned, flagged)
 
 
-def render(view: FrameView, image: np.ndarray | None, layers: Layers = Layers(), max_width: int = 1280) -> np.ndarray:
+def render(view: FrameView, image: np.ndarray | None, layers: Layers = Layers(), max_width: int = 1280,
+           findings=()) -> np.ndarray:
     """The frame (``image``, BGR, or a neutral canvas when None) with its overlays drawn on the
-    pixels, RGB uint8, at most ``max_width`` wide (for pictures and the 3D view's frustum)."""
+    pixels, RGB uint8, at most ``max_width`` wide (for pictures and the 3D view's frustum);
+    ``findings`` as :func:`overlay_geometry`."""
     W, H = view.size
     img = image.copy() if image is not None else blank_canvas(W, H)
     res = view.result
@@ -226,6 +255,8 @@ def render(view: FrameView, image: np.ndarray | None, layers: Layers = Layers(),
             draw_pitch(img, camera, colour=REFINED_RGB[::-1], thickness=2)
     if layers.annotation and view.annotation:
         draw_annotation(img, view.annotation, thickness=1, radius=2)
+    if layers.findings and findings:
+        draw_findings(img, findings)
     geom = overlay_geometry(view, Layers(annotation=False, initial_pitch=False, refined_pitch=False,
                                          reference_pitch=False, ghosts=False, detected_lines=layers.detected_lines,
                                          residuals=layers.residuals))

@@ -17,7 +17,7 @@ from pnlviz.app.overlay import LEGEND, SET_RGB
 from pnlviz.viz import keypoint_map
 
 LAYERS = ("keypoints", "ids", "ghosts", "refined_pitch", "initial_pitch", "reference_pitch", "annotation",
-          "residuals", "detected_lines")
+          "residuals", "detected_lines", "findings")
 REVIEW_KEYS = {"accepted": "G", "corrected": "C", "rejected": "R"}
 PANEL_WIDTH = 320
 MAP_PX_PER_M = 6.0  # the keypoint map beside the picker (about 700 px wide, shown at the panel's width)

@@ -77,20 +77,29 @@ def summarize(view, token: str, judge: bool = False) -> FrameSummary:
                         view.jac.get(5) if ok else None, token, suspect, note)
 
 
+def judge_view(view):
+    """The label-error finder's verdict (:func:`pnlviz.calib.qa.check_frame`, reusing the view's
+    calibration) on a frame calibrated from its annotation alone; None for a frame calibrated
+    from anything else, or without an annotation. Raises what the finder raises."""
+    from pnlviz.calib.frame import FrameCalibration
+    from pnlviz.calib.qa import check_frame
+
+    if not view.annotation or view.origin != "annotation" or view.result is None:
+        return None
+    return check_frame(view.annotation, view.size,
+                       calibration=FrameCalibration(view.observations, view.origin, None, view.result))
+
+
 def fix_frame(state, stem: str, settings=None):
     """Apply the suggested fix of the frame's worst finding that has one (the label-error
     finder's, on the frame as the tab shows it) as an ordinary annotation edit, undoable like
     any other: the finding, or None when there is nothing to fix (a frame calibrated from
     anything but its annotation is not judged)."""
-    from pnlviz.calib.frame import FrameCalibration
-    from pnlviz.calib.qa import apply_fix, check_frame
+    from pnlviz.calib.qa import apply_fix
 
     view = state.view(stem, settings)
-    if not view.annotation or view.origin != "annotation" or view.result is None:
-        return None
-    qa = check_frame(view.annotation, view.size, calibration=FrameCalibration(view.observations, view.origin, None,
-                                                                              view.result))
-    finding = next((f for f in qa.findings if f.fix is not None), None)
+    qa = judge_view(view)
+    finding = next((f for f in qa.findings if f.fix is not None), None) if qa is not None else None
     if finding is not None and finding.fix is not None:
         state.set_annotation(stem, apply_fix(view.annotation, finding.fix))
     return finding
@@ -98,17 +107,12 @@ def fix_frame(state, stem: str, settings=None):
 
 def suspect_score(view) -> tuple[float | None, str | None]:
     """The label-error finder's score of a frame calibrated from its annotation alone, and its
-    worst finding in words (:func:`pnlviz.calib.qa.check_frame`, reusing the view's calibration);
-    (None, None) for a frame calibrated from anything else, or without an annotation."""
-    from pnlviz.calib.frame import FrameCalibration
-    from pnlviz.calib.qa import check_frame
-
-    if not view.annotation or view.origin != "annotation" or view.result is None:
-        return None, None
-    fc = FrameCalibration(view.observations, view.origin, None, view.result)
+    worst finding in words (:func:`judge_view`); (None, None) for a frame it does not judge."""
     try:
-        qa = check_frame(view.annotation, view.size, calibration=fc)
+        qa = judge_view(view)
     except Exception:  # noqa: BLE001 - a bug here must not stop the background pass: the frame is not judged
+        return None, None
+    if qa is None:
         return None, None
     return round(qa.score, 3), (qa.findings[0].message if qa.findings else None)
 
@@ -386,4 +390,4 @@ class Triage:
 
 
 __all__ = ["DetectionCache", "FrameSummary", "PassProgress", "SummaryStore", "Triage", "cache_paths", "run_pass",
-           "fix_frame", "same_inputs", "summarize", "summary_token", "suspect_score"]
+           "fix_frame", "judge_view", "same_inputs", "summarize", "summary_token", "suspect_score"]

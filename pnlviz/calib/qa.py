@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from itertools import pairwise
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,7 +45,8 @@ from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.field.names import MODEL_CLASSES
 from pnlviz.geometry.camera import Camera
 
-__all__ = ["KINDS", "Finding", "FrameQA", "QAParams", "apply_fix", "check_frame", "frame_score"]
+__all__ = ["KINDS", "Finding", "FindingMarks", "FrameQA", "QAParams", "apply_fix", "check_frame", "finding_marks",
+           "frame_score"]
 
 
 @dataclass
@@ -114,7 +116,7 @@ def _judge_classes(cam: Camera, data: FrameData, px: dict[str, np.ndarray], para
         verdict = judge_class(cls, pts, cam_c or cam, cam_c is not None, px, model, spread)
         new = class_findings(verdict, cam.width, cam.height, params)
         if new and new[0].kind != "wrong_class" and cam_c is not None and cls in fitted and \
-                consistent(cam_c, data, px, cls, suspects - {cls}, params, model):
+                consistent(cam_c, data, px, cls, suspects - {cls}, params, model, cam):
             new = []
         findings += new
         if not new and np.isfinite(verdict.others):
@@ -242,4 +244,65 @@ def apply_fix(annotation: Mapping[str, np.ndarray], fix: Mapping) -> dict[str, n
         out[cls] = pts
     else:
         raise ValueError(f"unknown fix {fix!r}: op is one of rename, drop_points, move_points, add_class")
+    return out
+
+
+@dataclass
+class FindingMarks:
+    """What to draw for one finding, in pixels of the frame: ``annotated`` the class where the
+    annotation put it (its points, in order; empty for a marking left out), ``expected`` where the
+    judging camera puts the class (polylines: its trusted, visible parts; and the name a rename
+    gives it), ``points`` the points the fix is about (the stray points it drops, where it
+    moves or adds the class's points; for a keypoint, where the camera puts it)."""
+
+    finding: Finding
+    annotated: np.ndarray
+    expected: list[np.ndarray]
+    points: np.ndarray
+
+
+def _visible_parts(uv: np.ndarray, ok: np.ndarray, W: int, H: int, margin: float) -> list[np.ndarray]:
+    """The runs of consecutive trusted points of a projected polyline within ``margin`` px of the image."""
+    with np.errstate(invalid="ignore"):
+        keep = ok & (uv[:, 0] > -margin) & (uv[:, 0] < W - 1 + margin) & (uv[:, 1] > -margin) & (uv[:, 1] < H - 1 + margin)
+    cuts = np.flatnonzero(np.diff(keep.astype(np.int8)))
+    bounds = np.concatenate([[0], cuts + 1, [len(uv)]])
+    return [uv[a:b] for a, b in pairwise(bounds) if keep[a] and b - a >= 2]
+
+
+def finding_marks(qa: FrameQA, annotation: Mapping[str, np.ndarray], size: tuple[int, int],
+                  model: FieldModel | None = None) -> list[FindingMarks]:
+    """Each finding of ``qa`` (the verdict on ``annotation``, normalised, at ``size``) as what to
+    draw over the frame; a finding about nothing drawable (no camera) is left out."""
+    from pnlviz.calib.qa_checks import trusted_projection
+
+    model = model or load_field_model()
+    W, H = size
+    scale = np.array([W - 1, H - 1], float)
+    cam = qa.camera.scaled(W, H) if qa.camera is not None and (qa.camera.width, qa.camera.height) != (W, H) \
+        else qa.camera
+    ann = _normalised(annotation)
+    polys = model.sample_polylines(0.5, 0.25)
+    none = np.zeros((0, 2))
+    out = []
+    for f in qa.findings:
+        annotated, expected, points = none, [], none
+        if f.cls is not None:
+            if f.cls in ann:
+                annotated = ann[f.cls] * scale
+            names = [f.cls] + ([f.fix["to"]] if f.fix and f.fix.get("op") == "rename" else [])
+            for name in names:
+                if cam is not None and name in polys:
+                    expected += _visible_parts(*trusted_projection(cam, polys[name]), W, H, 0.1 * W)
+        elif f.keypoint is not None and cam is not None and f.keypoint in model.keypoints:
+            uv, _ = cam.project(model.keypoint_xyz([f.keypoint]))
+            if np.isfinite(uv).all():
+                points = uv.reshape(-1, 2)
+        fix = f.fix or {}
+        if fix.get("op") == "drop_points" and len(annotated):
+            points = annotated[np.asarray(fix["points"], int)]
+        elif fix.get("op") in ("move_points", "add_class"):
+            points = np.asarray(fix["points"], float).reshape(-1, 2) * scale
+        if len(annotated) or expected or len(points):
+            out.append(FindingMarks(f, annotated, expected, points))
     return out
