@@ -234,7 +234,7 @@ def figure(rows: list[dict], path: Path) -> None:
             draw_pitch(im, q.camera, colour=(255, 255, 255))
         draw_annotation(im, r["ann"], labels=True, thickness=1)
         marks = finding_marks(q, r["ann"], SIZE)[:1]
-        draw_findings(im, marks)
+        draw_findings(im, marks, thickness=3)
         f = q.findings[0]
         to = f" -> {f.fix['to']}" if f.fix and f.fix["op"] == "rename" else ""
         caption(im, f"SN22 {r['stem']}: {f.kind}: {f.cls or f.keypoint}{to}")

@@ -91,13 +91,13 @@ def draw_findings(image: np.ndarray, marks, thickness: int = 2) -> np.ndarray:
     the class as annotated (pink), where the camera expects it (green), the fix's points circled
     (green). In place."""
     pink, green = FINDING_ANNOTATED_RGB[::-1], FINDING_EXPECTED_RGB[::-1]
-    for m in marks:
-        for part in m.expected:
-            cv2.polylines(image, [_to_int(part)], False, green, thickness, cv2.LINE_AA, shift=4)
+    for m in marks:  # the annotation under, thicker: where the camera agrees, green runs inside pink
         if len(m.annotated) >= 2:
-            cv2.polylines(image, [_to_int(m.annotated)], False, pink, thickness + 1, cv2.LINE_AA, shift=4)
+            cv2.polylines(image, [_to_int(m.annotated)], False, pink, thickness + 2, cv2.LINE_AA, shift=4)
         for p in m.annotated:
             cv2.circle(image, tuple(_to_int(p)[0, 0]), 4 << 4, pink, -1, cv2.LINE_AA, shift=4)
+        for part in m.expected:
+            cv2.polylines(image, [_to_int(part)], False, green, thickness, cv2.LINE_AA, shift=4)
         for p in m.points:
             cv2.polylines(image, [_to_int(ring(p, 8.0))], True, green, thickness, cv2.LINE_AA, shift=4)
     return image

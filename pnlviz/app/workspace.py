@@ -28,7 +28,7 @@ DISC_PX, RIM_PX, GRAB_PX, RING_PX = 4.5, 6.0, 8.0, 11.0
 PIN_BOX_PX = 8.5  #: screen pixels: half the side of the box around a pinned keypoint
 #: screen thickness of each layer's lines
 THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
-             "detected_lines": 2.0, "residuals": 1.5, "finding_annotated": 4.0, "finding_expected": 3.0}
+             "detected_lines": 2.0, "residuals": 1.5, "finding_annotated": 5.0, "finding_expected": 2.0}
 BACKDROP_RGB = (38, 40, 46)
 BACKDROP_MARGIN = 6.0  # the dark frame around the image: this many image widths (heights) each side
 FRAME_SLOTS = 3  # frames whose pixels are kept in the browser: the one shown and two sent ahead
