@@ -40,6 +40,14 @@ def test_a_pixel_above_the_horizon_is_nowhere_on_the_pitch():
     assert np.all(np.isnan(cam.image_to_pitch([[960.0, -5000.0]])))
 
 
+def test_image_to_pitch_takes_one_pixel_or_n_and_refuses_other_shapes():
+    cam = cameras()[0]
+    many = cam.image_to_pitch([[960.0, 540.0], [100.0, 900.0]])
+    np.testing.assert_allclose(cam.image_to_pitch((100.0, 900.0)), many[1])  # one pixel: one point
+    with pytest.raises(ValueError, match=r"uv: expected pixels \(N, 2\).*shape \(2, 3\)"):
+        cam.image_to_pitch([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])  # it read these as 3 pixels
+
+
 def test_calibrate_recovers_the_camera_the_keypoints_came_from():
     cam = cameras()[0]
     world = pnlviz.keypoints()

@@ -289,8 +289,14 @@ class Camera:
         """Where on the pitch (the ground plane z = 0, metres, SoccerNet's centre-origin frame) the
         pixels ``uv`` (N, 2) of this image are: (N, 2), lens distortion undone; NaN for a pixel
         whose ray does not meet the ground in front of the camera (above the horizon). The point
-        a player stands on is the bottom middle of the player's box."""
-        return self.back_project_to_ground(uv)[:, :2]
+        a player stands on is the bottom middle of the player's box. One pixel (2,) gives one
+        point (2,); any other shape than (N, 2) or (2,) is refused (ValueError)."""
+        arr = np.asarray(uv, float)
+        if arr.shape == (2,):
+            return self.back_project_to_ground(arr[None])[0, :2]
+        if arr.ndim != 2 or arr.shape[1] != 2:
+            raise ValueError(f"uv: expected pixels (N, 2) or one pixel (2,), got an array of shape {arr.shape}")
+        return self.back_project_to_ground(arr)[:, :2]
 
     def homography(self) -> np.ndarray:
         """3x3 homography from the ground plane (X, Y, 1) in metres to pixels, without lens
