@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from pnlviz.calib.calibrate import CalibParams, CalibrationResult, calibrate
-from pnlviz.calib.inputs import observations_from_annotation, observations_from_predictions
+from pnlviz.calib.inputs import Detections, observations_from_annotation, observations_from_predictions
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.sources import KeypointEdit, apply_keypoint_edits, merge_observations
 from pnlviz.conventions import DEFAULT_ALPHA
@@ -35,7 +35,7 @@ class FrameInputs:
 
     size: tuple[int, int]
     annotation: Mapping[str, np.ndarray] | None = None
-    detections: object | None = None
+    detections: Detections | None = None
     keypoint_edits: Mapping[str, KeypointEdit] | None = None
 
     def __post_init__(self):

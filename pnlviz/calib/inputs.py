@@ -4,6 +4,7 @@ line annotations (through the keypoint labels of :mod:`pnlviz.labels`)."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Set
+from typing import Protocol
 
 import numpy as np
 
@@ -11,6 +12,17 @@ from pnlviz.calib.observations import Observations
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.field.names import LINE_ID_TO_CLASS
 from pnlviz.geometry.conics import fit_line, intersect_lines
+
+class Detections(Protocol):
+    """PnLCalib-format detections of one frame, as the engine reads them (what
+    :class:`pnlviz.data.Predictions` is): normalised positions and confidences."""
+
+    @property
+    def keypoints(self) -> Mapping[int, tuple[float, float, float]]: ...  # id -> (x, y, p)
+
+    @property
+    def lines(self) -> Mapping[int, tuple[float, float, float, float, float, float]]: ...  # id -> 2 ends, each x, y, p
+
 
 #: Keypoint ids PnLCalib's published networks predict (1..57; 58-73 are not predicted).
 PREDICTED_KEYPOINTS = range(1, 58)
@@ -38,7 +50,7 @@ def auxiliary_keypoints(lines: dict[str, np.ndarray], width: int, height: int, m
     return out
 
 
-def observations_from_predictions(pred, width: int, height: int, *, kp_threshold: float = 0.1,
+def observations_from_predictions(pred: Detections, width: int, height: int, *, kp_threshold: float = 0.1,
                                   line_threshold: float = 0.1, auxiliary: bool = True,
                                   model: FieldModel | None = None) -> Observations:
     """Observations from PnLCalib-format detections (``pnlviz.data.Predictions``), in pixels of a
