@@ -115,18 +115,22 @@ class Painter:
 
     def findings(self, view: FrameView) -> list:
         """The label-error finder's findings on ``view`` as marks to draw
-        (:func:`pnlviz.calib.qa.finding_marks`; judged once per view): none when the findings layer
-        is off, or for a frame calibrated from anything but its annotation."""
+        (:func:`pnlviz.calib.qa.finding_marks`; judged once per view, not at all when the background
+        pass judged the same inputs clean): none when the findings layer is off, or for a frame
+        calibrated from anything but its annotation."""
         if not self.layers.findings:
             return []
         if self._judged is None or self._judged[0] is not view:
             from pnlviz.app.triage import judge_view
             from pnlviz.calib.qa import finding_marks
 
-            try:
-                qa = judge_view(view)
-            except Exception:  # noqa: BLE001 - a bug in the finder must not stop the frame being shown
-                qa = None
+            summary = self.tab.state.triage.lookup(view.stem, self.tab.settings)
+            qa = None
+            if summary is None or summary.suspect is None or summary.suspect >= 1.0:  # else: judged clean
+                try:
+                    qa = judge_view(view)
+                except Exception:  # noqa: BLE001 - a bug in the finder must not stop the frame being shown
+                    qa = None
             marks = finding_marks(qa, view.annotation or {}, view.size, self.tab.state.model) if qa else []
             self._judged = (view, marks)
         return self._judged[1]
