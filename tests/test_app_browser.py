@@ -382,10 +382,14 @@ def test_two_tabs_keep_their_own_frames_and_see_each_others_edits(data, browser,
     b_page.bring_to_front()
     b_page.keyboard.press("p")
     wait_until(lambda: b.stem == "00000")
-    settle(b)
     moved = app.state.edits.get("00000")["keypoints"][str(kid)]
-    shown = b.workspace.points["keypoints"]
-    np.testing.assert_allclose(shown.uv[shown.keys.index(kid)], moved)
+
+    def shows(session, points) -> bool:  # the tab's nodes at these places (drawn after its frame changes)
+        nodes = session.workspace.points["keypoints"]
+        return all(int(k) in nodes.keys and np.allclose(nodes.uv[nodes.keys.index(int(k))], xy)
+                   for k, xy in points.items())
+
+    wait_until(lambda: shows(b, {kid: moved}))
     assert a.stem == "00000" and b.stem == "00000"
     # now both on 00000, they drag points in turns without waiting: every drag is kept, in
     # both tabs (each release recalibrates and moves the other tab's points in place)
@@ -401,10 +405,7 @@ def test_two_tabs_keep_their_own_frames_and_see_each_others_edits(data, browser,
     saved = app.state.edits.get("00000")["keypoints"]
     assert set(saved) == {str(k) for k in [kid] + others} and a.editor.grabs + b.editor.grabs == 5
     for session in (a, b):
-        settle(session)
-        nodes = session.workspace.points["keypoints"]
-        for k, xy in saved.items():
-            np.testing.assert_allclose(nodes.uv[nodes.keys.index(int(k))], xy)
+        wait_until(lambda session=session: shows(session, saved))
     a_page.close()
     b_page.close()
 
