@@ -69,6 +69,22 @@ def test_a_fifo_or_a_device_is_refused_before_it_is_read(tmp_path):
         open_dataset(fifo)
 
 
+def test_a_cameras_zip_given_as_the_data_says_what_it_is(tmp_path, capsys):
+    """pnlviz's own cameras (calibrate's output) given to --data read as 32 broken annotations
+    ("unknown class 'pan_degrees'"), and a folder holding that zip alone as a dataset in splits."""
+    cams = tmp_path / "out" / "cams.zip"
+    cams.parent.mkdir()
+    assert main(["calibrate", "--data", str(SAMPLE), "--out", str(cams), "--no-progress"]) == 0
+    capsys.readouterr()
+    for given in (cams, cams.parent):
+        with pytest.raises(DataError, match=r"holds cameras \(camera_<stem>\.json"):
+            open_dataset(given)
+        assert main(["validate", "--data", str(given)]) != 0
+        err = capsys.readouterr().err
+        assert "holds cameras" in err and "pan_degrees" not in err
+    assert len(open_dataset(SAMPLE)) == 33  # a dataset with its cameras/ beside the frames still opens
+
+
 def test_a_symlink_loop_and_a_fifo_in_a_dataset_are_skipped_with_a_line(tmp_path):
     d = sample_copy(tmp_path / "d")
     os.symlink("b.json", d / "a.json")

@@ -49,6 +49,11 @@ from .reading import bad_name_error, is_utf8, limit_for, open_file, open_zip, re
 
 __all__ = ["Frame", "Dataset", "IMAGE_EXTENSIONS"]
 
+#: The message of a folder or zip of cameras opened as a dataset.
+CAMERAS_NOT_FRAMES = (
+    "holds cameras (camera_<stem>.json, as `pnlviz calibrate` writes them), not frames: give --data the dataset's "
+    "folder or zip; cameras are read by `pnlviz evaluate --pred`, `render --cameras` and `sheet --cameras`")
+
 #: The message of a dataset without a single frame.
 NO_FRAMES = (
     "no frames (expected <stem>.jpg/.png/.json at the top level, inside one folder, or in split folders or zips)")
@@ -121,6 +126,9 @@ class Dataset:
         self.rejected = self._index.rejected
         self._images, self._annotations = self._index.images, self._index.annotations
         self._stems = tuple(sort_stems(set(self._images) | set(self._annotations)))
+        if self._annotations and not self._images and all(
+                camera_stem(name.replace("\\", "/").rsplit("/", 1)[-1]) is not None for name in self._annotations.values()):
+            raise DataError(os.fspath(self.path), CAMERAS_NOT_FRAMES)
 
     # ------------------------------------------------------------- pickling
     def __getstate__(self) -> dict:

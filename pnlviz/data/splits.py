@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .annotations import Annotation
-from .dataset import Dataset, Frame
+from .dataset import NO_FRAMES, Dataset, Frame
 from .errors import DataError
 from .filekind import os_error_text
 from .index import CAMERAS_DIR, FolderScan, classify, frame_folder
@@ -214,5 +214,8 @@ def open_dataset(path: str | os.PathLike, cache_size: int = 64) -> Dataset:
         else:
             d.close()
     if not opened:
+        unread = [e for e in rejected if "cannot be read" in e.problem]
+        if unread:  # the zips or folders that looked like splits were something else: say what
+            raise DataError(os.fspath(p), NO_FRAMES + "; " + "; ".join(str(e) for e in unread[:3]))
         return Dataset(path, cache_size=cache_size)
     return SplitDataset(path, {s: opened[s] for s in sorted(opened)}, rejected, cache_size)
