@@ -395,3 +395,22 @@ def test_the_panel_shows_the_frame_from_above(data, serve):
     assert first.shape == plain.shape and np.abs(first.astype(int) - plain).sum(axis=2).astype(bool).mean() > 0.05
     tab.goto(app.state.find("00001"))
     assert (tab.panels.top_view.image != first).any()
+
+
+def test_releasing_the_caches_starts_no_process(monkeypatch):
+    """The last tab leaving returns the freed heap (malloc_trim). Looking libc up through
+    ctypes.util.find_library ran ldconfig in a child process each time; a child forked while the
+    edits folder was handed to the next app held its lock, and that app was refused under load."""
+    import subprocess
+
+    from pnlviz.app import state
+
+    started = []
+
+    def no_process(self, *args, **kwargs):
+        started.append(args)
+        raise AssertionError(f"a process was started: {args[:1]}")
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", no_process)
+    state._return_free_memory()
+    assert started == []

@@ -53,18 +53,29 @@ def _view_key(edits: EditsStore, stem: str, settings: Settings, keypoints: dict 
     return stem, settings, json.dumps(edit, sort_keys=True) if edit else None
 
 
+@functools.cache
+def _malloc_trim():
+    """glibc's ``malloc_trim``, or None. Loaded by its soname, never through
+    ``ctypes.util.find_library``: that runs ``ldconfig`` in a child process, and a child forked
+    while another thread hands the edits folder over holds its lock for a moment (a second app
+    on the same folder was refused under load)."""
+    import ctypes
+
+    try:
+        return ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
 def _return_free_memory() -> None:
     """Give the memory freed by the caches back to the system: glibc keeps freed small blocks in
     its heap (the process would stay at its peak); ``malloc_trim`` returns them. A no-op elsewhere."""
-    import ctypes
-    import ctypes.util
     import gc
 
     gc.collect()
-    try:
-        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):
-        pass
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
 
 
 class AppState:
