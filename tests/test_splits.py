@@ -142,6 +142,12 @@ def test_commands_keep_the_split_in_every_output(layouts, tmp_path, capsys):
     assert main(["calibrate", "--data", str(data), "--out", str(cams), "--no-progress"]) == 0
     names = sorted(zipfile.ZipFile(cams).namelist())
     assert names == [f"{s.split('/')[0]}/camera_{s.split('/')[1]}.json" for s in EXPECTED]
+    # split folders: the same frames, the same names
+    assert main(["validate", "--data", str(layouts["folders"])]) == 0
+    assert "split train: 3 frames" in capsys.readouterr().out
+    from_folders = tmp_path / "cams_folders.zip"
+    assert main(["calibrate", "--data", str(layouts["folders"]), "--out", str(from_folders), "--no-progress"]) == 0
+    assert sorted(zipfile.ZipFile(from_folders).namelist()) == names
     capsys.readouterr()
     assert main(["eval", "--gt", str(layouts["zip"]), "--pred", str(cams), "--no-progress"]) == 0
     out = capsys.readouterr().out
@@ -154,6 +160,15 @@ def test_commands_keep_the_split_in_every_output(layouts, tmp_path, capsys):
     capsys.readouterr()
     assert main(["labels", "--data", str(layouts["folders"]), "--out", str(labels), "--resume"]) == 0  # all done
     assert "5 frames already labelled" in capsys.readouterr().out
+
+
+def test_detect_keeps_the_split_of_split_folders(layouts, tmp_path):
+    pytest.importorskip("torch")
+    preds = tmp_path / "preds.zip"
+    assert main(["detect", "--data", str(layouts["folders"]), "--out", str(preds), "--threads", "1",
+                 "--no-progress"]) == 0
+    assert sorted(zipfile.ZipFile(preds).namelist()) == sorted(f"{s}.json" for s in EXPECTED)
+    assert sorted(read_predictions(preds, splits=("train", "valid"))) == sorted(EXPECTED)
 
 
 def test_export_keeps_the_split_and_gives_each_frame_its_homography(layouts, tmp_path):
