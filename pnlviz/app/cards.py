@@ -1,6 +1,6 @@
 """The texts of a tab's panel, as pure functions of what they show (markdown, or the rows of a
-dropdown): the calibration card and the label-error findings under it, the title and status lines, the points list, the selected
-point, the review progress, the clip line, the zoom.
+dropdown): the calibration card and the label-error findings under it, the title and status
+lines, the points list, the selected point, the review progress, the clip line, the zoom.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Drawing one tab: its frame's image on the image plane (and the frames either side of it sent
 ahead), the overlays and points over it (the label-error finder's findings among them), the
-panel's texts, and in the 3D view the camera over the pitch. Only what changed is sent (:func:`pnlviz.app.workspace.update_changed`), inside one
-message batch per draw.
+panel's texts, and in the 3D view the camera over the pitch. Only what changed is sent
+(:func:`pnlviz.app.workspace.update_changed`), inside one message batch per draw.
 """
 
 from __future__ import annotations

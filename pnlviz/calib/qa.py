@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from itertools import pairwise
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -38,7 +38,7 @@ import numpy as np
 from pnlviz.calib.frame import Failure, FrameCalibration, FrameInputs, FrameSettings, calibrate_frame
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.qa_checks import (KINDS, Finding, QAParams, class_findings, detection_findings, distances,
-                                    judge_class, missing_findings, projected_classes)
+                                    judge_class, missing_findings, projected_classes, trusted_projection)
 from pnlviz.calib.qa_fits import CameraSpread, class_distances, consistent, first_order_loo, loo_camera
 from pnlviz.conventions import EVAL_SIZE
 from pnlviz.field.model import FieldModel, load_field_model
@@ -264,7 +264,8 @@ class FindingMarks:
 def _visible_parts(uv: np.ndarray, ok: np.ndarray, W: int, H: int, margin: float) -> list[np.ndarray]:
     """The runs of consecutive trusted points of a projected polyline within ``margin`` px of the image."""
     with np.errstate(invalid="ignore"):
-        keep = ok & (uv[:, 0] > -margin) & (uv[:, 0] < W - 1 + margin) & (uv[:, 1] > -margin) & (uv[:, 1] < H - 1 + margin)
+        keep = (ok & (uv[:, 0] > -margin) & (uv[:, 0] < W - 1 + margin)
+                & (uv[:, 1] > -margin) & (uv[:, 1] < H - 1 + margin))
     cuts = np.flatnonzero(np.diff(keep.astype(np.int8)))
     bounds = np.concatenate([[0], cuts + 1, [len(uv)]])
     return [uv[a:b] for a, b in pairwise(bounds) if keep[a] and b - a >= 2]
@@ -274,8 +275,6 @@ def finding_marks(qa: FrameQA, annotation: Mapping[str, np.ndarray], size: tuple
                   model: FieldModel | None = None) -> list[FindingMarks]:
     """Each finding of ``qa`` (the verdict on ``annotation``, normalised, at ``size``) as what to
     draw over the frame; a finding about nothing drawable (no camera) is left out."""
-    from pnlviz.calib.qa_checks import trusted_projection
-
     model = model or load_field_model()
     W, H = size
     scale = np.array([W - 1, H - 1], float)

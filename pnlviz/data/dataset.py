@@ -126,9 +126,9 @@ class Dataset:
         self.rejected = self._index.rejected
         self._images, self._annotations = self._index.images, self._index.annotations
         self._stems = tuple(sort_stems(set(self._images) | set(self._annotations)))
-        if self._annotations and not self._images and all(
-                camera_stem(name.replace("\\", "/").rsplit("/", 1)[-1]) is not None for name in self._annotations.values()):
-            raise DataError(os.fspath(self.path), CAMERAS_NOT_FRAMES)
+        bases = (name.replace("\\", "/").rsplit("/", 1)[-1] for name in self._annotations.values())
+        if self._annotations and not self._images and all(camera_stem(b) is not None for b in bases):
+            raise DataError(os.fspath(self.path), CAMERAS_NOT_FRAMES)  # calibrate's output, not a dataset
 
     # ------------------------------------------------------------- pickling
     def __getstate__(self) -> dict:
