@@ -21,6 +21,7 @@ import numpy as np
 from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
+from pnlviz.viz import ring
 
 #: screen pixels: the radius of a point's disc, of its black rim, of the area that grabs it, and
 #: of the selection ring
@@ -478,8 +479,7 @@ class Workspace:
             if self._ring is not None:
                 update_changed(self._ring, visible=False)
             return
-        a = np.linspace(0, 2 * math.pi, 33)
-        circle = uv + RING_PX * self.world_per_px / placed(self.plane).scale * np.stack([np.cos(a), np.sin(a)], 1)
+        circle = ring(uv, RING_PX * self.world_per_px / placed(self.plane).scale, 32)
         pts = placed(self.plane).world(np.stack([circle[:-1], circle[1:]], 1), "selection")
         if self._ring is None:
             self._ring = self.scene.add_line_segments(f"{self.root}/selection", pts, SELECTED_RGB, thickness=2.0,

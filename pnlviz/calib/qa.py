@@ -97,6 +97,7 @@ def _judge_classes(cam: Camera, data: FrameData, px: dict[str, np.ndarray], para
     proj = projected_classes(cam, model)
     far = params.px(params.far_px, cam.width)
     worst = {cls: float(np.max(distances(pts, proj.get(cls)))) for cls, pts in px.items()}
+    frame_worst = dict(worst)  # under the frame's camera (worst grows with the screen below)
     suspects = {cls for cls, w in worst.items() if w > far}
     screen = first_order_loo(cam, data, params)
     findings, closest = [], 0.0
@@ -116,7 +117,7 @@ def _judge_classes(cam: Camera, data: FrameData, px: dict[str, np.ndarray], para
         verdict = judge_class(cls, pts, cam_c or cam, cam_c is not None, px, model, spread)
         new = class_findings(verdict, cam.width, cam.height, params)
         if new and new[0].kind != "wrong_class" and cam_c is not None and cls in fitted and \
-                consistent(cam_c, data, px, cls, suspects - {cls}, params, model, cam):
+                consistent(cam_c, data, px, cls, suspects - {cls}, params, model, frame_worst):
             new = []
         findings += new
         if not new and np.isfinite(verdict.others):
@@ -278,8 +279,7 @@ def finding_marks(qa: FrameQA, annotation: Mapping[str, np.ndarray], size: tuple
     model = model or load_field_model()
     W, H = size
     scale = np.array([W - 1, H - 1], float)
-    cam = qa.camera.scaled(W, H) if qa.camera is not None and (qa.camera.width, qa.camera.height) != (W, H) \
-        else qa.camera
+    cam = qa.camera.scaled(W, H) if qa.camera is not None else None
     ann = _normalised(annotation)
     polys = model.sample_polylines(0.5, 0.25)
     none = np.zeros((0, 2))

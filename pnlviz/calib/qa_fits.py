@@ -6,6 +6,8 @@ from the points it was fitted to, propagated to the marking's pixels). Pure.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from pnlviz.calib.problem import FrameData
@@ -81,29 +83,27 @@ def class_distances(cam: Camera, cls: str, pts: np.ndarray, model: FieldModel) -
 
 
 def consistent(cam: Camera, data: FrameData, px: dict[str, np.ndarray], cls: str, skip: set[str],
-               params: QAParams, model: FieldModel, frame_cam: Camera | None = None) -> bool:
+               params: QAParams, model: FieldModel, frame_worst: Mapping[str, float] | None = None) -> bool:
     """Whether one camera fits ``cls`` and the other classes (but ``skip``) together, every
-    point within ``tol_px``: ``frame_cam`` (the frame's camera, fitted to them all) when it does,
-    else ``cam`` refitted with them all (pose, focal length and k1; from a camera without the
-    class, the refit can stop in another minimum than the frame's). Then nothing says the class
-    is wrong, however badly the camera without it extrapolated."""
+    point within ``tol_px``: the frame's camera, fitted to them all, when it does (``frame_worst``:
+    each class's farthest point from it, px), else ``cam`` refitted with them all (pose, focal
+    length and k1; from a camera without the class, the refit can stop in another minimum than
+    the frame's). Then nothing says the class is wrong, however badly the camera without it
+    extrapolated."""
     obs = data.obs
+    names = [n for n in (*obs.lines, *obs.circles) if (n not in skip or n == cls) and n in px]
+    tol = params.px(params.tol_px, cam.width)
+    if frame_worst is not None and all(frame_worst[n] <= tol for n in names):
+        return True
     lines = [n for n in obs.lines if n not in skip or n == cls]
     circles = [n for n in obs.circles if n not in skip or n == cls]
-    tol = params.px(params.tol_px, cam.width)
-
-    def fits(camera: Camera) -> bool:
-        proj = projected_classes(camera, model)
-        return all(float(np.max(distances(px[n], proj.get(n)))) <= tol for n in lines + circles if n in px)
-
-    if frame_cam is not None and fits(frame_cam):
-        return True
     rp = RefineParams(alpha=1.0, refine_focal=True, refine_k1=True, max_iter=params.loo_iter, tol=1e-6)
     prob = CameraProblem(cam, data, rp, use_keypoints=np.zeros(obs.n_keypoints, bool), lines=lines, circles=circles)
     if prob.n_res < prob.n_free + 2:
         return False
     joint, _ = prob.solve()
-    return fits(joint)
+    proj = projected_classes(joint, model)
+    return all(float(np.max(distances(px[n], proj.get(n)))) <= tol for n in names)
 
 
 # ----------------------------------------------------------------------------- how sure a camera is

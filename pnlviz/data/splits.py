@@ -202,20 +202,21 @@ def open_dataset(path: str | os.PathLike, cache_size: int = 64) -> Dataset:
         return Dataset(path, cache_size=cache_size, listing=listing)
     parts, rejected = found
     opened: dict[str, Dataset] = {}
+    unread: list[DataError] = []
     for part in parts:
         try:
             d = _open_part(part, cache_size)
         except (DataError, OSError, zipfile.BadZipFile) as e:
             msg = e.problem if isinstance(e, DataError) else os_error_text(e) if isinstance(e, OSError) else str(e)
-            rejected.append(DataError(os.fspath(part.path), f"split {part.name!r} cannot be read: {msg}"))
+            unread.append(DataError(os.fspath(part.path), f"split {part.name!r} cannot be read: {msg}"))
             continue
         if len(d):
             opened[part.name] = d
         else:
             d.close()
     if not opened:
-        unread = [e for e in rejected if "cannot be read" in e.problem]
         if unread:  # the zips or folders that looked like splits were something else: say what
             raise DataError(os.fspath(p), NO_FRAMES + "; " + "; ".join(str(e) for e in unread[:3]))
         return Dataset(path, cache_size=cache_size)
+    rejected += unread
     return SplitDataset(path, {s: opened[s] for s in sorted(opened)}, rejected, cache_size)
