@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from pnlviz.calib.calibrate import CalibParams
-from pnlviz.calib.clip import ClipSolver, CutEdits, apply_cuts
+from pnlviz.calib.clip import ClipSolver
+from pnlviz.calib.cuts import CutEdits, apply_cuts
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.shot import TemporalParams
 from pnlviz.field import load_field_model

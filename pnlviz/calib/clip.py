@@ -3,10 +3,11 @@ every frame.
 
 :class:`ClipSolver` holds a clip in time order: each frame's own observations (detections or an
 annotation), the keypoint edits made on its frames (``{"id": [x, y] | None}``, as the edits folder
-stores them), each frame's own camera (its per-frame calibration, with its edits), the shots (found
-as ``pnlviz calibrate --temporal`` finds them, :func:`pnlviz.calib.cuts.segment_shots`, then the
-cuts a hand added or removed: :class:`CutEdits`) and one broadcast camera per shot
-(:func:`pnlviz.calib.shot_fit.fit_shot`).
+stores them), each frame's own camera (its per-frame calibration, with its edits), the shots (the
+one rule of :mod:`pnlviz.calib.cuts`, as ``pnlviz calibrate --temporal`` finds them: the cuts
+found, the hand's :class:`~pnlviz.calib.cuts.CutEdits`, the fit's splits) and one broadcast camera
+per shot (:func:`pnlviz.calib.shot_fit.fit_shot`), with the camera each frame uses: its shot's,
+unless that is worse than its own on its own observations (:mod:`pnlviz.calib.shot_check`).
 
 * **edits are constraints of the shot**: a point moved or placed on any frame is a pinned keypoint
   of its shot's solve (it weighs ``pin_weight`` times more and is never dropped, as a pin is on a
@@ -34,49 +35,19 @@ from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
 
 from .calibrate import CalibParams, calibrate
-from .cuts import segment_shots
+from .cuts import CutEdits, apply_cuts, find_shots
 from .observations import Observations
-from .shot import ShotModel, TemporalParams, flatten
-from .shot_fit import ShotFit, camera_vector, fit_shot
+from .problem import FrameData
+from .shot import TemporalParams
+from .shot_check import CameraChoice
+from .shot_fit import ShotFit, distances
 from .sources import apply_keypoint_edits
+from .temporal import ShotPart, ShotSolver
 
-__all__ = ["PROVENANCE", "ClipLabel", "ClipSolver", "CutEdits", "apply_cuts", "carried_points"]
+__all__ = ["PROVENANCE", "ClipLabel", "ClipSolver", "carried_points"]
 
 #: where a clip frame's label comes from
 PROVENANCE = ("annotation", "detection", "hand", "shot")
-
-
-@dataclass(frozen=True)
-class CutEdits:
-    """Cuts changed by hand: ``added`` frames start a shot, ``removed`` ones no longer do (a cut
-    before frame t is named by t)."""
-
-    added: frozenset[int] = frozenset()
-    removed: frozenset[int] = frozenset()
-
-    def with_cut(self, t: int, cut: bool) -> CutEdits:
-        """These edits with a cut before frame ``t`` added (``cut``) or removed."""
-        t = int(t)
-        if cut:
-            return CutEdits(self.added | {t}, self.removed - {t})
-        return CutEdits(self.added - {t}, self.removed | {t})
-
-    def to_json(self) -> dict:
-        return {"added": sorted(self.added), "removed": sorted(self.removed)}
-
-    @classmethod
-    def from_json(cls, obj: Mapping | None) -> CutEdits:
-        obj = obj or {}
-        return cls(frozenset(int(t) for t in obj.get("added", ())), frozenset(int(t) for t in obj.get("removed", ())))
-
-
-def apply_cuts(shots: Sequence[range], cuts: CutEdits, T: int) -> list[range]:
-    """The shots of a clip of ``T`` frames after the hand's cuts: the found cuts without the
-    removed ones, with the added ones."""
-    starts = {s.start for s in shots if 0 < s.start < T}
-    starts = (starts - set(cuts.removed)) | {t for t in cuts.added if 0 < t < T}
-    bounds = [0, *sorted(starts), T]
-    return [range(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
 
 
 @dataclass(frozen=True)
@@ -133,13 +104,6 @@ def carried_points(shot: range, edits: Mapping[int, Mapping[str, Sequence[float]
 
 
 @dataclass
-class _Shot:
-    frames: range
-    fit: ShotFit | None = None
-    seconds: float = 0.0
-
-
-@dataclass
 class ClipSolver:
     """A clip under correction (see the module docstring). ``observations[t]``: frame t's own
     observations without edits (None: nothing); ``size``: (W, H) of its frames; ``cameras``: the
@@ -169,55 +133,62 @@ class ClipSolver:
             if e:
                 self.edits[int(t)] = {str(int(k)): (None if v is None else [float(v[0]), float(v[1])])
                                       for k, v in e.items()}
-        self._stale: set[int] = set()  # frames whose own camera is to be recalibrated (their edits changed)
-        if self.cameras is None:
-            self.own = [self._own_camera(self.frame_observations(t)) for t in range(self.T)]
-        else:
-            self.own = list(self.cameras)
-        #: the shots found (before the hand's cuts): where the images change when every change is
-        #: known (a frame with few keypoints has an own camera that jumps, which is no cut), else
-        #: as ``pnlviz calibrate --temporal`` finds them
-        images = self.changes is not None and len(self.changes) == self.T - 1 and all(
-            c is not None for c in self.changes)
-        self.found = segment_shots([None] * self.T if images else self.own, self.changes, self.params)
-        self._shots = [_Shot(r) for r in apply_cuts(self.found, self.cuts, self.T)]
+        data = [self._frame_data(t) for t in range(self.T)]
+        own = ([self._own_camera(d.obs if d else None) for d in data] if self.cameras is None else list(self.cameras))
+        self._solver = ShotSolver(data, own, self.size, self.params, self.calib_params, self.field_model)
+        #: the shots found (before the hand's cuts; the fit's splits included)
+        found = find_shots(own, self.changes, self.params)
+        parts, self.unrelated = self._solver.solve(found, self.cuts)
+        starts = {s.start for s in found} | ({p.frames.start for p in parts} - {
+            s.start for s in apply_cuts(found, self.cuts, self.T)})
+        self.found = apply_cuts([range(0, self.T)], CutEdits(frozenset(starts)), self.T)
+        self._parts = parts
+        self._seconds = [0.0] * len(parts)
         self._labels: list[dict[int, ClipLabel]] | None = None
-        for k in range(len(self._shots)):
-            self._solve(k, warm=False)
+
+    @property
+    def own(self) -> list[Camera | None]:
+        """Each frame's own camera (a stale one is recalibrated by :meth:`own_camera`)."""
+        return self._solver.own
 
     # ------------------------------------------------------------------ what the clip is
     @property
     def shots(self) -> list[range]:
-        return [s.frames for s in self._shots]
+        return [p.frames for p in self._parts]
 
     def shot_of(self, t: int) -> int:
         """The index of frame ``t``'s shot."""
-        for k, s in enumerate(self._shots):
-            if t in s.frames:
+        for k, p in enumerate(self._parts):
+            if t in p.frames:
                 return k
         raise IndexError(f"frame {t} is not in the clip of {self.T} frames")
 
     def fit(self, k: int) -> ShotFit | None:
-        return self._shots[k].fit
+        return self._parts[k].fit
 
     def solve_seconds(self, k: int) -> float:
         """How long shot ``k``'s latest solve took."""
-        return self._shots[k].seconds
+        return self._seconds[k]
+
+    def choice(self, t: int) -> CameraChoice:
+        """Which camera frame ``t`` uses, and why."""
+        p = self._parts[self.shot_of(t)]
+        return p.choices[t - p.frames.start]
 
     def camera(self, t: int) -> Camera | None:
-        """Frame ``t``'s camera from its shot's model (None: the shot has no camera to start from,
-        or the frame has nothing observed and no neighbour's hand point)."""
-        s = self._shots[self.shot_of(t)]
-        if s.fit is None or self.frame_observations(t) is None:
-            return None
-        return s.fit.cameras[t - s.frames.start]
+        """Frame ``t``'s camera: its shot's (None when the shot has none, or the frame has nothing
+        observed), or its own where the shot's is worse (:meth:`choice` says which and why)."""
+        p = self._parts[self.shot_of(t)]
+        return p.camera(t - p.frames.start, self._solver.own[t])
 
     def own_camera(self, t: int) -> Camera | None:
         """Frame ``t``'s own camera: its per-frame calibration, with its edits."""
-        if t in self._stale:
-            self._stale.discard(t)
-            self.own[t] = self._own_camera(self.frame_observations(t))
-        return self.own[t]
+        if t in self._solver.stale:
+            self._solver.stale.discard(t)
+            d = self._solver.data[t]
+            self._solver.own[t] = self._own_camera(d.obs if d is not None else None)
+            self._solver.forget(t)
+        return self._solver.own[t]
 
     def cameras_of(self) -> list[Camera | None]:
         return [self.camera(t) for t in range(self.T)]
@@ -237,16 +208,23 @@ class ClipSolver:
             obs = Observations(int(W), int(H))
         return apply_keypoint_edits(obs, edits, self.field_model)
 
+    def _frame_data(self, t: int) -> FrameData | None:
+        obs = self.frame_observations(t)
+        return None if obs is None else FrameData.build(obs, self.field_model)
+
     # ------------------------------------------------------------------ edits
     def set_edits(self, t: int, edits: Mapping[str, Sequence[float] | None] | None, solve: bool = True) -> int:
         """Frame ``t``'s keypoint edits (``{"id": [x, y] | None}``; None or empty: none): its own
-        camera recalibrated, its shot solved again (warm) unless ``solve`` is off. Returns the shot."""
+        camera recalibrated when next asked for, its shot solved again (warm) unless ``solve`` is
+        off. Returns the shot."""
+        t = int(t)
         if edits:
-            self.edits[int(t)] = {str(int(k)): (None if v is None else [float(v[0]), float(v[1])])
-                                  for k, v in edits.items()}
+            self.edits[t] = {str(int(k)): (None if v is None else [float(v[0]), float(v[1])]) for k, v in edits.items()}
         else:
-            self.edits.pop(int(t), None)
-        self._stale.add(int(t))  # its own camera: recalibrated when asked for (it can take a second)
+            self.edits.pop(t, None)
+        self._solver.data[t] = self._frame_data(t)
+        self._solver.stale.add(t)  # its own camera: recalibrated when asked for (it can take a second)
+        self._solver.forget(t)
         k = self.shot_of(t)
         if solve:
             self._solve(k, warm=True)
@@ -262,16 +240,19 @@ class ClipSolver:
         """A cut before frame ``t`` added (``cut``) or removed by hand; the shots it touches are
         solved again from the frames' own cameras, the others keep their solution."""
         self.cuts = self.cuts.with_cut(t, cut)
-        old = {(s.frames.start, s.frames.stop): s for s in self._shots}
-        self._shots = [old.get((r.start, r.stop)) or _Shot(r) for r in apply_cuts(self.found, self.cuts, self.T)]
-        for k, s in enumerate(self._shots):
-            if s.fit is None:
-                self._solve(k, warm=False)
+        old = {(p.frames.start, p.frames.stop): (p, sec) for p, sec in zip(self._parts, self._seconds)}
+        parts, seconds = [], []
+        for r in apply_cuts(self.found, self.cuts, self.T):
+            kept = old.get((r.start, r.stop))
+            t0 = time.perf_counter()
+            parts.append(kept[0] if kept else self._solver.part(r))
+            seconds.append(kept[1] if kept else time.perf_counter() - t0)
+        self._parts, self._seconds = parts, seconds
         self._labels = None
 
     def solve(self, k: int | None = None, warm: bool = True) -> None:
         """Solve shot ``k`` (every shot when None) again."""
-        for j in range(len(self._shots)) if k is None else [k]:
+        for j in range(len(self._parts)) if k is None else [k]:
             self._solve(j, warm)
 
     # ------------------------------------------------------------------ labels
@@ -284,8 +265,8 @@ class ClipSolver:
     def _all_labels(self) -> list[dict[int, ClipLabel]]:
         cams = self.cameras_of()
         carried: dict[int, dict[int, np.ndarray]] = {}
-        for s in self._shots:
-            carried.update(carried_points(s.frames, self.edits, cams, self.field_model))
+        for p in self._parts:
+            carried.update(carried_points(p.frames, self.edits, cams, self.field_model))
         out = []
         for t in range(self.T):
             obs, cam = self.frame_observations(t), cams[t]
@@ -314,41 +295,29 @@ class ClipSolver:
             return None
         return r.camera if r.ok else None
 
-    def _start_cameras(self, frames: list[int]) -> list[Camera | None]:
-        """The frames' own cameras to start a shot's solve from, without those whose centre is
-        farther than ``cut_centre_m`` from the shot's median centre (a frame with few or wrong
-        keypoints: its neighbours place it)."""
-        own = [self.own_camera(t) for t in frames]
-        known = [c.C for c in own if c is not None]
-        if not known:
-            return own
-        centre = np.median(np.array(known), axis=0)
-        return [c if c is not None and np.linalg.norm(c.C - centre) <= self.params.cut_centre_m else None for c in own]
-
     def frame_error(self, t: int) -> float:
-        """What the app ranks frame ``t`` by: the median distance (px) of all its observations
-        (keypoints and line points, the dropped ones too) to its shot camera; inf without one."""
-        cam, obs = self.camera(t), self.frame_observations(t)
+        """What the app ranks frame ``t`` by: the median distance (px) of its observations (each
+        keypoint, the farthest point of each line and circle, the left-out ones too) to the camera
+        it uses; inf without one."""
+        cam, d = self.camera(t), self._solver.data[t]
         if cam is None:
             return float("inf")
-        if obs is None:
+        if d is None:
             return 0.0
-        r_kp, r_ln = ShotModel(flatten([obs], self.field_model), 1, self.size, replace(self.params, fit_k1=True)
-                               ).data_residuals(camera_vector(cam))
-        r = np.concatenate([np.hypot(r_kp[:, 0], r_kp[:, 1]), np.abs(r_ln)])
+        p = self._parts[self.shot_of(t)]
+        i = t - p.frames.start
+        if p.choices[i].use == "shot" and p.fit is not None and p.fit.distances is not None:
+            m = p.fit.distances[i]
+        else:
+            m = distances(d, cam)
+        r = np.concatenate([m.keypoints, list(m.classes.values())]) if m is not None else np.zeros(0)
+        r = r[np.isfinite(r)]
         return float(np.median(r)) if len(r) else 0.0
 
     def _solve(self, k: int, warm: bool) -> None:
-        s = self._shots[k]
+        p = self._parts[k]
         t0 = time.perf_counter()
-        frames = list(s.frames)
-        obs = [self.frame_observations(t) for t in frames]
-        start = s.fit if warm and s.fit is not None else None
-        # a warm start needs no per-frame camera (the stale ones are not recalibrated for it)
-        own = self._start_cameras(frames) if start is None else [self.own[t] for t in frames]
-        if start is None and all(c is None for c in own):
-            s.fit = None
-        else:
-            s.fit = fit_shot(obs, own, self.size, self.params, self.field_model, start=start)
-        s.seconds = time.perf_counter() - t0
+        start = p.fit if warm and p.fit is not None else None
+        self._parts[k] = self._solver.part(p.frames, start=start)
+        self._seconds[k] = time.perf_counter() - t0
         self._labels = None

@@ -1,13 +1,22 @@
-"""Where a broadcast clip cuts from one shot to the next: a large image change between
-consecutive frames (when the caller measured one, see :func:`pnlviz.calib.temporal.image_change`),
-or per-frame cameras whose centres and views jump (a different camera position), confirmed by the
-next frame.
+"""Where a broadcast clip cuts from one shot to the next, one rule for every caller (``pnlviz
+calibrate --temporal``, :func:`pnlviz.calibrate_clip`, the app and its export):
+
+1. **found** (:func:`find_shots`): where every image change between consecutive frames is known
+   (:func:`pnlviz.calib.temporal.image_change`), a large change; otherwise per-frame cameras whose
+   centres and views jump (a different camera position), confirmed by the next frame, and the
+   image changes that are known. (With the images known, a per-frame camera that jumps is a frame
+   with too few keypoints, not a cut.)
+2. **by hand** (:class:`CutEdits`, :func:`apply_cuts`): cuts a user added or removed.
+3. **by the fit** (:func:`pnlviz.calib.temporal.solve_clip`): a shot whose camera is worse than
+   its frames' own cameras on some of them is split where the frames' own centres jump, when that
+   makes fewer frames worse (never at a cut removed by hand).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -16,7 +25,7 @@ from pnlviz.geometry.camera import Camera
 
 from .shot import TemporalParams
 
-__all__ = ["segment_shots"]
+__all__ = ["CutEdits", "apply_cuts", "find_shots", "segment_shots"]
 
 _GRID = pitch_grid(5.0)
 
@@ -72,4 +81,58 @@ def segment_shots(cameras: Sequence[Camera | None], changes: Sequence[float | No
         centres.append(C)
         last = cam
     bounds = [0, *sorted(set(c for c in cuts if 0 < c < T)), T]
+    return [range(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+
+def find_shots(cameras: Sequence[Camera | None], changes: Sequence[float | None] | None = None,
+               params: TemporalParams = TemporalParams()) -> list[range]:
+    """The shots found in a clip (step 1 of the module docstring): from the image changes alone
+    when every one is known, else from the per-frame ``cameras`` and the changes known."""
+    T = len(cameras)
+    images = changes is not None and len(changes) == T - 1 and all(c is not None for c in changes)
+    return segment_shots([None] * T if images else cameras, changes, params)
+
+
+@dataclass(frozen=True)
+class CutEdits:
+    """Cuts changed by hand: ``added`` frames start a shot, ``removed`` ones no longer do (a cut
+    before frame t is named by t)."""
+
+    added: frozenset[int] = frozenset()
+    removed: frozenset[int] = frozenset()
+
+    def with_cut(self, t: int, cut: bool) -> CutEdits:
+        """These edits with a cut before frame ``t`` added (``cut``) or removed."""
+        t = int(t)
+        if cut:
+            return CutEdits(self.added | {t}, self.removed - {t})
+        return CutEdits(self.added - {t}, self.removed | {t})
+
+    def to_json(self) -> dict:
+        return {"added": sorted(self.added), "removed": sorted(self.removed)}
+
+    @classmethod
+    def from_json(cls, obj: Mapping | None) -> CutEdits:
+        """From :meth:`to_json`'s form (None: no cuts). Anything else is a ValueError saying what
+        (a damaged file must not read as "no cuts", nor ``"123"`` as cuts 1, 2 and 3)."""
+        if obj is None:
+            return cls()
+        if not isinstance(obj, Mapping) or set(obj) - {"added", "removed"}:
+            raise ValueError(f"cuts: expected {{'added': [...], 'removed': [...]}}, got {str(obj)[:80]!r}")
+
+        def frames(key: str) -> frozenset[int]:
+            value = obj.get(key, [])
+            if not isinstance(value, list) or not all(type(t) is int and t >= 0 for t in value):
+                raise ValueError(f"cuts: {key!r} must be a list of frame numbers, got {str(value)[:80]!r}")
+            return frozenset(value)
+
+        return cls(frames("added"), frames("removed"))
+
+
+def apply_cuts(shots: Sequence[range], cuts: CutEdits, T: int) -> list[range]:
+    """The shots of a clip of ``T`` frames after the hand's cuts: the found cuts without the
+    removed ones, with the added ones."""
+    starts = {s.start for s in shots if 0 < s.start < T}
+    starts = (starts - set(cuts.removed)) | {t for t in cuts.added if 0 < t < T}
+    bounds = [0, *sorted(starts), T]
     return [range(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]

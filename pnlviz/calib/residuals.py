@@ -47,7 +47,7 @@ def segment_block(A: np.ndarray, B: np.ndarray, q: np.ndarray, scale: float, min
                   jac: SegmentJacobian | None = None) -> tuple[Block, Block]:
     """Distance of observed points ``q`` (N, 2) to the images of model segments whose ends are the
     homogeneous points ``A``, ``B`` (N, 3) (``q`` lives where ``A / A_z`` does), in pixels
-    (``scale``: pixels per unit of that space). Two blocks of N residuals:
+    (``scale``: pixels per unit of that space, one or (N,)). Two blocks of N residuals:
 
     * perpendicular: the signed distance to the image line ``l = A x B``. ``l`` stays right when
       an end lies behind the camera (it is the plane through the centre and the 3D line), so no
@@ -91,9 +91,11 @@ def segment_block(A: np.ndarray, B: np.ndarray, q: np.ndarray, scale: float, min
     ga[n:] = _through_dehom(sign * (-u - Pw / L[:, None]) + aft * u, A, az)
     gb[n:] = _through_dehom(sign * (Pw / L[:, None]) - aft * u, B, bz)
     gq[n:] = sign * u
-    J = scale * jac.ends_vjp(ga, gb)
+    sc = np.asarray(scale, float)  # one scale, or one per point (the frames of a shot)
+    s2 = sc if sc.ndim == 0 else np.concatenate([sc, sc])[:, None]
+    J = s2 * jac.ends_vjp(ga, gb)
     if jac.q_vjp is not None:
-        J += scale * jac.q_vjp(gq)
+        J += s2 * jac.q_vjp(gq)
     if jac.log_scale is not None:
         J[:n, jac.log_scale] += perp
         J[n:, jac.log_scale] += over

@@ -4,57 +4,62 @@ zoom per frame, and the residuals that measure it against the frames' observatio
 A broadcast camera stands on a tripod head: within a shot its centre and its lens (k1) do not
 move, only pan, tilt, roll and the zoom (focal length) change, and they change smoothly. Here:
 
-* **parameters** ``[C (3), k1, pan_0, tilt_0, roll_0, log f_0, pan_1, ...]``: one centre ``C`` and
-  one ``k1`` for the shot; per frame ``t`` pan, tilt, roll (radians, SoccerNet angles) and
-  ``log f`` (square pixels, principal point at the centre);
-* **data residuals** (pixels, divided by ``noise_px``): keypoints, reprojected minus observed
-  (a pinned keypoint, placed or moved by hand, weighs ``pin_weight`` times more);
-  points observed on straight lines, their distance to the image of the line (computed in
-  undistorted coordinates, where the image of a 3D line is straight). The projection and the
-  undistortion are those of the per-frame refinements (:mod:`pnlviz.geometry.projection`), with
-  one rotation and focal length per point (its frame's);
+* **parameters** ``x = [C (3), k1, pan_0, tilt_0, roll_0, log f_0, pan_1, ...]``: one centre
+  ``C`` and one ``k1`` for the shot; per frame ``t`` pan, tilt, roll (radians, SoccerNet angles)
+  and ``log f`` (square pixels, principal point at the centre);
+* **data residuals**: each frame's own refinement problem (:class:`pnlviz.calib.problem.Problem`,
+  the one the frame pipeline's PnL step solves), so a shot weighs exactly what a frame weighs:
+  keypoints, the distance of line points to their projected segment (perpendicular and
+  overshoot), circle points to the projected arc, lines and circles ``sqrt(alpha)`` against
+  keypoints ``sqrt(1 - alpha)``, a pinned keypoint (placed or moved by hand) ``pin_weight`` times
+  a detected one. Residuals are divided by ``noise_px``, the scale of detection noise, so that
+  they are commensurate with the prior;
 * **smoothness prior**: the second difference (acceleration) of each per-frame parameter, divided
   by its expected size (``accel_deg``, ``accel_log_f``); and a weak prior on k1 (``k1_sigma``).
 
-Its Jacobian (:func:`jacobian`) is taken by finite differences over column groups: each frame's
-parameters touch only its own residuals and three prior rows, so the columns of every third frame
-share no row and one evaluation differentiates them all (~16 evaluations whatever the shot's
-length). :mod:`pnlviz.calib.shot_fit` solves it with the one solver (:mod:`pnlviz.calib.solver`).
+The Jacobian is analytic: each frame's problem gives its residuals' derivatives with respect to
+its camera (a rotation step, the centre, log f and k1), mapped to the shot's parameters by the
+chain rule (:func:`angle_steps`: how a change of pan, tilt or roll turns the camera). The
+matrix is sparse: a frame's rows touch its own four columns and the four shared ones.
+:mod:`pnlviz.calib.shot_fit` solves it with the one solver (:mod:`pnlviz.calib.solver`).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
 
+from pnlviz.conventions import DEFAULT_ALPHA
 from pnlviz.field.model import FieldModel
-from pnlviz.geometry.camera import rotation_from_pan_tilt_roll
+from pnlviz.geometry.camera import MIN_DEPTH, Camera, rotation_from_pan_tilt_roll
 from pnlviz.geometry.projection import camera_to_pixels, to_camera, undistort_k1
 from pnlviz.geometry.so3 import cross
 
 from .observations import Observations
+from .problem import BEHIND, FrameData, pin_block
+from .residuals import Block, SegmentJacobian, point_block, polyline_block, segment_block
 
-__all__ = ["ShotData", "ShotModel", "TemporalParams", "flatten", "jacobian"]
+__all__ = ["FrameDistances", "Selection", "ShotProblem", "TemporalParams", "angle_steps", "frame_data"]
 
 
 @dataclass(frozen=True)
 class TemporalParams:
-    #: detection noise (px): the scale of the data residuals
+    #: detection noise (px at 960 px width): the scale of the data residuals against the prior
     noise_px: float = 1.5
     #: expected frame-to-frame acceleration of pan, tilt and roll (degrees / frame^2)
     accel_deg: float = 0.01
     #: ... of log focal length (1 / frame^2)
     accel_log_f: float = 0.001
-    #: soft-L1 threshold, in units of each residual's scale
+    #: soft-L1 threshold, in units of ``noise_px``
     robust: float = 3.0
-    #: observations farther than this from the shot's camera are dropped (px)
-    outlier_px: float = 12.0
-    #: ... and, for the first solve, those farther than this from their own frame's camera (px;
-    #: looser: a per-frame camera is itself a few pixels off where it extrapolates)
+    #: for the first solve, an observation joins when its own frame's camera puts it within this
+    #: (px at 960 px width; looser than the frame's gates: a per-frame camera is itself a few pixels
+    #: off where it extrapolates). After it, the frame pipeline's PnL gates decide
+    #: (``CalibParams.line_gate_px``, ``point_gate_px``) against the shot's camera
     start_outlier_px: float = 30.0
     #: fit k1 for the shot (off for detectors whose calibration settings say ``refine_k1: false``)
     fit_k1: bool = True
@@ -76,155 +81,318 @@ class TemporalParams:
     pin_weight: float = 7.0
 
 
-@dataclass
-class ShotData:
-    """The observations of a shot, flattened: keypoints and line points with their frame index."""
+@dataclass(frozen=True)
+class Selection:
+    """The observations of one frame a shot's solve uses: a keypoint mask and the line and circle
+    classes (the rest are outliers for now)."""
 
-    kp_t: np.ndarray  # (N,)
-    kp_X: np.ndarray  # (N, 3)
-    kp_xy: np.ndarray  # (N, 2)
-    ln_t: np.ndarray  # (M,)
-    ln_A: np.ndarray  # (M, 3) world ends of the line
-    ln_B: np.ndarray
-    ln_q: np.ndarray  # (M, 2) observed pixels
-    #: (N,) True for keypoints placed or moved by hand (none when left out)
-    kp_pin: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    keypoints: np.ndarray
+    lines: tuple[str, ...]
+    circles: tuple[str, ...]
 
-    def __post_init__(self):
-        if len(self.kp_pin) != len(self.kp_t):
-            self.kp_pin = np.zeros(len(self.kp_t), bool)
+    @classmethod
+    def everything(cls, obs: Observations) -> Selection:
+        return cls(np.ones(obs.n_keypoints, bool), tuple(obs.lines), tuple(obs.circles))
 
-    def subset(self, kp_keep: np.ndarray, ln_keep: np.ndarray) -> ShotData:
-        return ShotData(self.kp_t[kp_keep], self.kp_X[kp_keep], self.kp_xy[kp_keep], self.ln_t[ln_keep],
-                        self.ln_A[ln_keep], self.ln_B[ln_keep], self.ln_q[ln_keep], self.kp_pin[kp_keep])
+    def same(self, other: Selection) -> bool:
+        return (np.array_equal(self.keypoints, other.keypoints) and self.lines == other.lines
+                and self.circles == other.circles)
 
-    def frame(self, t: int) -> ShotData:
-        """Frame ``t``'s observations alone, as a shot of one frame."""
-        k, l = self.kp_t == t, self.ln_t == t
-        return ShotData(np.zeros(k.sum(), int), self.kp_X[k], self.kp_xy[k], np.zeros(l.sum(), int), self.ln_A[l],
-                        self.ln_B[l], self.ln_q[l], self.kp_pin[k])
+    @property
+    def size(self) -> int:
+        return int(self.keypoints.sum()) + len(self.lines) + len(self.circles)
 
 
-def flatten(observations: Sequence[Observations | None], model: FieldModel) -> ShotData:
-    """The shot's observations (None: a frame without any) as one :class:`ShotData`."""
-    kt, kX, kx, kp, lt, lA, lB, lq = [], [], [], [], [], [], [], []
-    for t, obs in enumerate(observations):
-        if obs is None:
-            continue
-        kt.append(np.full(obs.n_keypoints, t))
-        kX.append(obs.kp_xyz)
-        kx.append(obs.kp_xy)
-        kp.append(obs.pins)
-        for name, pts in obs.lines.items():
-            seg = model.lines.get(name)
-            if seg is None or len(pts) == 0:
-                continue
-            m = len(pts)
-            lt.append(np.full(m, t))
-            lA.append(np.repeat(seg.start[None], m, 0))
-            lB.append(np.repeat(seg.end[None], m, 0))
-            lq.append(np.asarray(pts, float).reshape(-1, 2))
+@dataclass(frozen=True)
+class FrameDistances:
+    """How far a camera puts a frame's observations (px): each keypoint's distance (N,), the
+    farthest point of each line and circle class, and (when measured point by point, else 0) the
+    sum of the squared distances with the number of scalars it sums (2 per keypoint, 1 per point
+    of a line or circle)."""
 
-    def cat(parts, shape):
-        return np.concatenate(parts) if parts else np.zeros(shape)
+    keypoints: np.ndarray
+    classes: dict[str, float]
+    rss: float = 0.0
+    n: int = 0
 
-    return ShotData(cat(kt, (0,)).astype(int), cat(kX, (0, 3)), cat(kx, (0, 2)), cat(lt, (0,)).astype(int),
-                    cat(lA, (0, 3)), cat(lB, (0, 3)), cat(lq, (0, 2)), cat(kp, (0,)).astype(bool))
+    def selection(self, obs: Observations, point_gate: float, line_gate: float) -> Selection:
+        """The observations within the gates (and every pin)."""
+        kp = (self.keypoints <= point_gate) | obs.pins
+        return Selection(kp, tuple(k for k in obs.lines if self.classes.get(k, math.inf) <= line_gate),
+                         tuple(k for k in obs.circles if self.classes.get(k, math.inf) <= line_gate))
+
+    def kept(self, sel: Selection) -> np.ndarray:
+        """The distances of the selected observations (keypoints, then classes)."""
+        return np.concatenate([self.keypoints[sel.keypoints],
+                               [self.classes[k] for k in (*sel.lines, *sel.circles) if k in self.classes]])
 
 
-class ShotModel:
-    """The shot's residual function over the parameter vector
-    ``[C (3), k1, pan_0, tilt_0, roll_0, logf_0, pan_1, ...]`` (see the module docstring)."""
+def frame_data(observations: Sequence[Observations | None], model: FieldModel) -> list[FrameData | None]:
+    """Each frame's observations laid out once for its problem (None: nothing observed)."""
+    return [None if o is None else FrameData.build(o, model) for o in observations]
 
-    def __init__(self, data: ShotData, T: int, size: tuple[float, float], params: TemporalParams):
-        self.d, self.T, self.params = data, T, params
-        self.cx, self.cy = size[0] / 2.0, size[1] / 2.0
+
+def angle_steps(pan, tilt, roll) -> np.ndarray:
+    """(3, 3) (or (T, 3, 3) for arrays of T angles): column ``i`` is the rotation step ``w``
+    (``R <- exp([w]x) R``, the frame problems' update) that a unit change of angle ``i`` (pan,
+    tilt, roll) makes, to first order.
+
+    With ``O = Rz(pan) Rx(tilt) Rz(roll)`` and ``R = O^T``: ``dR/dpan R^T = -[R e_z]x``,
+    ``dR/dtilt R^T = -[R Rz(pan) e_x]x``, ``dR/droll R^T = -[e_z]x``."""
+    R = rotation_from_pan_tilt_roll(pan, tilt, roll)
+    c, s = np.cos(pan), np.sin(pan)
+    out = np.empty(np.shape(R))
+    out[..., 0] = -R[..., 2]
+    out[..., 1] = -(R[..., 0] * np.expand_dims(c, -1) + R[..., 1] * np.expand_dims(s, -1))  # -R Rz(pan) e_x
+    out[..., 2] = [0.0, 0.0, -1.0]
+    return out
+
+
+class ShotProblem:
+    """The shot's residuals over ``x`` (see the module docstring) against the frames' data
+    (``frames[t]``: :class:`FrameData` or None), each frame restricted to its :class:`Selection`
+    (None: everything it observed). ``size``: (W, H) of the frames; ``alpha``: the PnL weight of
+    lines against points; ``pin_scale``: px where a pin's bounded loss bends (0: squares).
+
+    The frames' rows are stacked (every keypoint, line point and circle of the shot at once, each
+    with its frame's rotation and focal length) and go through the frame problem's residual blocks
+    (:mod:`pnlviz.calib.residuals`) with the frame problem's weights, so one evaluation costs a
+    few vectorised calls whatever the shot's length (a loop over frames costs ~0.2 ms a frame)."""
+
+    def __init__(self, frames: Sequence[FrameData | None], size: tuple[float, float], params: TemporalParams,
+                 selections: Sequence[Selection | None] | None = None, alpha: float = DEFAULT_ALPHA,
+                 pin_scale: float = 0.0):
+        self.T, self.params = len(frames), params
+        W, H = float(size[0]), float(size[1])
+        self.size, self.cx, self.cy = (W, H), W / 2.0, H / 2.0
+        self.noise = params.noise_px * W / 960.0
+        self.pin_scale = pin_scale
+        self.rows = _Rows.stack(frames, selections or [None] * self.T, alpha)
+        self.n_data = self.rows.n_res
         self.prior_scale = np.array([math.radians(params.accel_deg)] * 3 + [params.accel_log_f])
-        # each keypoint residual's scale: the noise, smaller for a pin (it weighs pin_weight times more)
-        self.kp_scale = np.repeat(np.where(data.kp_pin, params.noise_px / params.pin_weight, params.noise_px), 2)
+        self.n_params = 4 + 4 * self.T
+        self._prior = self._prior_jacobian()
 
-    def unpack(self, x: np.ndarray):
-        C, k1 = x[:3], (x[3] if self.params.fit_k1 else 0.0)
-        per = x[4:].reshape(self.T, 4)
-        return C, k1, per
+    # ------------------------------------------------------------------ parameters
+    def unpack(self, x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+        """``(C (3,), k1, per-frame (T, 4): pan, tilt, roll, log f)``."""
+        return x[:3], (float(x[3]) if self.params.fit_k1 else 0.0), x[4:].reshape(self.T, 4)
 
-    def data_residuals(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Keypoint residuals (N, 2) and line distances (M,), pixels."""
-        d = self.d
+    def cameras(self, x: np.ndarray) -> list[Camera]:
+        C, k1, per = self.unpack(x)
+        R = rotation_from_pan_tilt_roll(per[:, 0], per[:, 1], per[:, 2])
+        W, H = self.size
+        radial = np.zeros(6)
+        radial[0] = k1
+        return [Camera(f, f, self.cx, self.cy, R[t], C, W, H, radial)
+                for t, f in enumerate(np.exp(per[:, 3]).tolist())]
+
+    # ------------------------------------------------------------------ residuals
+    def evaluate(self, x: np.ndarray, jac: bool = False) -> tuple[np.ndarray, scipy.sparse.csr_matrix | None]:
+        """Residuals (n,) at ``x`` (keypoints, line points' perpendicular distances and overshoots,
+        circle points, then the prior rows) and, with ``jac``, their Jacobian (n, 4 + 4 T) as a
+        sparse matrix."""
         C, k1, per = self.unpack(x)
         R = rotation_from_pan_tilt_roll(per[:, 0], per[:, 1], per[:, 2])
         f = np.exp(per[:, 3])
-        Rk = R[d.kp_t]
-        uv, _ = camera_to_pixels(to_camera(d.kp_X, Rk, C), Rk, f[d.kp_t], 1.0, self.cx, self.cy, k1)
-        r_kp = uv - d.kp_xy
-        # lines: the observed points undistorted, then their distance to the pinhole image of the
-        # 3D line (the plane through the centre and the line: l = A x B in camera coordinates)
-        fl, Rl = f[d.ln_t], R[d.ln_t]
-        qu, _ = undistort_k1(d.ln_q, fl, 1.0, self.cx, self.cy, k1)
-        l = cross(to_camera(d.ln_A, Rl, C), to_camera(d.ln_B, Rl, C))
-        nrm = np.maximum(np.hypot(l[:, 0], l[:, 1]), 1e-12)
-        r_ln = fl * (l[:, 0] * qu[:, 0] + l[:, 1] * qu[:, 1] + l[:, 2]) / nrm
-        return r_kp, r_ln
-
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        r_kp, r_ln = self.data_residuals(x)
-        per = self.unpack(x)[2]
+        rows = self.rows
+        r = np.empty(rows.n_res)
+        J = np.empty((rows.n_res, 8)) if jac else None
+        at = 0
+        if rows.kp_t.size:
+            tk = rows.kp_t
+            uv, Juv = camera_to_pixels(to_camera(rows.kp_X, R[tk], C), R[tk], f[tk], 1.0, self.cx, self.cy, k1, jac)
+            block = point_block(uv, Juv, rows.kp_xy)
+            if rows.kp_pin.any():
+                block = pin_block(block, rows.kp_pin, self.params.pin_weight, self.pin_scale)
+            at = _put(r, J, at, np.repeat(rows.kp_w, 2), block)
+        if rows.ln_t.size:
+            tl = rows.ln_t
+            A, B = to_camera(rows.ln_A, R[tl], C), to_camera(rows.ln_B, R[tl], C)
+            q, dq = undistort_k1(rows.ln_q, f[tl], 1.0, self.cx, self.cy, k1, jac)
+            sj = _segment_jacobian(A, B, dq, R[tl]) if dq is not None else None
+            for block in segment_block(A, B, q, f[tl], MIN_DEPTH, sj):
+                at = _put(r, J, at, rows.ln_w, block)
+        for t, world, pts, w, _ in rows.circles:
+            at = _put(r, J, at, w, _circle_block(world, pts, R[t], C, float(f[t]), k1, self.cx, self.cy, jac))
         acc = (per[:-2] - 2 * per[1:-1] + per[2:]) / self.prior_scale if self.T >= 3 else np.zeros((0, 4))
-        k1 = [x[3] / self.params.k1_sigma] if self.params.fit_k1 else []
-        return np.concatenate([r_kp.ravel() / self.kp_scale, r_ln / self.params.noise_px, acc.ravel(), k1])
+        k1_row = [x[3] / self.params.k1_sigma] if self.params.fit_k1 else []
+        out = np.concatenate([r / self.noise, acc.ravel(), k1_row])
+        if J is None:
+            return out, None
+        return out, scipy.sparse.vstack([self._chain(J / self.noise, per), self._prior], format="csr")
 
-    def column_groups(self) -> list[np.ndarray]:
-        """Columns that share no row, to be differentiated together: each shared parameter alone;
-        a per-frame parameter with the same parameter of every third frame (frames t and t + 1
-        or t + 2 share a prior row, t and t + 3 do not)."""
-        groups = [np.array([c]) for c in ([0, 1, 2, 3] if self.params.fit_k1 else [0, 1, 2])]
-        for j in range(4):
-            for phase in range(3):
-                cols = 4 + 4 * np.arange(phase, self.T, 3) + j
-                if len(cols):
-                    groups.append(cols)
-        return groups
+    def distances(self, x: np.ndarray) -> list[FrameDistances | None]:
+        """Per frame, how far its camera at ``x`` puts its selected observations (unweighted
+        pixels, as :class:`FrameDistances`: with every observation selected, each keypoint of the
+        frame in order); None for a frame without data."""
+        C, k1, per = self.unpack(x)
+        R = rotation_from_pan_tilt_roll(per[:, 0], per[:, 1], per[:, 2])
+        f = np.exp(per[:, 3])
+        rows = self.rows
+        kp = np.zeros(0)
+        if rows.kp_t.size:
+            tk = rows.kp_t
+            uv, _ = camera_to_pixels(to_camera(rows.kp_X, R[tk], C), R[tk], f[tk], 1.0, self.cx, self.cy, k1)
+            kp = np.hypot(*(uv - rows.kp_xy).T)
+        ln = np.zeros(0)
+        if rows.ln_t.size:
+            tl = rows.ln_t
+            A, B = to_camera(rows.ln_A, R[tl], C), to_camera(rows.ln_B, R[tl], C)
+            q, _ = undistort_k1(rows.ln_q, f[tl], 1.0, self.cx, self.cy, k1)
+            perp, over = segment_block(A, B, q, f[tl], MIN_DEPTH)
+            ln = np.hypot(perp.r, over.r)
+        out: list[FrameDistances | None] = [None] * self.T
+        for t in np.unique(np.concatenate([rows.kp_t, rows.ln_t, [c[0] for c in rows.circles]]).astype(int)):
+            out[t] = FrameDistances(np.nan_to_num(kp[rows.kp_t == t], nan=math.inf), {})
+        for (t, name), idx in rows.ln_items.items():
+            out[t].classes[name] = float(np.max(ln[idx])) if len(idx) else 0.0  # type: ignore[union-attr]
+        for t, world, pts, _, name in rows.circles:
+            d = _circle_block(world, pts, R[t], C, float(f[t]), k1, self.cx, self.cy, False).r
+            out[t].classes[name] = float(np.max(np.abs(d))) if len(d) else 0.0  # type: ignore[union-attr]
+        return out
 
-    def sparsity(self) -> scipy.sparse.csr_matrix:
-        """Which rows each parameter touches (1 where it may)."""
-        d, T = self.d, self.T
-        n_data, n_acc = 2 * len(d.kp_t) + len(d.ln_t), 4 * max(T - 2, 0)
-        rows, cols = [], []
-        shared = [0, 1, 2] + ([3] if self.params.fit_k1 else [])
-        frame_of_row = np.concatenate([np.repeat(d.kp_t, 2), d.ln_t]).astype(int)
-        for c in shared:
-            rows.append(np.arange(n_data))
-            cols.append(np.full(n_data, c))
-        for j in range(4):
-            rows.append(np.arange(n_data))
-            cols.append(4 + 4 * frame_of_row + j)
-        for s in range(max(T - 2, 0)):  # prior row of the acceleration at s + 1: frames s, s+1, s+2
+    def _chain(self, J: np.ndarray, per: np.ndarray) -> scipy.sparse.csr_matrix:
+        """The data rows' Jacobian with respect to each row's camera (a rotation step, the centre,
+        log f, k1: :mod:`pnlviz.geometry.projection`'s 8) chained to the shot's parameters."""
+        t = self.rows.frame
+        steps = angle_steps(per[:, 0], per[:, 1], per[:, 2])
+        block = np.empty((len(J), 8))
+        block[:, :3] = np.einsum("nk,nkj->nj", J[:, :3], steps[t])  # pan, tilt, roll
+        block[:, 3] = J[:, 6]  # log f
+        block[:, 4:7] = J[:, 3:6]  # the centre
+        block[:, 7] = J[:, 7] if self.params.fit_k1 else 0.0
+        cols = np.empty((len(J), 8), int)
+        cols[:, :4] = 4 + 4 * t[:, None] + np.arange(4)
+        cols[:, 4:] = np.arange(4)
+        rows = np.repeat(np.arange(len(J)), 8)
+        return scipy.sparse.csr_matrix((block.ravel(), (rows, cols.ravel())), shape=(len(J), self.n_params))
+
+    def _prior_jacobian(self) -> scipy.sparse.csr_matrix:
+        """The prior rows' Jacobian (constant: the prior is linear in ``x``)."""
+        rows, cols, vals = [], [], []
+        for s in range(max(self.T - 2, 0)):  # the acceleration at s + 1: frames s, s + 1, s + 2
             for j in range(4):
-                rows.append(np.full(3, n_data + 4 * s + j))
-                cols.append(4 + 4 * np.arange(s, s + 3) + j)
-        n_k1 = 0
-        if self.params.fit_k1:  # the k1 prior row
-            rows.append(np.array([n_data + n_acc]))
-            cols.append(np.array([3]))
-            n_k1 = 1
-        row, col = np.concatenate(rows), np.concatenate(cols)
-        return scipy.sparse.csr_matrix((np.ones(len(row)), (row, col)), shape=(n_data + n_acc + n_k1, 4 + 4 * T))
+                for k, c in enumerate((1.0, -2.0, 1.0)):
+                    rows.append(4 * s + j)
+                    cols.append(4 + 4 * (s + k) + j)
+                    vals.append(c / self.prior_scale[j])
+        n = 4 * max(self.T - 2, 0)
+        if self.params.fit_k1:
+            rows.append(n)
+            cols.append(3)
+            vals.append(1.0 / self.params.k1_sigma)
+            n += 1
+        return scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(n, self.n_params))
 
 
-def jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, r0: np.ndarray,
-             sparsity: scipy.sparse.csc_matrix, groups: list[np.ndarray]) -> scipy.sparse.csr_matrix:
-    """Forward differences of ``fun`` at ``x`` (where it is ``r0``), one evaluation per group of
-    columns with disjoint rows (the sparsity pattern says which rows each column touches)."""
-    rows, cols, vals = [], [], []
-    for group in groups:
-        h = 1.5e-8 * np.maximum(1.0, np.abs(x[group]))
-        xh = x.copy()
-        xh[group] += h
-        diff = fun(xh) - r0
-        for c, hc in zip(group, h):
-            rr = sparsity.indices[sparsity.indptr[c]:sparsity.indptr[c + 1]]
-            rows.append(rr)
-            cols.append(np.full(len(rr), c))
-            vals.append(diff[rr] / hc)
-    return scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                                   shape=sparsity.shape)
+@dataclass
+class _Rows:
+    """The selected observations of every frame of a shot, stacked, with each row's frame and
+    weight (the frame problem's: keypoints ``sqrt(1 - alpha)``, lines and circles ``sqrt(alpha)``,
+    1 for a kind alone on its frame)."""
+
+    kp_t: np.ndarray
+    kp_X: np.ndarray
+    kp_xy: np.ndarray
+    kp_pin: np.ndarray
+    kp_w: np.ndarray
+    ln_t: np.ndarray
+    ln_A: np.ndarray
+    ln_B: np.ndarray
+    ln_q: np.ndarray
+    ln_w: np.ndarray
+    #: (frame, world samples (S, 3), observed pixels (P, 2), weight, class) per circle class seen
+    circles: list[tuple[int, np.ndarray, np.ndarray, float, str]]
+    #: each residual row's frame
+    frame: np.ndarray
+    #: the line rows (into ``ln_*``) of each (frame, class)
+    ln_items: dict[tuple[int, str], np.ndarray]
+
+    @property
+    def n_res(self) -> int:
+        return len(self.frame)
+
+    @classmethod
+    def stack(cls, frames: Sequence[FrameData | None], selections: Sequence[Selection | None], alpha: float) -> _Rows:
+        kp: list[tuple] = []
+        ln: list[tuple] = []
+        circles: list[tuple[int, np.ndarray, np.ndarray, float, str]] = []
+        items: dict[tuple[int, str], np.ndarray] = {}
+        n_ln = 0
+        for t, (data, sel) in enumerate(zip(frames, selections)):
+            if data is None:
+                continue
+            sel = sel or Selection.everything(data.obs)
+            obs = data.obs
+            lines = [(name, rows) for name, rows in zip(data.line_names, data.line_rows) if name in sel.lines]
+            arcs = [(name, w, p) for name, w, p in data.arcs(0.5) if name in sel.circles]
+            K = int(sel.keypoints.sum())
+            w_pt = math.sqrt(1 - alpha) if (lines or arcs) else 1.0
+            w_ln = math.sqrt(alpha) if K else 1.0
+            m = sel.keypoints
+            kp.append((np.full(K, t), obs.kp_xyz[m], obs.kp_xy[m], obs.pins[m], np.full(K, w_pt)))
+            for name, rows in lines:
+                n = rows.stop - rows.start
+                ln.append((np.full(n, t), data.line_a[rows], data.line_b[rows], data.line_pts[rows], np.full(n, w_ln)))
+                items[(t, name)] = np.arange(n_ln, n_ln + n)
+                n_ln += n
+            circles += [(t, w, p, w_ln, name) for name, w, p in arcs]
+
+        def cat(parts: list[tuple], i: int, shape: tuple, dtype=float) -> np.ndarray:
+            return np.concatenate([p[i] for p in parts]).astype(dtype) if parts else np.zeros(shape, dtype)
+
+        kp_t, ln_t = cat(kp, 0, (0,), int), cat(ln, 0, (0,), int)
+        frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [np.full(len(c[2]), c[0]) for c in circles])
+        return cls(kp_t, cat(kp, 1, (0, 3)), cat(kp, 2, (0, 2)), cat(kp, 3, (0,), bool), cat(kp, 4, (0,)), ln_t,
+                   cat(ln, 1, (0, 3)), cat(ln, 2, (0, 3)), cat(ln, 3, (0, 2)), cat(ln, 4, (0,)), circles,
+                   frame.astype(int), items)
+
+
+def _put(r: np.ndarray, J: np.ndarray | None, at: int, weight, block: Block) -> int:
+    n = len(block.r)
+    w = np.asarray(weight, float)
+    r[at:at + n] = w * block.r
+    if J is not None:
+        assert block.J is not None, "a block without its Jacobian in a Jacobian evaluation"
+        J[at:at + n] = (w[:, None] if w.ndim else w) * block.J
+    return at + n
+
+
+def _segment_jacobian(A: np.ndarray, B: np.ndarray, dq: np.ndarray, R: np.ndarray) -> SegmentJacobian:
+    """:meth:`pnlviz.calib.models.CameraModel.segment_jacobian` with a rotation per row."""
+    A2, B2, R2, Jq = np.vstack([A, A]), np.vstack([B, B]), np.concatenate([R, R]), np.vstack([dq, dq])
+
+    def ends_vjp(ga, gb):
+        out = np.zeros((len(ga), 8))
+        out[:, :3] = cross(A2, ga) + cross(B2, gb)
+        out[:, 3:6] = -np.einsum("ni,nij->nj", ga + gb, R2)
+        return out
+
+    def q_vjp(g):
+        out = np.zeros((len(g), 8))
+        out[:, 6] = g[:, 0] * Jq[:, 0, 0] + g[:, 1] * Jq[:, 1, 0]
+        out[:, 7] = g[:, 0] * Jq[:, 0, 1] + g[:, 1] * Jq[:, 1, 1]
+        return out
+
+    return SegmentJacobian(ends_vjp, q_vjp, 6)
+
+
+def _circle_block(world: np.ndarray, pts: np.ndarray, R: np.ndarray, C: np.ndarray, f: float, k1: float,
+                  cx: float, cy: float, jac: bool) -> Block:
+    """A circle's observed points against its projected arc (:meth:`pnlviz.calib.problem.Problem._circle`)."""
+    Xc = to_camera(world, R, C)
+    front = Xc[:, 2] > MIN_DEPTH
+    if front.sum() < 2:
+        return Block(np.full(len(pts), BEHIND), np.zeros((len(pts), 8)) if jac else None)
+    Xc = Xc[front]
+    poly, _ = camera_to_pixels(Xc, R, f, 1.0, cx, cy, k1)
+    if not jac:
+        return polyline_block(poly, pts)
+
+    def vertex_jacobian(idx: np.ndarray) -> np.ndarray:
+        J = camera_to_pixels(Xc[idx], R, f, 1.0, cx, cy, k1, True)[1]
+        assert J is not None
+        return J
+
+    return polyline_block(poly, pts, vertex_jacobian)

@@ -6,16 +6,17 @@
   neighbours;
 * **robust**: the first solve uses the observations that their frame's own camera agrees with
   (within ``start_outlier_px``; all of a frame that has none), then the ones the shot's camera
-  agrees with, until that set stops changing (outlier detections, wrong ids, outlier frames); and
-  a soft-L1 loss on every residual (``robust``, in units of the residual's scale);
+  agrees with by the frame pipeline's PnL gates (a keypoint within ``point_gate_px``, a line or
+  circle when all its points are within ``line_gate_px``), until that set stops changing; and a
+  soft-L1 loss on every residual (``robust``, in units of the noise);
 * **solved jointly** by the one Levenberg-Marquardt solver (:mod:`pnlviz.calib.solver`) on the
-  whole shot, with the model's Jacobian by grouped finite differences (the normal equations are
-  small: 4 per frame + 4 columns). (scipy's iterative trust-region solver needed hundreds of steps
-  on the narrow valley that couples the centre's depth with the focal length; its exact one
-  decomposes the whole Jacobian and is slow on long shots.)
+  whole shot, with the model's analytic sparse Jacobian (the normal equations are small: 4 per
+  frame + 4 columns).
 
 Frames with fewer keypoints than a per-frame calibration needs still get a camera: their own
-observations and the prior place them. Everything here is pure (numpy / scipy, no I/O).
+observations and the prior place them. Whether each frame should use it is decided afterwards,
+against its own camera (:mod:`pnlviz.calib.shot_check`). Everything here is pure (numpy / scipy,
+no I/O).
 """
 
 from __future__ import annotations
@@ -27,13 +28,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from pnlviz.field.model import FieldModel, load_field_model
-from pnlviz.geometry.camera import Camera, look_at_rotation, pan_tilt_roll_from_rotation, rotation_from_pan_tilt_roll
+from pnlviz.geometry.camera import Camera, look_at_rotation, pan_tilt_roll_from_rotation
 
+from .calibrate import CalibParams
+from .models import CameraModel
 from .observations import Observations
-from .shot import ShotData, ShotModel, TemporalParams, flatten, jacobian
+from .problem import FrameData, Problem
+from .shot import FrameDistances, Selection, ShotProblem, TemporalParams, frame_data
 from .solver import SolverParams, levenberg_marquardt
 
-__all__ = ["ShotFit", "camera_vector", "fit_shot"]
+__all__ = ["ShotFit", "camera_vector", "distances", "fit_shot"]
 
 #: the relative decrease of the cost a solve from a previous solution stops at (1e-10 from the
 #: per-frame cameras): the cameras it gives differ by hundredths of a pixel
@@ -50,11 +54,35 @@ class ShotFit:
     #: per frame: pan, tilt, roll (radians), focal length (px)
     angles: np.ndarray
     focal: np.ndarray
-    #: per frame: residuals (px) of the observations kept, and how many were dropped
+    #: per frame: distances (px) of the observations kept, and how many were left out
     residuals: list[np.ndarray]
     dropped: list[int]
     cost: float
     nfev: int
+    #: the solver stopped at a minimum (not at its iteration limit, nor with no descent at all)
+    converged: bool = True
+    #: per frame: the observations the solve used
+    selections: list[Selection | None] | None = None
+    #: per frame: how far its shot camera puts each of its observations
+    distances: list[FrameDistances | None] | None = None
+
+
+def distances(data: FrameData, cam: Camera) -> FrameDistances:
+    """:class:`FrameDistances` of ``cam`` on a frame (the frame pipeline's distances: the same
+    problem, unweighted)."""
+    model = CameraModel(cam, True, True, k1_bound=10.0)
+    p = Problem(model, data)
+    state = model.start()
+    obs = data.obs
+    kp = np.zeros(0)
+    if obs.n_keypoints:
+        uv, _ = model.project(obs.kp_xyz, state)
+        kp = np.hypot(*(uv - obs.kp_xy).T)
+        kp = np.where(np.isfinite(kp), kp, math.inf)
+    per_class = p.class_distances(state)
+    classes = {k: (float(np.max(v)) if len(v) else 0.0) for k, v in per_class.items()}
+    rss = float(np.sum(np.square(kp))) + sum(float(np.sum(np.square(v))) for v in per_class.values())
+    return FrameDistances(kp, classes, rss, 2 * len(kp) + sum(len(v) for v in per_class.values()))
 
 
 def initial(cameras: Sequence[Camera | None], T: int) -> tuple[np.ndarray, float, np.ndarray]:
@@ -95,57 +123,11 @@ def camera_vector(cam: Camera) -> np.ndarray:
     return np.concatenate([cam.C, [cam.radial[0]], pan_tilt_roll_from_rotation(cam.R), [math.log(cam.fx)]])
 
 
-def _agreeing(data: ShotData, cameras: Sequence[Camera | None], size, params: TemporalParams
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """Masks of the keypoints and line points within ``start_outlier_px`` of their own frame's
-    camera (every observation of a frame without one)."""
-    kp_keep = np.ones(len(data.kp_t), bool)
-    ln_keep = np.ones(len(data.ln_t), bool)
-    one = replace(params, fit_k1=True)
-    for t, cam in enumerate(cameras):
-        if cam is None:
-            continue
-        r_kp, r_ln = ShotModel(data.frame(t), 1, size, one).data_residuals(camera_vector(cam))
-        mine = data.kp_t == t
-        kp_keep[mine] = (np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.start_outlier_px) | data.kp_pin[mine]
-        ln_keep[data.ln_t == t] = np.abs(r_ln) <= params.start_outlier_px
-    return kp_keep, ln_keep
-
-
-def _cameras(x: np.ndarray, model: ShotModel, size: tuple[float, float]) -> list[Camera]:
-    C, k1, per = model.unpack(x)
-    R = rotation_from_pan_tilt_roll(per[:, 0], per[:, 1], per[:, 2])
-    radial = np.zeros(6)
-    radial[0] = k1
-    out = []
-    for t in range(model.T):
-        f = float(math.exp(per[t, 3]))
-        out.append(Camera(f, f, size[0] / 2.0, size[1] / 2.0, R[t], C, float(size[0]), float(size[1]), radial))
-    return out
-
-
-def _solve(m: ShotModel, x: np.ndarray, params: TemporalParams, tol: float = 1e-10) -> tuple[np.ndarray, float, int]:
-    """The shot solved from ``x`` by the one solver, soft-L1 (``robust``), its Jacobian by grouped
-    finite differences at accepted steps only. Returns the solution, its cost and the number of
-    evaluations of the residuals. ``tol``: the relative decrease of the cost to stop at."""
-    sparsity = m.sparsity().tocsc()
-    groups = m.column_groups()
-    nfev = 0
-
-    def evaluate(x: np.ndarray, jac: bool):
-        nonlocal nfev
-        nfev += 1
-        return m.residuals(x), None
-
-    def derivative(x: np.ndarray, r: np.ndarray):
-        nonlocal nfev
-        nfev += len(groups)
-        return jacobian(m.residuals, x, r, sparsity, groups)
-
+def _solve(m: ShotProblem, x: np.ndarray, params: TemporalParams, tol: float) -> tuple[np.ndarray, dict]:
+    """The shot solved from ``x`` by the one solver, soft-L1 (``robust``)."""
     solver = SolverParams(loss="soft_l1", f_scale=params.robust, max_iter=params.max_iterations, tol=tol,
                           step_tol=1e-10 * float(np.linalg.norm(x)), max_trials=12)
-    x, info = levenberg_marquardt(evaluate, lambda x, dx: x + dx, x, solver, jacobian=derivative)
-    return x, float(info["cost"]), nfev
+    return levenberg_marquardt(m.evaluate, lambda x, dx: x + dx, x, solver)
 
 
 def _start_vector(start: ShotFit, T: int) -> np.ndarray:
@@ -156,56 +138,87 @@ def _start_vector(start: ShotFit, T: int) -> np.ndarray:
     return np.concatenate([start.C, [start.k1], per.ravel()])
 
 
+def _selections(data: Sequence[FrameData | None], cameras: Sequence[Camera | None], point_gate: float,
+                line_gate: float) -> list[Selection | None]:
+    """Per frame, the observations ``cameras[t]`` (its own camera) puts within the gates
+    (everything of a frame without a camera)."""
+    out: list[Selection | None] = []
+    for d, cam in zip(data, cameras):
+        if d is None:
+            out.append(None)
+        elif cam is None:
+            out.append(Selection.everything(d.obs))
+        else:
+            out.append(distances(d, cam).selection(d.obs, point_gate, line_gate))
+    return out
+
+
+def _gated(data: Sequence[FrameData | None], dist: Sequence[FrameDistances | None], point_gate: float,
+           line_gate: float) -> list[Selection | None]:
+    """Per frame, the observations the shot's camera puts within the gates (``dist``:
+    :meth:`ShotProblem.distances` with everything selected)."""
+    return [None if d is None or m is None else m.selection(d.obs, point_gate, line_gate) for d, m in zip(data, dist)]
+
+
+def _same(a: Sequence[Selection | None], b: Sequence[Selection | None]) -> bool:
+    return all((x is None and y is None) or (x is not None and y is not None and x.same(y)) for x, y in zip(a, b))
+
+
 def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Camera | None],
              size: tuple[float, float], params: TemporalParams = TemporalParams(),
-             model: FieldModel | None = None, start: ShotFit | None = None) -> ShotFit:
+             model: FieldModel | None = None, start: ShotFit | None = None,
+             calib: CalibParams = CalibParams(), data: Sequence[FrameData | None] | None = None) -> ShotFit:
     """The broadcast camera of one shot (see the module docstring): ``observations[t]`` and the
     per-frame ``cameras[t]`` (None where a frame has none) of its T frames, in time order, for
     images of ``size`` (W, H). Returns a camera for every frame. Pinned keypoints (placed or moved
     by hand, ``Observations.kp_pinned``) weigh ``pin_weight`` times more and are never dropped.
+    ``calib``: the frames' calibration settings (``alpha``, the PnL gates).
 
     ``start``: a previous solution of the same shot (warm start, after an edit): the solve starts
-    from it, with the observations it agrees with, instead of from the per-frame cameras."""
+    from it, with the observations it agrees with, instead of from the per-frame cameras.
+    ``data``: the frames' :func:`~pnlviz.calib.shot.frame_data` when the caller keeps it."""
     model = model or load_field_model()
     T = len(observations)
     if len(cameras) != T:
         raise ValueError("one camera (or None) per frame")
-    data = flatten(observations, model)
-    whole = ShotModel(data, T, size, params)
+    fd = list(data) if data is not None else frame_data(observations, model)
+    W = float(size[0])
+    point_gate, line_gate = calib.px(calib.point_gate_px, W), calib.px(calib.line_gate_px, W)
+    whole = ShotProblem(fd, size, params, alpha=calib.alpha)
     if start is not None:
         x = _start_vector(start, T)
-        kp_keep, ln_keep = _kept(whole, x, params)
+        sel = _gated(fd, whole.distances(x), point_gate, line_gate)
+        params = replace(params, max_iterations=min(params.max_iterations, WARM_ITERATIONS))
+        tol = WARM_TOL  # from a previous solution an edit moves the cameras a little: a looser stop is as good
     else:
         C0, k10, per0 = initial(cameras, T)
         x = np.concatenate([C0, [k10 if params.fit_k1 else 0.0], per0.ravel()])
-        # start from the observations each frame's own camera agrees with (all of a frame without one):
-        # a detector's wrong ids and lines would otherwise pull the first solve off
-        kp_keep, ln_keep = _agreeing(data, cameras, size, params)
-    nfev = 0
-    # from a previous solution an edit moves the cameras a little: a looser stop is as good
-    tol = WARM_TOL if start is not None else 1e-10
-    if start is not None:
-        params = replace(params, max_iterations=min(params.max_iterations, WARM_ITERATIONS))
+        # start from the observations each frame's own camera agrees with (all of a frame without
+        # one): a detector's wrong ids and lines would otherwise pull the first solve off
+        gate = calib.px(params.start_outlier_px, W)
+        sel = _selections(fd, cameras, gate, gate)
+        tol = 1e-10
+    nfev, info = 0, {"success": False, "cost": math.inf, "iterations": 0}
+    dist: list[FrameDistances | None] = []
     for _ in range(3):
-        x, cost, n = _solve(ShotModel(data.subset(kp_keep, ln_keep), T, size, params), x, params, tol)
-        nfev += n
+        x, info = _solve(ShotProblem(fd, size, params, sel, calib.alpha), x, params, tol)
+        nfev += int(info["iterations"])
         # then those the shot's camera agrees with, until the set stops changing
-        new_kp, new_ln = _kept(whole, x, params)
-        if np.array_equal(new_kp, kp_keep) and np.array_equal(new_ln, ln_keep):
+        dist = whole.distances(x)
+        new = _gated(fd, dist, point_gate, line_gate)
+        if _same(new, sel):
             break
-        kp_keep, ln_keep = new_kp, new_ln
-    r_kp, r_ln = whole.data_residuals(x)
+        sel = new
+    cams = whole.cameras(x)
     res, dropped = [], []
     for t in range(T):
-        k, l = data.kp_t == t, data.ln_t == t
-        res.append(np.concatenate([np.hypot(r_kp[k & kp_keep, 0], r_kp[k & kp_keep, 1]), np.abs(r_ln[l & ln_keep])]))
-        dropped.append(int((k & ~kp_keep).sum() + (l & ~ln_keep).sum()))
+        d, s, m = fd[t], sel[t], dist[t]
+        if d is None or s is None or m is None:
+            res.append(np.zeros(0))
+            dropped.append(0)
+            continue
+        res.append(m.kept(s))
+        dropped.append(d.obs.n_keypoints + len(d.obs.lines) + len(d.obs.circles) - s.size)
     C, k1, per = whole.unpack(x)
-    return ShotFit(_cameras(x, whole, size), C.copy(), float(k1), per[:, :3].copy(), np.exp(per[:, 3]), res, dropped,
-                   cost, nfev)
-
-
-def _kept(whole: ShotModel, x: np.ndarray, params: TemporalParams) -> tuple[np.ndarray, np.ndarray]:
-    """Masks of the observations within ``outlier_px`` of the shot's camera ``x``, and every pin."""
-    r_kp, r_ln = whole.data_residuals(x)
-    return (np.hypot(r_kp[:, 0], r_kp[:, 1]) <= params.outlier_px) | whole.d.kp_pin, np.abs(r_ln) <= params.outlier_px
+    return ShotFit(cams, C.copy(), float(k1), per[:, :3].copy(), np.exp(per[:, 3]), res, dropped,
+                   float(info["cost"]), nfev, bool(info["success"]), sel, dist)

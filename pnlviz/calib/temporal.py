@@ -3,17 +3,19 @@
 Per-frame calibration ignores that a broadcast camera stands on a tripod head (within a shot its
 centre and lens do not move, and pan, tilt, roll and zoom change smoothly), so its cameras jitter
 with the detection noise and fail on frames with too few keypoints. A clip, in time order, is cut
-into shots (:func:`pnlviz.calib.cuts.segment_shots`: large image changes, or per-frame cameras
-that jump to another position), and each shot that has at least one per-frame camera gets one
-broadcast camera (:func:`pnlviz.calib.shot_fit.fit_shot`, the model in :mod:`pnlviz.calib.shot`),
-which gives every frame a camera. This module is the clip's driver, and measures the image
-changes that mark cuts.
+into shots (the one rule of :mod:`pnlviz.calib.cuts`: large image changes, or per-frame cameras
+that jump to another position, then the hand's cuts), and each shot that has at least one
+per-frame camera gets one broadcast camera (:func:`pnlviz.calib.shot_fit.fit_shot`, the model in
+:mod:`pnlviz.calib.shot`). Each frame then uses its shot's camera unless that is worse than its own
+on its own observations (:mod:`pnlviz.calib.shot_check`); a shot worse on some frames is split
+where that helps. This module is the clip's driver, and measures the image changes that mark
+cuts.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -21,16 +23,23 @@ import numpy as np
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
 
-from .cuts import segment_shots
+from .calibrate import CalibParams
+from .cuts import CutEdits, apply_cuts, find_shots
 from .observations import Observations
-from .shot import TemporalParams
-from .shot_fit import ShotFit, fit_shot
+from .problem import FrameData
+from .shot import FrameDistances, TemporalParams, frame_data
+from .shot_check import CameraChoice, judge_frame
+from .shot_fit import ShotFit, distances, fit_shot
 
 if TYPE_CHECKING:  # imported when called (frame imports this module's neighbours)
     from .frame import FrameInputs, FrameSettings
 
-__all__ = ["ClipCalibration", "ClipResult", "calibrate_clip", "calibrate_clip_frames", "image_change",
-           "image_changes"]
+__all__ = ["MIN_CLIP", "ClipCalibration", "ClipResult", "ShotPart", "ShotSolver", "calibrate_clip", "calibrate_clip_frames", "image_change",
+           "image_changes", "start_cameras"]
+
+#: a clip has at least this many frames, and on average at least this many per shot (else its
+#: frames are unrelated pictures)
+MIN_CLIP = 3
 
 
 def image_change(a: np.ndarray, b: np.ndarray) -> float:
@@ -47,40 +56,216 @@ def image_change(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean(np.abs(thumb(a) - thumb(b))) / 255.0)
 
 
+#: a shot split by the fit (:func:`solve_clip`) leaves parts of at least this many frames
+MIN_PART = 3
+#: a split is tried this many times deep at most (a shot becomes at most 2^depth shots)
+SPLIT_DEPTH = 3
+#: a shot worse than its frames' own cameras is first fitted again with its motion prior this many
+#: times looser (before it is split)
+RELAX = 10.0
+
+
 @dataclass
 class ClipResult:
-    #: per frame: the shot's camera, or None (a shot without any per-frame camera to start from)
+    #: per frame: the camera it uses (``choices[t].use``: the shot's, its own, or None)
     cameras: list[Camera | None]
     #: per frame: index of its shot
     shot_of: list[int]
     shots: list[range]
+    #: per shot: its fit (None: no frame of it has a camera to start from)
     fits: list[ShotFit | None]
+    #: per frame: which camera it uses and why (:func:`pnlviz.calib.shot_check.judge_frame`)
+    choices: list[CameraChoice] = field(default_factory=list)
+    #: cuts the fit added: a shot split because its camera was worse than its frames' own
+    splits: list[int] = field(default_factory=list)
+    #: why the frames are not calibrated as a clip (None: they are)
+    unrelated: str | None = None
+
+
+@dataclass
+class ShotPart:
+    """A shot: its frames, its fit (None: no frame had a camera to start from) and each frame's
+    choice of camera."""
+
+    frames: range
+    fit: ShotFit | None
+    choices: list[CameraChoice]
+
+    @property
+    def worse(self) -> int:
+        """Frames whose shot camera is worse than their own."""
+        return sum(c.use == "own" for c in self.choices)
+
+    def camera(self, i: int, own: Camera | None) -> Camera | None:
+        """The camera the shot's ``i``-th frame uses (``own``: its own camera)."""
+        use = self.choices[i].use
+        if use == "shot" and self.fit is not None:
+            return self.fit.cameras[i]
+        return own if use == "own" else None
 
 
 def calibrate_clip(observations: Sequence[Observations | None], cameras: Sequence[Camera | None],
                    size: tuple[float, float], params: TemporalParams = TemporalParams(),
-                   changes: Sequence[float | None] | None = None, model: FieldModel | None = None) -> ClipResult:
-    """A clip in time order: its shots (:func:`segment_shots`), and in each shot that has at least
-    one per-frame camera the broadcast camera (:func:`fit_shot`) of every frame that has
-    observations (frames with none keep no camera)."""
+                   changes: Sequence[float | None] | None = None, model: FieldModel | None = None, *,
+                   calib: CalibParams = CalibParams(), cuts: CutEdits = CutEdits(),
+                   data: Sequence[FrameData | None] | None = None) -> ClipResult:
+    """A clip in time order: ``observations[t]`` and the per-frame ``cameras[t]`` (its own
+    calibration, None without one) of its frames, images of ``size`` (W, H), the image
+    ``changes`` from each frame to the next when known, the ``cuts`` changed by hand. Returns its
+    shots (the one rule of :mod:`pnlviz.calib.cuts`, the fit's splits included), the broadcast
+    camera of each shot (:func:`fit_shot`) and the camera each frame uses
+    (:func:`pnlviz.calib.shot_check.judge_frame`): its shot's where that is not worse than its
+    own. Frames with nothing observed keep no camera. A clip whose shots are mostly single frames
+    is a folder of unrelated pictures: each frame keeps its own camera."""
     model = model or load_field_model()
     T = len(observations)
-    shots = segment_shots(cameras, changes, params)
-    out: list[Camera | None] = [None] * T
-    shot_of = [0] * T
-    fits: list[ShotFit | None] = []
-    for k, shot in enumerate(shots):
-        for t in shot:
-            shot_of[t] = k
-        if all(cameras[t] is None for t in shot):
-            fits.append(None)
-            continue
-        fit = fit_shot([observations[t] for t in shot], [cameras[t] for t in shot], size, params, model)
-        fits.append(fit)
-        for t, cam in zip(shot, fit.cameras):
-            if observations[t] is not None:
-                out[t] = cam
-    return ClipResult(out, shot_of, shots, fits)
+    if len(cameras) != T:
+        raise ValueError("one camera (or None) per frame")
+    fd = list(data) if data is not None else frame_data(observations, model)
+    solver = ShotSolver(fd, list(cameras), size, params, calib, model)
+    found = find_shots(cameras, changes, params)
+    parts, unrelated = solver.solve(found, cuts)
+    shots = [p.frames for p in parts]
+    out = ClipResult([None] * T, [0] * T, shots, [p.fit for p in parts], [],
+                     sorted({s.start for s in shots} - {s.start for s in apply_cuts(found, cuts, T)}), unrelated)
+    for k, p in enumerate(parts):
+        for i, t in enumerate(p.frames):
+            out.shot_of[t] = k
+            out.cameras[t] = p.camera(i, cameras[t])
+        out.choices += p.choices
+    return out
+
+
+class ShotSolver:
+    """Fits and judges the shots of one clip (see :func:`calibrate_clip`): ``data[t]`` each
+    frame's observations laid out (None: nothing observed), ``own[t]`` its own camera. Both may be
+    changed by the caller between solves (a hand's edit): :meth:`forget` then drops what was
+    measured with the old ones. ``stale``: frames whose own camera no longer matches their data
+    (edited, not recalibrated yet): they use the shot's camera, which carries the hand's points."""
+
+    def __init__(self, data: list[FrameData | None], own: list[Camera | None], size: tuple[float, float],
+                 params: TemporalParams, calib: CalibParams, model: FieldModel):
+        self.data, self.own, self.size, self.params, self.calib, self.model = data, own, size, params, calib, model
+        self.stale: set[int] = set()
+        self._own: dict[int, FrameDistances | None] = {}
+
+    def forget(self, t: int) -> None:
+        """Frame ``t``'s data or own camera changed."""
+        self._own.pop(t, None)
+
+    def own_distances(self, t: int) -> FrameDistances | None:
+        """Frame ``t``'s own camera's distances (measured once: a split judges a frame again)."""
+        if t not in self._own:
+            d, cam = self.data[t], self.own[t]
+            self._own[t] = None if d is None or cam is None else distances(d, cam)
+        return self._own[t]
+
+    def solve(self, found: Sequence[range], cuts: CutEdits) -> tuple[list[ShotPart], str | None]:
+        """The clip's shots from the ``found`` ones and the hand's ``cuts``, each fitted, judged and
+        split where that helps; and why the frames are not a clip (None: they are). A clip whose
+        shots are mostly single frames is a folder of unrelated pictures: each frame its own
+        camera."""
+        T = len(self.data)
+        shots = apply_cuts(found, cuts, T)
+        if T >= MIN_CLIP and len(shots) * MIN_CLIP > T:
+            why = f"not a clip: {len(shots)} shots in {T} frames (consecutive frames are unrelated pictures)"
+            return [ShotPart(range(t, t + 1), None, [
+                CameraChoice("none", "nothing observed on this frame") if self.data[t] is None else
+                CameraChoice("own" if self.own[t] is not None else "none", why)]) for t in range(T)], why
+        parts: list[ShotPart] = []
+        for shot in shots:
+            parts += self.split(self.part(shot), cuts.removed, SPLIT_DEPTH)
+        return parts, None
+
+    def part(self, frames: range, start: ShotFit | None = None) -> ShotPart:
+        """Shot ``frames`` fitted (warm from ``start`` when given) and each frame judged. From the
+        frames' own cameras, a shot worse than some of them is fitted again with a prior
+        :data:`RELAX` times looser (a camera that moves faster than the prior expects: frames
+        sampled sparsely from a video, a whip pan), kept when fewer frames are worse."""
+        part = self._fit(frames, start, self.params)
+        if start is None and part.worse and part.fit is not None:
+            loose = replace(self.params, accel_deg=RELAX * self.params.accel_deg,
+                            accel_log_f=RELAX * self.params.accel_log_f)
+            other = self._fit(frames, None, loose)
+            if other.worse < part.worse:
+                return other
+        return part
+
+    def _fit(self, frames: range, start: ShotFit | None, params: TemporalParams) -> ShotPart:
+        fd = [self.data[t] for t in frames]
+        own = [self.own[t] for t in frames]
+        fit = None
+        if start is not None or any(c is not None for c in own):
+            begin = [None if t in self.stale else c for t, c in zip(frames, own)]
+            fit = fit_shot([None if d is None else d.obs for d in fd], start_cameras(begin, params), self.size,
+                           params, self.model, start=start, calib=self.calib, data=fd)
+        return ShotPart(frames, fit, [self._judge(t, i, fit) for i, t in enumerate(frames)])
+
+    def _judge(self, t: int, i: int, fit: ShotFit | None) -> CameraChoice:
+        if t in self.stale and fit is not None and fit.converged and self.data[t] is not None:
+            return CameraChoice("shot", "corrected by hand: the shot's camera carries the hand's points")
+        return judge_frame(self.data[t], None if fit is None else fit.cameras[i], self.own[t], self.params,
+                           self.calib, True if fit is None else fit.converged,
+                           shot_distances=None if fit is None or fit.distances is None else fit.distances[i],
+                           own_distances=self.own_distances(t))
+
+    def split(self, part: ShotPart, removed: frozenset[int], depth: int) -> list[ShotPart]:
+        """``part`` split where that leaves fewer frames worse off than their own cameras (parts
+        of :data:`MIN_PART` frames at least, never at a cut in ``removed``), each half split again
+        down to ``depth``; else ``[part]``."""
+        if depth <= 0 or not part.worse or len(part.frames) < 2 * MIN_PART:
+            return [part]
+        best: tuple[ShotPart, ShotPart] | None = None
+        for t in self._candidates(part):
+            if t in removed:
+                continue
+            a, b = self.part(range(part.frames.start, t)), self.part(range(t, part.frames.stop))
+            if a.worse + b.worse < (part.worse if best is None else best[0].worse + best[1].worse):
+                best = (a, b)
+        if best is None:
+            return [part]
+        return self.split(best[0], removed, depth - 1) + self.split(best[1], removed, depth - 1)
+
+    def _candidates(self, part: ShotPart) -> list[int]:
+        """Where to try a split: where the frames' own centres change (the split that leaves the
+        least sum of distances of each part's centres to their median), and the ends of the
+        longest run of frames worse off."""
+        lo, hi = part.frames.start + MIN_PART, part.frames.stop - MIN_PART
+        out: list[int] = []
+        known = [(t, c.C) for t in part.frames if (c := self.own[t]) is not None]
+        costs = {}
+        for t in range(lo, hi + 1):
+            a = np.array([C for u, C in known if u < t])
+            b = np.array([C for u, C in known if u >= t])
+            if len(a) and len(b):
+                costs[t] = float(np.linalg.norm(a - np.median(a, axis=0), axis=1).sum()
+                                 + np.linalg.norm(b - np.median(b, axis=0), axis=1).sum())
+        if costs:
+            out.append(min(costs, key=lambda t: costs[t]))
+        worse = [c.use == "own" for c in part.choices]
+        runs, i = [], 0
+        while i < len(worse):
+            j = i
+            while j < len(worse) and worse[j] == worse[i]:
+                j += 1
+            if worse[i]:
+                runs.append((j - i, i, j))
+            i = j
+        if runs:
+            _, i, j = max(runs)
+            out += [part.frames.start + i, part.frames.start + j]
+        return [t for t in dict.fromkeys(out) if lo <= t <= hi]
+
+
+def start_cameras(own: Sequence[Camera | None], params: TemporalParams) -> list[Camera | None]:
+    """The frames' own cameras to start a shot's solve from, without those whose centre is
+    farther than ``cut_centre_m`` from the shot's median centre (a frame with few or wrong
+    keypoints: its neighbours place it)."""
+    known = [c.C for c in own if c is not None]
+    if not known:
+        return list(own)
+    centre = np.median(np.array(known), axis=0)
+    return [c if c is not None and np.linalg.norm(c.C - centre) <= params.cut_centre_m else None for c in own]
 
 
 def image_changes(images: Iterable[np.ndarray | None]) -> list[float | None]:
@@ -107,7 +292,7 @@ class ClipCalibration:
 def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameSettings, *,
                           cameras: Sequence[Camera | None] | None = None,
                           changes: Sequence[float | None] | None = None,
-                          model: FieldModel | None = None) -> ClipCalibration:
+                          model: FieldModel | None = None, cuts: CutEdits = CutEdits()) -> ClipCalibration:
     """A clip as ``pnlviz calibrate --temporal`` calibrates it: ``inputs`` are the frames'
     :class:`pnlviz.calib.frame.FrameInputs` in time order (None: unreadable), all of one size, and
     ``settings`` their :class:`~pnlviz.calib.frame.FrameSettings`. The per-frame cameras (computed
@@ -124,7 +309,9 @@ def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameS
         cameras = [calibrate_frame(i, settings, model).camera if i is not None else None for i in inputs]
     found = [observations_for(i, settings.source, model) if i is not None else (None, None) for i in inputs]
     origin = next((g for _, g in found if g is not None), None)
-    params = TemporalParams(fit_k1=calib_params(settings, origin).refine_k1)
+    calib = calib_params(settings, origin)
+    params = TemporalParams(fit_k1=calib.refine_k1)
     obs = [o for o, _ in found]
-    result = calibrate_clip(obs, list(cameras), sizes.pop(), params, changes=changes, model=model)
+    result = calibrate_clip(obs, list(cameras), sizes.pop(), params, changes=changes, model=model, calib=calib,
+                            cuts=cuts)
     return ClipCalibration(list(cameras), obs, result)

@@ -187,12 +187,13 @@ def temporal_pass(reader, settings, stems: list[str], results: dict, progress: b
         for t, s in enumerate(members):
             cam_dict, report = results.get(s, (None, {"stem": s}))
             report = dict(report)
-            fit = res.fits[res.shot_of[t]]
-            report["temporal"] = {"clip": clip, "shot": res.shot_of[t], "shots": len(res.shots),
-                                  "per_frame": cam_dict is not None}
+            k = res.shot_of[t]
+            fit, choice = res.fits[k], res.choices[t]
+            report["temporal"] = {"clip": clip, "shot": k, "shots": len(res.shots), "per_frame": cam_dict is not None,
+                                  "camera": choice.use, "why": choice.reason}
             cam = res.cameras[t]
-            if cam is not None and fit is not None:
-                i = t - res.shots[res.shot_of[t]].start
+            if choice.use == "shot" and cam is not None and fit is not None:
+                i = t - res.shots[k].start
                 r = fit.residuals[i]
                 report["temporal"].update(residual_median=round(float(np.median(r)), 3) if len(r) else None,
                                           dropped=fit.dropped[i])

@@ -17,7 +17,8 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
-from pnlviz.calib.clip import ClipSolver, CutEdits
+from pnlviz.calib.clip import ClipSolver
+from pnlviz.calib.cuts import CutEdits
 from pnlviz.calib.frame import calib_params, detection_settings_apply, observations_for
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.shot import TemporalParams

@@ -1,0 +1,127 @@
+"""Which camera each frame of a shot keeps: the shot's or its own.
+
+The shot's camera of a frame is judged against that frame's own observations, item by item, with
+the frame pipeline's distances (:func:`pnlviz.calib.shot_fit.distances`): an item is a keypoint,
+a line class or a circle class, and its distance is that of its farthest point. The frame's noise
+is measured from its own camera: ``sigma = sqrt(rss / (n - p))`` over its ``n`` residual scalars
+and the camera's ``p`` parameters (8; 7 without k1), no less than the detection noise
+(``TemporalParams.noise_px``); with ``n <= p`` its own camera merely interpolates its few points
+and cannot vouch for itself (``sigma`` infinite). An item **prefers** one camera when the other
+puts it farther than ``3 sigma`` and than twice the first camera's distance, while the first puts
+it within ``3 sigma``. The shot's camera is **worse** than the frame's own when more items prefer
+the frame's camera than prefer the shot's. Noise cannot tip it (a camera fitted to the frame alone
+is closer on every item, but within its noise), and a frame with too few observations for a
+reliable camera of its own is carried by the shot.
+The frame then keeps its own camera.
+
+The shot's camera is also held to the frame's verdict (``CalibParams.max_rms``: the RMS of the
+keypoints it keeps), and a shot whose solve did not converge gives no frame its camera.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from pnlviz.geometry.camera import Camera
+
+from .calibrate import CalibParams
+from .problem import FrameData
+from .shot import FrameDistances, TemporalParams
+from .shot_fit import distances
+
+__all__ = ["CameraChoice", "Use", "frame_noise", "judge_frame"]
+
+#: which camera a clip frame uses: its shot's, its own (per-frame calibration), or none
+Use = Literal["shot", "own", "none"]
+
+
+@dataclass(frozen=True)
+class CameraChoice:
+    """The camera a clip frame uses and why (one line a user reads)."""
+
+    use: Use
+    reason: str
+    #: items (keypoints, line and circle classes) that prefer the frame's own camera / the shot's
+    worse: tuple[str, ...] = ()
+    better: tuple[str, ...] = ()
+
+    def to_json(self) -> dict:
+        return {"use": self.use, "reason": self.reason, "worse": list(self.worse), "better": list(self.better)}
+
+
+def _items(data: FrameData, d: FrameDistances) -> dict[str, float]:
+    out = {f"keypoint {int(k)}": float(v) for k, v in zip(data.obs.kp_ids, d.keypoints)}
+    out.update(d.classes)
+    return out
+
+
+def _prefers(a: float, b: float, tol: float) -> bool:
+    """An item ``a`` px from one camera and ``b`` px from the other prefers the first."""
+    return a <= tol < b and b > 2 * a
+
+
+def frame_noise(d: FrameDistances, floor: float, n_params: int) -> float:
+    """The noise (px) of a frame's observations measured from a camera fitted to them (``d``), no
+    less than ``floor``; infinite when the camera has no more residuals than parameters."""
+    if d.n <= n_params:
+        return math.inf
+    return max(floor, math.sqrt(d.rss / (d.n - n_params)))
+
+
+def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None, params: TemporalParams,
+                calib: CalibParams = CalibParams(), converged: bool = True, *,
+                shot_distances: FrameDistances | None = None, own_distances: FrameDistances | None = None
+                ) -> CameraChoice:
+    """The camera frame ``data`` uses: its shot's ``shot`` or its own ``own`` (either None when
+    there is none). See the module docstring. ``shot_distances`` / ``own_distances``: the
+    cameras' :class:`FrameDistances` on the frame when the caller has them."""
+    if data is None:
+        return CameraChoice("none", "nothing observed on this frame")
+    if shot is None or not converged:
+        why = "the shot has no camera" if shot is None else "the shot's solve did not converge"
+        if own is None:
+            return CameraChoice("none", f"{why}, and the frame has none of its own")
+        return CameraChoice("own", f"{why}: the frame keeps its own camera")
+    W = float(shot.width)
+    d_shot = shot_distances or distances(data, shot)
+    fail = _verdict(data, d_shot, calib, W)
+    if own is None:
+        if fail:
+            return CameraChoice("none", f"the shot's camera fails the frame's verdict ({fail}), and the frame has "
+                                        "none of its own")
+        return CameraChoice("shot", "the frame has no camera of its own: the shot carries it")
+    d_own = own_distances or distances(data, own)
+    a, b = _items(data, d_shot), _items(data, d_own)
+    tol = 3 * frame_noise(d_own, params.noise_px * W / 960.0, 8 if calib.refine_k1 else 7)
+    worse = tuple(k for k in a if _prefers(b[k], a[k], tol))
+    better = tuple(k for k in a if _prefers(a[k], b[k], tol))
+    if fail:
+        return CameraChoice("own", f"the shot's camera fails the frame's verdict ({fail})", worse, better)
+    if len(worse) > len(better):
+        far = ", ".join(f"{k} ({a[k]:.0f} px, own {b[k]:.1f})" if math.isfinite(a[k]) else f"{k} (behind)"
+                        for k in worse[:3])
+        more = f" and {len(worse) - 3} more" if len(worse) > 3 else ""
+        return CameraChoice("own", f"the shot's camera misses {far}{more}, which the frame's own camera fits",
+                            worse, better)
+    if better:
+        return CameraChoice("shot", f"the shot's camera fits {len(better)} item(s) the frame's own camera misses",
+                            worse, better)
+    return CameraChoice("shot", "the shot's camera fits the frame as well as its own", worse, better)
+
+
+def _verdict(data: FrameData, d: FrameDistances, calib: CalibParams, width: float) -> str | None:
+    """Why a camera fails the frame pipeline's verdict (no keypoint within the point gate, or
+    their RMS above ``max_rms``), None when it passes (a frame of lines alone: nothing to judge)."""
+    if not data.obs.n_keypoints:
+        return None
+    gate = calib.px(calib.point_gate_px, width)
+    kept = d.keypoints[(d.keypoints <= gate) | data.obs.pins]
+    if not len(kept):
+        return f"no keypoint within {gate:.0f} px"
+    rms = float(np.sqrt(np.mean(np.square(kept))))
+    limit = calib.px(calib.max_rms, width)
+    return None if rms <= limit else f"keypoint RMS {rms:.1f} px > {limit:.1f}"
