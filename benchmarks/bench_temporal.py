@@ -33,9 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _clip_groups(stems):
-    from pnlviz.data.layout import clips
+    from pnlviz.data.layout import video_clips
 
-    return clips(stems)
+    return video_clips(stems)
 
 
 def per_frame_and_temporal(inputs: dict, size, detection_settings: dict, changes: dict | None = None):

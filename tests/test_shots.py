@@ -128,3 +128,38 @@ def test_the_shot_fits_circles_as_the_frame_does():
         pa, _ = truth[t].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 30)))
         pb, _ = fit.cameras[t].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 30)))
         assert np.median(np.linalg.norm(pa - pb, axis=1)) < 1.0
+
+
+def test_one_rule_says_which_frames_are_a_clip():
+    """The same groups for the command line, the app's timeline and its shot models: named frames
+    that follow each other; a split's plain frames, numbered frames and separate pictures are not."""
+    from pnlviz.app.timeline import clip_index
+    from pnlviz.data.layout import video_clips
+    from pnlviz.pipeline.clip import dataset_clips
+
+    stems = ([f"train/{i:05d}" for i in range(6)] + [f"valid/{i:05d}" for i in range(4)]
+             + [f"valid/match-IMG_{i}" for i in (1, 2, 3, 5)] + ["wc14_3", "wc14_8", "wc14_11"]
+             + [f"m2_frame{i}" for i in range(2)])
+    groups = video_clips(stems)
+    assert groups == {"valid/match": [f"valid/match-IMG_{i}" for i in (1, 2, 3, 5)]}
+    assert dataset_clips(stems) == groups
+    assert clip_index(stems) == {"valid/match": [stems.index(s) for s in groups["valid/match"]]}
+    assert video_clips([f"{i:05d}" for i in range(24)]) == {}  # the bundled sample's names
+
+
+def test_unrelated_pictures_named_as_a_clip_keep_their_own_cameras():
+    """Nine frames named v-IMG_1..9, each from another broadcast (another camera position): the
+    cut rule finds a cut before almost every frame, so they are not calibrated as a clip; each keeps
+    its own camera and says why."""
+    anns, own, obs = [], [], []
+    for seed in range(20, 29):
+        plan, a = _annotated_clip(seed, 1)
+        fc = calibrate_frame(FrameInputs((W, H), annotation=a[0]))
+        anns.append(a[0])
+        own.append(fc.camera)
+        obs.append(fc.observations)
+    res = calibrate_clip(obs, own, (W, H))
+    assert res.unrelated is not None and "not a clip" in res.unrelated
+    assert all(a is b for a, b in zip(res.cameras, own))
+    assert all(c.use == ("own" if cam is not None else "none") and "not a clip" in c.reason
+               for c, cam in zip(res.choices, own))

@@ -194,7 +194,9 @@ def test_calibrate_temporal_on_a_prediction_zip(tmp_path, capsys):
 
     reports = [json.loads(line) for line in (tmp_path / "r.jsonl").read_text().splitlines()]
     clip_names = {r["temporal"]["clip"] for r in reports}
-    assert clip_names == {"match3", "other"}
+    assert clip_names == {"match3", None}  # one frame named "other" is no clip
+    other = next(r for r in reports if r["stem"] == "other-IMG_001")["temporal"]
+    assert other["camera"] == "own" and "not part of a clip" in other["why"]
     assert next(r for r in reports if r["stem"] == "match3-IMG_016")["temporal"]["per_frame"] is False
 
 

@@ -50,7 +50,9 @@ def calibration_card(view: FrameView, state: AppState) -> str:
     if res.subset == SHOT_SUBSET:
         lines.append("the **shot model**'s camera (one centre and lens for the shot, solved with every hand edit "
                      "of it; the frame's own camera: the Clip panel's toggle)")
-    else:
+    if view.shot_note:
+        lines.append(view.shot_note)
+    if res.subset != SHOT_SUBSET:
         lines.append(f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, "
                      f"{len(res.inliers)} inliers; PnL set: {len(res.pnl_lines)} lines/circles")
     lines += pin_lines(res)

@@ -34,9 +34,12 @@ class ClipPlayer:
         self.shot_model = True
 
     def members(self) -> list[int]:
-        """Dataset indices of the frames of the tab's clip, in frame order ([] outside a clip)."""
+        """Dataset indices of the frames of the tab's clip, in frame order ([] outside a clip, and
+        in a named clip whose frames turned out to be unrelated pictures)."""
         name = self.clip_of.get(self.tab.index)
-        return self.clips.get(name, []) if name is not None else []
+        if name is None or clip_shots(self.tab.state).unrelated(name):
+            return []
+        return self.clips.get(name, [])
 
     def _shot_strip(self):
         """(errors, cuts, keyframes) of the clip under its shot model, None without one (yet)."""

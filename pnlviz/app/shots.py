@@ -62,7 +62,15 @@ class ClipShots:
             if solver is None and build and key not in self._building and self._ready(clip):
                 self._building.add(key)
                 threading.Thread(target=self._build, args=(key,), name="pnlviz-shots", daemon=True).start()
+        if solver is not None and solver.unrelated:
+            return None  # its frames are unrelated pictures: no shot model (each frame its own camera)
         return ShotPlace(clip, self.clips[clip], t, solver)
+
+    def unrelated(self, clip: str) -> str | None:
+        """Why ``clip`` turned out not to be a video (its frames are unrelated pictures), once a
+        model of it was built; None otherwise."""
+        with self._lock:
+            return next((s.unrelated for (c, _), s in self._solvers.items() if c == clip and s.unrelated), None)
 
     def _ready(self, clip: str) -> bool:
         return not any(self.state.needs_detection(s) for s in self.clips[clip])
@@ -155,6 +163,9 @@ class ClipShots:
         place = self.place(view.stem, settings)
         if place is None or place.solver is None or view.observations is None:
             return view
+        choice = place.solver.choice(place.t)
+        if choice.use != "shot":
+            return replace(view, shot_note=f"the frame's **own camera**: {choice.reason}")
         cam = place.solver.camera(place.t)
         if cam is None:
             return view
@@ -163,7 +174,7 @@ class ClipShots:
                      if lab.residual is not None and lab.provenance != "shot"}
         result = CalibrationResult(estimate=cam, subset=SHOT_SUBSET, point_residuals=residuals,
                                    pinned=[k for k, lab in labels.items() if lab.provenance == "hand"])
-        return replace(view, result=result, jac={})
+        return replace(view, result=result, jac={}, shot_note=f"why the shot's camera here: {choice.reason}")
 
     def strip(self, stem: str, settings) -> tuple[list[float], list[int], list[int]] | None:
         """The clip's strip under its model: each frame's error to its shot's camera, the cuts

@@ -1,11 +1,10 @@
 """The clip timeline of the app (no GUI here): which frames form a clip, each frame's calibration
 error, the error strip drawn under the frame slider, and the worst frames to jump to.
 
-A dataset is a video when its stems name clips (``<clip>-IMG_<n>``, see
-:func:`pnlviz.data.layout.clip_key`): a named clip of at least three frames that follow each
-other (frame numbers mostly consecutive: a median step of at most :data:`MAX_STEP`). Plain
-numbered frames (``00001``) and named picks of separate pictures (``wc14_3``, ``wc14_8``,
-``wc14_11``) are not clips.
+A dataset is a video when its stems name clips, by the one rule of
+:func:`pnlviz.data.layout.video_clips` (a named clip of at least three frames that follow each
+other). Plain numbered frames (``00001``), a dataset's splits and named picks of separate pictures
+(``wc14_3``, ``wc14_8``, ``wc14_11``) are not clips.
 """
 
 from __future__ import annotations
@@ -14,28 +13,18 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pnlviz.data.layout import clip_key, clips
+from pnlviz.data.layout import video_clips
 
-__all__ = ["MAX_STEP", "MIN_CLIP", "STRIP_SCALE_PX", "clip_index", "frame_error", "strip_image", "worst_frames"]
-
-MIN_CLIP = 3
-#: the largest median step between the frame numbers of a clip (a video dropped a frame here and there)
-MAX_STEP = 2
+__all__ = ["STRIP_SCALE_PX", "clip_index", "frame_error", "strip_image", "worst_frames"]
 #: the error (px) drawn fully red in the strip
 STRIP_SCALE_PX = 10.0
 
 
 def clip_index(stems: Sequence[str]) -> dict[str, list[int]]:
-    """``{clip: [dataset indices in frame order]}`` of the named clips of at least
-    :data:`MIN_CLIP` frames that follow each other (see the module docstring)."""
+    """``{clip: [dataset indices in frame order]}`` of the dataset's clips
+    (:func:`pnlviz.data.layout.video_clips`)."""
     pos = {s: i for i, s in enumerate(stems)}
-
-    def consecutive(members: list[str]) -> bool:
-        numbers = np.array([clip_key(s)[1] for s in members])
-        return float(np.median(np.diff(numbers))) <= MAX_STEP
-
-    return {name: [pos[s] for s in members] for name, members in clips(stems).items()
-            if name and len(members) >= MIN_CLIP and consecutive(members)}
+    return {name: [pos[s] for s in members] for name, members in video_clips(stems).items()}
 
 
 def frame_error(view) -> float:

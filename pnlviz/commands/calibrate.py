@@ -151,24 +151,29 @@ def frame_reader(ds, predictions, size, source: str, edits):
 
 
 def temporal_pass(reader, settings, stems: list[str], results: dict, progress: bool = True) -> dict:
-    """``--temporal``: per clip (:func:`pnlviz.data.layout.clips`), the per-frame cameras in
+    """``--temporal``: per clip (:func:`pnlviz.data.layout.video_clips`), the per-frame cameras in
     ``results`` (``{stem: (camera dict at 960x540 | None, report)}``) replaced by the broadcast
-    model of their shot (:func:`pnlviz.calib.temporal.calibrate_clip`); reports gain the clip, the
-    shot and the residuals. Image changes between consecutive frames mark cuts when the frames
+    model of their shot where it is not worse than their own (:func:`pnlviz.calib.temporal.calibrate_clip`);
+    reports gain the clip, the shot, which camera the frame uses and why, and the residuals. Image changes between consecutive frames mark cuts when the frames
     have images."""
-    import numpy as np
     from tqdm import tqdm
 
     from pnlviz.calib.temporal import calibrate_clip_frames, image_changes
-    from pnlviz.data.layout import clips
+    from pnlviz.data.layout import video_clips
     from pnlviz.field import load_field_model
     from pnlviz.geometry.camera import Camera
 
     ds = reader.ds
     model = load_field_model()
     out = dict(results)
-    groups = clips(stems)
-    bar = tqdm(total=len(stems), desc="temporal", unit="frame", disable=not progress or None)
+    groups = video_clips(stems)
+    in_clip = {s for members in groups.values() for s in members}
+    for s in stems:  # frames of no clip: each its own camera, and the report says why
+        if s not in in_clip and s in out:
+            cam_dict, report = out[s]
+            out[s] = (cam_dict, {**report, "temporal": {"clip": None, "camera": "own" if cam_dict else "none",
+                                                        "why": "not part of a clip (pnlviz.data.layout.video_clips)"}})
+    bar = tqdm(total=len(in_clip), desc="temporal", unit="frame", disable=not progress or None)
     for clip, members in groups.items():
         inputs = [frame_inputs(reader, s)[0] for s in members]
         sizes = {tuple(i.size) for i in inputs if i is not None}
@@ -185,26 +190,32 @@ def temporal_pass(reader, settings, stems: list[str], results: dict, progress: b
             changes = image_changes(_image_or_none(ds, s) for s in members)  # two frames in memory at a time
         res = calibrate_clip_frames(inputs, settings, cameras=cams, changes=changes, model=model).result
         for t, s in enumerate(members):
-            cam_dict, report = results.get(s, (None, {"stem": s}))
-            report = dict(report)
-            k = res.shot_of[t]
-            fit, choice = res.fits[k], res.choices[t]
-            report["temporal"] = {"clip": clip, "shot": k, "shots": len(res.shots), "per_frame": cam_dict is not None,
-                                  "camera": choice.use, "why": choice.reason}
-            cam = res.cameras[t]
-            if choice.use == "shot" and cam is not None and fit is not None:
-                i = t - res.shots[k].start
-                r = fit.residuals[i]
-                report["temporal"].update(residual_median=round(float(np.median(r)), 3) if len(r) else None,
-                                          dropped=fit.dropped[i])
-                report.pop("failure", None)
-                report.pop("failure_code", None)
-                out[s] = (cam.scaled(*EVAL_SIZE).to_soccernet(), report)
-            else:
-                out[s] = (cam_dict, report)
+            out[s] = _temporal_result(clip, t, res, *results.get(s, (None, {"stem": s})))
         bar.update(len(members))
     bar.close()
     return out
+
+
+def _temporal_result(clip: str, t: int, res, cam_dict: dict | None, report: dict) -> tuple[dict | None, dict]:
+    """Frame ``t`` of ``clip`` after its clip's calibration ``res``: the camera it uses (its
+    shot's or its own, as SoccerNet JSON at 960x540) and its report with which one and why."""
+    import numpy as np
+
+    report = dict(report)
+    k = res.shot_of[t]
+    fit, choice = res.fits[k], res.choices[t]
+    report["temporal"] = {"clip": clip, "shot": k, "shots": len(res.shots), "per_frame": cam_dict is not None,
+                          "camera": choice.use, "why": choice.reason}
+    cam = res.cameras[t]
+    if choice.use != "shot" or cam is None or fit is None:
+        return cam_dict, report
+    i = t - res.shots[k].start
+    r = fit.residuals[i]
+    report["temporal"].update(residual_median=round(float(np.median(r)), 3) if len(r) else None,
+                              dropped=fit.dropped[i])
+    report.pop("failure", None)
+    report.pop("failure_code", None)
+    return cam.scaled(*EVAL_SIZE).to_soccernet(), report
 
 
 def _image_or_none(ds, stem: str):

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import re
+import statistics
 from collections.abc import Callable, Collection, Iterable
 
-__all__ = ["clips", "clip_key", "natural_key", "sort_stems", "split_member", "find_root", "split_stem", "join_stem",
+__all__ = ["MAX_CLIP_STEP", "MIN_CLIP_FRAMES", "clips", "clip_key", "video_clips", "natural_key", "sort_stems", "split_member", "find_root", "split_stem", "join_stem",
            "member_name", "keyed_members"]
 
 _DIGITS = re.compile(r"([0-9]+)")
@@ -33,22 +34,51 @@ _FRAME_WORD = re.compile(r"(?:img|image|frame)$", re.IGNORECASE)
 
 def clip_key(stem: str) -> tuple[str, int]:
     """``(clip, frame number)`` of a video frame's stem: the trailing number is the frame, what
-    comes before it (less separators and a word such as ``IMG`` or ``frame``) names the clip.
-    ``"clip7-IMG_012"`` -> ``("clip7", 12)``; ``"00042"`` -> ``("", 42)``; no number -> ``(stem, 0)``."""
-    m = _FRAME_NUMBER.match(stem)
+    comes before it (less separators and a word such as ``IMG`` or ``frame``) names the clip; a
+    split's folder stays in front of the name (``"valid/clip7-IMG_012"`` -> ``("valid/clip7", 12)``)
+    and is no name by itself (``"valid/00042"`` -> ``("", 42)``). ``"clip7-IMG_012"`` ->
+    ``("clip7", 12)``; ``"00042"`` -> ``("", 42)``; no number -> ``(stem, 0)``."""
+    split, base = split_stem(stem)
+    m = _FRAME_NUMBER.match(base)
     if m is None:
         return stem, 0
-    prefix = m.group(1).rstrip("-_. /")  # "/": a split's frames (valid/00042) are the clip "valid"
-    prefix = _FRAME_WORD.sub("", prefix).rstrip("-_. /")
-    return prefix, int(m.group(2))
+    prefix = _FRAME_WORD.sub("", m.group(1).rstrip("-_. ")).rstrip("-_. ")
+    return (join_stem(split, prefix) if prefix else ""), int(m.group(2))
 
 
 def clips(stems: Iterable[str]) -> dict[str, list[str]]:
-    """Stems grouped by :func:`clip_key`, each clip in frame order, clips in natural order."""
+    """Stems grouped by :func:`clip_key`, each group in frame order, groups in natural order (the
+    group ``""`` holds the stems that name no clip)."""
     out: dict[str, list[str]] = {}
     for stem in stems:
         out.setdefault(clip_key(stem)[0], []).append(stem)
     return {c: sorted(out[c], key=lambda s: (clip_key(s)[1], natural_key(s))) for c in sort_stems(out)}
+
+
+#: a clip has at least this many frames
+MIN_CLIP_FRAMES = 3
+#: the largest median step between the frame numbers of a clip (a video dropped a frame here and there)
+MAX_CLIP_STEP = 2
+
+
+def video_clips(stems: Iterable[str]) -> dict[str, list[str]]:
+    """The one rule for which frames of a dataset form a video clip, by their names (every caller
+    uses it: ``pnlviz calibrate --temporal``, the app, its export, the benchmarks): stems that name
+    a clip (``<clip>-IMG_<n>``, ``<clip>_frame<n>``, :func:`clip_key`), at least
+    :data:`MIN_CLIP_FRAMES` of them, whose frame numbers follow each other (a median step of at most
+    :data:`MAX_CLIP_STEP`). Plain numbered frames (``00001``, ``valid/00042``: a split is not a clip)
+    and named picks of separate pictures (``wc14_3``, ``wc14_8``, ``wc14_11``) are not clips.
+    ``{clip: [stems in frame order]}``. (Whether the frames then look like one video is the
+    calibration's to say: :func:`pnlviz.calib.temporal.calibrate_clip` calls frames whose shots
+    are mostly single frames unrelated pictures.)"""
+    out = {}
+    for name, members in clips(stems).items():
+        if not name or len(members) < MIN_CLIP_FRAMES:
+            continue
+        numbers = [clip_key(s)[1] for s in members]
+        if statistics.median(b - a for a, b in zip(numbers[:-1], numbers[1:])) <= MAX_CLIP_STEP:
+            out[name] = members
+    return out
 
 
 def is_junk(name: str) -> bool:

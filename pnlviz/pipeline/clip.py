@@ -26,7 +26,7 @@ from pnlviz.calib.temporal import image_changes
 from pnlviz.conventions import EVAL_SIZE
 from pnlviz.data import atomic_write_text
 from pnlviz.data.errors import DataError
-from pnlviz.data.layout import clips
+from pnlviz.data.layout import video_clips
 from pnlviz.data.predictions import predictions_to_json
 from pnlviz.data.snapshot import edits_digest
 from pnlviz.field.model import FieldModel, load_field_model
@@ -38,9 +38,9 @@ CLIPS_DIR = "clips"
 
 
 def dataset_clips(stems: Sequence[str]) -> dict[str, list[str]]:
-    """``{clip: [stems in frame order]}`` of the named clips (``<clip>-IMG_<n>``) of two frames or
-    more among a dataset's ``stems``."""
-    return {name: list(members) for name, members in clips(stems).items() if name and len(members) >= 2}
+    """``{clip: [stems in frame order]}`` of a dataset's clips (the one rule:
+    :func:`pnlviz.data.layout.video_clips`)."""
+    return video_clips(stems)
 
 
 def _cuts_path(reader: FrameReader, clip: str) -> Path:

@@ -41,6 +41,8 @@ class FrameView:
     detections: Predictions | None = None  # the frame's PnLCalib detections, if any
     origin: str | None = None  # where the observations came from: annotation, detections, both or edits
     settings: Settings = Settings()
+    #: a clip frame: which camera it shows (its shot's or its own) and why, one line
+    shot_note: str | None = None
 
     @property
     def camera(self) -> Camera | None:
