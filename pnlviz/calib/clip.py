@@ -14,6 +14,11 @@ unless that is worse than its own on its own observations (:mod:`pnlviz.calib.sh
   single frame, :mod:`pnlviz.calib.pins`); a hidden point leaves the frame's observations. After
   an edit the shot is solved again from its previous solution (a warm start: a few iterations),
   and every frame of it gets its new camera;
+* **edits teach the shot which detections to trust**: a detector errs alike on the frames of one
+  shot (the same view of the same marking), so a detected keypoint the hand hid, or moved by more
+  than :data:`DISTRUST_PX`, on one frame of a shot is left out of the shot's solve on its other
+  frames too, and out of their labels (:meth:`ClipSolver.distrusted`), where a point the hand
+  placed is carried instead;
 * **labels of every frame** (:meth:`ClipSolver.labels`), each with its provenance: the frame's own
   observations (``annotation`` / ``detection``), the hand's (``hand``), and ``shot``: a keypoint
   placed by hand on one frame, carried to the neighbouring frames of its shot through their
@@ -44,7 +49,11 @@ from .shot_fit import ShotFit, distances
 from .sources import apply_keypoint_edits
 from .temporal import ShotPart, ShotSolver
 
-__all__ = ["PROVENANCE", "ClipLabel", "ClipSolver", "carried_points"]
+__all__ = ["DISTRUST_PX", "PROVENANCE", "ClipLabel", "ClipSolver", "carried_points"]
+
+#: a detected keypoint the hand moved farther than this (px at 960 px width) is not trusted on the
+#: shot's other frames (3 x the detection noise of :class:`TemporalParams`)
+DISTRUST_PX = 4.5
 
 #: where a clip frame's label comes from
 PROVENANCE = ("annotation", "detection", "hand", "shot")
@@ -145,6 +154,10 @@ class ClipSolver:
         self._parts = parts
         self._seconds = [0.0] * len(parts)
         self._labels: list[dict[int, ClipLabel]] | None = None
+        self._drop: list[frozenset[int]] = [frozenset()] * len(parts)
+        for k in range(len(parts)):  # the edits made before: their shots leave the detections they corrected out
+            if self._trust(k):
+                self._solve(k, warm=False)
 
     @property
     def own(self) -> list[Camera | None]:
@@ -208,9 +221,42 @@ class ClipSolver:
             obs = Observations(int(W), int(H))
         return apply_keypoint_edits(obs, edits, self.field_model)
 
-    def _frame_data(self, t: int) -> FrameData | None:
+    def distrusted(self, k: int) -> frozenset[int]:
+        """The keypoint ids whose detections the hand corrected on a frame of shot ``k`` (hid, or
+        moved by more than :data:`DISTRUST_PX`): left out of the shot's solve on its other frames."""
+        limit = DISTRUST_PX * float(self.size[0]) / 960.0
+        out: set[int] = set()
+        for t in self._parts[k].frames:
+            edits, base = self.edits.get(t), self.base[t]
+            if not edits or base is None or (self.origins is not None and self.origins[t] != "detection"):
+                continue
+            detected = {int(kid): base.kp_xy[i] for i, kid in enumerate(base.kp_ids)}
+            for key, v in edits.items():
+                kid = int(key)
+                if kid in detected and (v is None or float(np.hypot(*(np.asarray(v) - detected[kid]))) > limit):
+                    out.add(kid)
+        return frozenset(out)
+
+    def _trust(self, k: int) -> bool:
+        """Shot ``k``'s frames laid out again when its distrusted ids changed; whether they did."""
+        drop = self.distrusted(k)
+        if drop == self._drop[k]:
+            return False
+        self._drop[k] = drop
+        for t in self._parts[k].frames:
+            self._solver.data[t] = self._frame_data(t, drop)
+            self._solver.forget(t)
+        return True
+
+    def _frame_data(self, t: int, drop: frozenset[int] = frozenset()) -> FrameData | None:
+        """Frame ``t``'s observations laid out for the shot's solve, without the detections of
+        the ``drop`` ids (the pins stay)."""
         obs = self.frame_observations(t)
-        return None if obs is None else FrameData.build(obs, self.field_model)
+        if obs is None:
+            return None
+        if drop and obs.n_keypoints:
+            obs = obs.subset(~np.isin(obs.kp_ids, list(drop)) | obs.pins)
+        return FrameData.build(obs, self.field_model)
 
     # ------------------------------------------------------------------ edits
     def set_edits(self, t: int, edits: Mapping[str, Sequence[float] | None] | None, solve: bool = True) -> int:
@@ -222,10 +268,11 @@ class ClipSolver:
             self.edits[t] = {str(int(k)): (None if v is None else [float(v[0]), float(v[1])]) for k, v in edits.items()}
         else:
             self.edits.pop(t, None)
-        self._solver.data[t] = self._frame_data(t)
+        k = self.shot_of(t)
+        self._solver.data[t] = self._frame_data(t, self._drop[k])
         self._solver.stale.add(t)  # its own camera: recalibrated when asked for (it can take a second)
         self._solver.forget(t)
-        k = self.shot_of(t)
+        self._trust(k)
         if solve:
             self._solve(k, warm=True)
         return k
@@ -248,6 +295,12 @@ class ClipSolver:
             parts.append(kept[0] if kept else self._solver.part(r))
             seconds.append(kept[1] if kept else time.perf_counter() - t0)
         self._parts, self._seconds = parts, seconds
+        self._drop = [frozenset()] * len(parts)
+        for t in range(self.T):
+            self._solver.data[t] = self._frame_data(t)
+        for k in range(len(parts)):
+            if self._trust(k):
+                self._solve(k, warm=False)
         self._labels = None
 
     def solve(self, k: int | None = None, warm: bool = True) -> None:
@@ -269,7 +322,8 @@ class ClipSolver:
             carried.update(carried_points(p.frames, self.edits, cams, self.field_model))
         out = []
         for t in range(self.T):
-            obs, cam = self.frame_observations(t), cams[t]
+            data, cam = self._solver.data[t], cams[t]  # without the detections the shot distrusts
+            obs = None if data is None else data.obs
             labels: dict[int, ClipLabel] = {}
             own = (self.origins[t] if self.origins is not None else None) or "detection"
             if obs is not None and obs.n_keypoints:

@@ -8,8 +8,9 @@ and the camera's ``p`` parameters (8; 7 without k1), no less than the detection 
 (``TemporalParams.noise_px``); with ``n <= p`` its own camera merely interpolates its few points
 and cannot vouch for itself (``sigma`` infinite). An item **prefers** one camera when the other
 puts it farther than ``3 sigma`` and than twice the first camera's distance, while the first puts
-it within ``3 sigma``. The shot's camera is **worse** than the frame's own when more items prefer
-the frame's camera than prefer the shot's. Noise cannot tip it (a camera fitted to the frame alone
+it within ``3 sigma``. The shot's camera is **worse** than the frame's own when at least
+:data:`WORSE_BY` more items prefer the frame's camera than prefer the shot's (one wrong detection
+that the frame's own camera bends to is not enough). Noise cannot tip it (a camera fitted to the frame alone
 is closer on every item, but within its noise), and a frame with too few observations for a
 reliable camera of its own is carried by the shot.
 The frame then keeps its own camera.
@@ -37,6 +38,8 @@ __all__ = ["CameraChoice", "Use", "frame_noise", "judge_frame"]
 
 #: which camera a clip frame uses: its shot's, its own (per-frame calibration), or none
 Use = Literal["shot", "own", "none"]
+#: the shot's camera is worse when this many more of the frame's items prefer its own camera
+WORSE_BY = 2
 
 
 @dataclass(frozen=True)
@@ -101,7 +104,7 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
     better = tuple(k for k in a if _prefers(a[k], b[k], tol))
     if fail:
         return CameraChoice("own", f"the shot's camera fails the frame's verdict ({fail})", worse, better)
-    if len(worse) > len(better):
+    if len(worse) - len(better) >= WORSE_BY:
         far = ", ".join(f"{k} ({a[k]:.0f} px, own {b[k]:.1f})" if math.isfinite(a[k]) else f"{k} (behind)"
                         for k in worse[:3])
         more = f" and {len(worse) - 3} more" if len(worse) > 3 else ""

@@ -196,10 +196,18 @@ class ShotSolver:
         own = [self.own[t] for t in frames]
         fit = None
         if start is not None or any(c is not None for c in own):
-            begin = [None if t in self.stale else c for t, c in zip(frames, own)]
-            fit = fit_shot([None if d is None else d.obs for d in fd], start_cameras(begin, params), self.size,
+            fit = fit_shot([None if d is None else d.obs for d in fd], self._start(frames, own, params), self.size,
                            params, self.model, start=start, calib=self.calib, data=fd)
         return ShotPart(frames, fit, [self._judge(t, i, fit) for i, t in enumerate(frames)])
+
+    def _start(self, frames: range, own: list[Camera | None], params: TemporalParams) -> list[Camera | None]:
+        """The own cameras a cold solve starts from: not the stale ones, not the outliers
+        (:func:`start_cameras`), unless that leaves none."""
+        fresh = [None if t in self.stale else c for t, c in zip(frames, own)]
+        for candidates in (start_cameras(fresh, params), fresh, own):
+            if any(c is not None for c in candidates):
+                return candidates
+        return own
 
     def _judge(self, t: int, i: int, fit: ShotFit | None) -> CameraChoice:
         if t in self.stale and fit is not None and fit.converged and self.data[t] is not None:
@@ -210,9 +218,11 @@ class ShotSolver:
                            own_distances=self.own_distances(t))
 
     def split(self, part: ShotPart, removed: frozenset[int], depth: int) -> list[ShotPart]:
-        """``part`` split where that leaves fewer frames worse off than their own cameras (parts
-        of :data:`MIN_PART` frames at least, never at a cut in ``removed``), each half split again
-        down to ``depth``; else ``[part]``."""
+        """``part`` split where that leaves fewer frames worse off than their own cameras and the
+        two parts' cameras stand apart (centres farther apart than ``cut_centre_m``: a cut to
+        another camera position, not one camera fitted twice), in parts of :data:`MIN_PART` frames
+        at least, never at a cut in ``removed``; each half split again down to ``depth``; else
+        ``[part]``."""
         if depth <= 0 or not part.worse or len(part.frames) < 2 * MIN_PART:
             return [part]
         best: tuple[ShotPart, ShotPart] | None = None
@@ -220,7 +230,9 @@ class ShotSolver:
             if t in removed:
                 continue
             a, b = self.part(range(part.frames.start, t)), self.part(range(t, part.frames.stop))
-            if a.worse + b.worse < (part.worse if best is None else best[0].worse + best[1].worse):
+            apart = (a.fit is None or b.fit is None
+                     or float(np.linalg.norm(a.fit.C - b.fit.C)) > self.params.cut_centre_m)
+            if apart and a.worse + b.worse < (part.worse if best is None else best[0].worse + best[1].worse):
                 best = (a, b)
         if best is None:
             return [part]

@@ -15,6 +15,7 @@ Stems are ``clip<seed>-IMG_<t+1:04d>``: :func:`pnlviz.data.layout.clip_key` read
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -25,7 +26,7 @@ from pnlviz.geometry.camera import Camera
 from .cameras import HALF_LENGTH, HALF_WIDTH, K1_SIGMA, _main_position, camera_problem
 from .scene import Scene, sample_scene
 
-__all__ = ["ClipPlan", "clip_frame", "clip_stem", "plan_clip"]
+__all__ = ["ClipPlan", "Motion", "clip_frame", "clip_stem", "plan_clip"]
 
 
 @dataclass
@@ -67,17 +68,28 @@ def _damped_walk(rng: np.random.Generator, n: int, step: float, damping: float =
     return np.cumsum(v)
 
 
-def _shot_cameras(rng: np.random.Generator, n: int, size: tuple[int, int], side: float) -> list[Camera]:
+@dataclass(frozen=True)
+class Motion:
+    """How a shot's camera moves: ``pan`` scales how fast its aim point wanders (1: a camera
+    following play, 3: fast pans, 0.3: a slow, steady view), ``zoom`` how fast it zooms."""
+
+    pan: float = 1.0
+    zoom: float = 1.0
+
+
+def _shot_cameras(rng: np.random.Generator, n: int, size: tuple[int, int], side: float,
+                  motion: Motion = Motion()) -> list[Camera]:
     W, H = size
     for _ in range(200):
         C = _main_position(rng)
         C[1] = side * abs(C[1])
         k1 = float(rng.normal(0.0, K1_SIGMA))
         start = np.array([rng.uniform(-35, 35), rng.uniform(-20, 20)])
-        path = start + np.column_stack([_damped_walk(rng, n, 0.05), _damped_walk(rng, n, 0.03)])
+        path = start + np.column_stack([_damped_walk(rng, n, 0.05 * motion.pan),
+                                        _damped_walk(rng, n, 0.03 * motion.pan)])
         path[:, 0] = np.clip(path[:, 0], -HALF_LENGTH + 5, HALF_LENGTH - 5)
         path[:, 1] = np.clip(path[:, 1], -HALF_WIDTH + 3, HALF_WIDTH - 3)
-        log_fov = math.log(rng.uniform(18, 35)) + _damped_walk(rng, n, 0.003)
+        log_fov = math.log(rng.uniform(18, 35)) + _damped_walk(rng, n, 0.003 * motion.zoom)
         hfov = np.clip(np.exp(log_fov), 12.0, 45.0)
         roll = rng.normal(0, 0.4) + _damped_walk(rng, n, 0.0005)
         cams = [Camera.from_look_at(C, np.array([path[t, 0], path[t, 1], 0.0]), hfov_deg=float(hfov[t]), width=W,
@@ -87,9 +99,11 @@ def _shot_cameras(rng: np.random.Generator, n: int, size: tuple[int, int], side:
     raise RuntimeError("no usable shot in 200 draws")
 
 
-def plan_clip(seed: int, frames: int, size: tuple[int, int] = EVAL_SIZE, cuts: int | None = None) -> ClipPlan:
+def plan_clip(seed: int, frames: int, size: tuple[int, int] = EVAL_SIZE, cuts: int | None = None,
+              motions: Sequence[Motion] | None = None) -> ClipPlan:
     """Draw clip ``seed``: ``frames`` frames in ``cuts`` + 1 shots (default: one cut per 60
-    frames, at least one for clips of 40 frames or more)."""
+    frames, at least one for clips of 40 frames or more); ``motions``: how each shot's camera
+    moves (default: :class:`Motion` ()), the last one for the shots beyond the list."""
     rng = np.random.default_rng([int(seed), 1_000_003])
     if cuts is None:
         cuts = max(1 if frames >= 40 else 0, frames // 60)
@@ -97,7 +111,8 @@ def plan_clip(seed: int, frames: int, size: tuple[int, int] = EVAL_SIZE, cuts: i
     shot_of: list[int] = []
     side = 1.0
     for k, n in enumerate(_shot_lengths(rng, frames, cuts)):
-        cameras += _shot_cameras(rng, n, size, side if rng.random() < 0.8 else -side)
+        motion = (motions[min(k, len(motions) - 1)] if motions else Motion())
+        cameras += _shot_cameras(rng, n, size, side if rng.random() < 0.8 else -side, motion)
         shot_of += [k] * n
     scene = sample_scene(cameras[0], rng)
     P = len(scene.players)
