@@ -25,7 +25,8 @@ right and it moves on (a look, not an edit). Else it corrects it: a keypoint mar
 point the image shows (more than ``--move-px``) that the overlay follows (passes closer to the
 marker than the marker is to its point) is moved there (hidden when the point is not in view);
 with none, the keypoint where the overlay is farthest off the picture is placed or pinned where
-the image shows it. Its clicks land with Gaussian noise (sigma 1.5 px at 960x540), and 5 % of them on
+the image shows it. (The markers it sees are the app's: with the shot model, not the detections
+the shot leaves out.) Its clicks land with Gaussian noise (sigma 1.5 px at 960x540), and 5 % of them on
 the neighbouring keypoint (the nearest other point in view: a slip of the eye). It stops when the
 clip's FS@5 (completeness x mean JaC@5, the SoccerNet metric against the annotations made from the
 true cameras; either labelling of the pitch, as the evaluator accepts) reaches ``--target``, after
@@ -160,7 +161,7 @@ class ShotModel:
         return self.solver.camera(t)
 
     def observations(self, t):
-        return self.solver.frame_observations(t)
+        return self.solver.shown_observations(t)
 
     def error(self, t) -> float:
         return self.solver.frame_error(t)
@@ -200,11 +201,12 @@ def _moved(a, b, model) -> float:
 
 
 def _follows(cam, model, kid: int, marker: np.ndarray, miss: float) -> bool:
-    """Whether the overlay of ``cam`` passes by a wrong marker (closer to it than the marker is to
-    its point in the picture, ``miss`` px): the marker pulls the camera. A stray marker the overlay
-    ignores is no cause of an overlay off the picture."""
+    """Whether the overlay of ``cam`` passes by a wrong marker (closer to it than half the way the
+    marker is off its point in the picture, ``miss`` px, and within 10 px): the marker pulls the
+    camera. A stray marker the overlay ignores is no cause of an overlay off the picture."""
     uv, z = cam.project(model.keypoint_xyz(np.array([kid])))
-    return bool(z[0] > 0 and np.all(np.isfinite(uv[0])) and np.hypot(*(uv[0] - marker)) < 0.5 * miss)
+    near = min(0.5 * miss, 10.0 * cam.width / 960.0)
+    return bool(z[0] > 0 and np.all(np.isfinite(uv[0])) and np.hypot(*(uv[0] - marker)) < near)
 
 
 def _overlay_off(cam, truth, markings: np.ndarray) -> float:

@@ -221,6 +221,12 @@ class ClipSolver:
             obs = Observations(int(W), int(H))
         return apply_keypoint_edits(obs, edits, self.field_model)
 
+    def shown_observations(self, t: int) -> Observations | None:
+        """Frame ``t``'s observations as its shot uses and shows them: with its edits, without the
+        detections the shot distrusts (:meth:`distrusted`)."""
+        data = self._solver.data[t]
+        return None if data is None else data.obs
+
     def distrusted(self, k: int) -> frozenset[int]:
         """The keypoint ids whose detections the hand corrected on a frame of shot ``k`` (hid, or
         moved by more than :data:`DISTRUST_PX`): left out of the shot's solve on its other frames."""
@@ -322,8 +328,7 @@ class ClipSolver:
             carried.update(carried_points(p.frames, self.edits, cams, self.field_model))
         out = []
         for t in range(self.T):
-            data, cam = self._solver.data[t], cams[t]  # without the detections the shot distrusts
-            obs = None if data is None else data.obs
+            obs, cam = self.shown_observations(t), cams[t]
             labels: dict[int, ClipLabel] = {}
             own = (self.origins[t] if self.origins is not None else None) or "detection"
             if obs is not None and obs.n_keypoints:
