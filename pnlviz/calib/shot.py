@@ -40,8 +40,9 @@ from pnlviz.geometry.projection import camera_to_pixels, to_camera, undistort_k1
 from pnlviz.geometry.so3 import cross
 
 from .observations import Observations
-from .problem import BEHIND, FrameData, pin_block
-from .residuals import Block, SegmentJacobian, point_block, polyline_block, segment_block
+from .problem import FrameData, pin_block
+from .residuals import Block, SegmentJacobian, point_block, segment_block
+from .shot_circles import CircleGroup, circle_residuals, group_circles
 
 __all__ = ["FrameDistances", "Selection", "ShotProblem", "TemporalParams", "angle_steps", "frame_data"]
 
@@ -213,8 +214,8 @@ class ShotProblem:
             sj = _segment_jacobian(A, B, dq, R[tl]) if dq is not None else None
             for block in segment_block(A, B, q, f[tl], MIN_DEPTH, sj):
                 at = _put(r, J, at, rows.ln_w, block)
-        for t, world, pts, w, _ in rows.circles:
-            at = _put(r, J, at, w, _circle_block(world, pts, R[t], C, float(f[t]), k1, self.cx, self.cy, jac))
+        for g in rows.circles:
+            at = _put(r, J, at, g.weights[g.item], circle_residuals(g, R, C, f, k1, self.cx, self.cy, jac))
         acc = (per[:-2] - 2 * per[1:-1] + per[2:]) / self.prior_scale if self.T >= 3 else np.zeros((0, 4))
         k1_row = [x[3] / self.params.k1_sigma] if self.params.fit_k1 else []
         out = np.concatenate([r / self.noise, acc.ravel(), k1_row])
@@ -242,15 +243,16 @@ class ShotProblem:
             q, _ = undistort_k1(rows.ln_q, f[tl], 1.0, self.cx, self.cy, k1)
             perp, over = segment_block(A, B, q, f[tl], MIN_DEPTH)
             ln = np.hypot(perp.r, over.r)
-        out: list[FrameDistances | None] = [None] * self.T
-        for t in np.unique(np.concatenate([rows.kp_t, rows.ln_t, [c[0] for c in rows.circles]]).astype(int)):
-            out[t] = FrameDistances(np.nan_to_num(kp[rows.kp_t == t], nan=math.inf), {})
+        seen = np.unique(np.concatenate([rows.kp_t, rows.ln_t] + [g.frames for g in rows.circles]).astype(int))
+        found = {int(t): FrameDistances(np.nan_to_num(kp[rows.kp_t == t], nan=math.inf), {}) for t in seen}
         for (t, name), idx in rows.ln_items.items():
-            out[t].classes[name] = float(np.max(ln[idx])) if len(idx) else 0.0  # type: ignore[union-attr]
-        for t, world, pts, _, name in rows.circles:
-            d = _circle_block(world, pts, R[t], C, float(f[t]), k1, self.cx, self.cy, False).r
-            out[t].classes[name] = float(np.max(np.abs(d))) if len(d) else 0.0  # type: ignore[union-attr]
-        return out
+            found[t].classes[name] = float(np.max(ln[idx])) if len(idx) else 0.0
+        for g in rows.circles:
+            d = np.abs(circle_residuals(g, R, C, f, k1, self.cx, self.cy, False).r)
+            for i, t in enumerate(g.frames.tolist()):
+                mine = d[g.item == i]
+                found[t].classes[g.name] = float(np.max(mine)) if len(mine) else 0.0
+        return [found.get(t) for t in range(self.T)]
 
     def _chain(self, J: np.ndarray, per: np.ndarray) -> scipy.sparse.csr_matrix:
         """The data rows' Jacobian with respect to each row's camera (a rotation step, the centre,
@@ -269,21 +271,17 @@ class ShotProblem:
         return scipy.sparse.csr_matrix((block.ravel(), (rows, cols.ravel())), shape=(len(J), self.n_params))
 
     def _prior_jacobian(self) -> scipy.sparse.csr_matrix:
-        """The prior rows' Jacobian (constant: the prior is linear in ``x``)."""
-        rows, cols, vals = [], [], []
-        for s in range(max(self.T - 2, 0)):  # the acceleration at s + 1: frames s, s + 1, s + 2
-            for j in range(4):
-                for k, c in enumerate((1.0, -2.0, 1.0)):
-                    rows.append(4 * s + j)
-                    cols.append(4 + 4 * (s + k) + j)
-                    vals.append(c / self.prior_scale[j])
-        n = 4 * max(self.T - 2, 0)
+        """The prior rows' Jacobian (constant: the prior is linear in ``x``): the acceleration of
+        parameter j at frame s + 1 reads frames s, s + 1, s + 2."""
+        n_acc = 4 * max(self.T - 2, 0)
+        s, j = np.divmod(np.arange(n_acc), 4)
+        rows = np.repeat(np.arange(n_acc), 3)
+        cols = (4 + 4 * (s[:, None] + np.arange(3)) + j[:, None]).ravel()
+        vals = (np.array([1.0, -2.0, 1.0]) / self.prior_scale[j][:, None]).ravel()
         if self.params.fit_k1:
-            rows.append(n)
-            cols.append(3)
-            vals.append(1.0 / self.params.k1_sigma)
-            n += 1
-        return scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(n, self.n_params))
+            rows, cols = np.append(rows, n_acc), np.append(cols, 3)
+            vals = np.append(vals, 1.0 / self.params.k1_sigma)
+        return scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(n_acc + int(self.params.fit_k1), self.n_params))
 
 
 @dataclass
@@ -302,8 +300,8 @@ class _Rows:
     ln_B: np.ndarray
     ln_q: np.ndarray
     ln_w: np.ndarray
-    #: (frame, world samples (S, 3), observed pixels (P, 2), weight, class) per circle class seen
-    circles: list[tuple[int, np.ndarray, np.ndarray, float, str]]
+    #: the circles seen, one group per class (:class:`pnlviz.calib.shot_circles.CircleGroup`)
+    circles: list[CircleGroup]
     #: each residual row's frame
     frame: np.ndarray
     #: the line rows (into ``ln_*``) of each (frame, class)
@@ -343,9 +341,10 @@ class _Rows:
             return np.concatenate([p[i] for p in parts]).astype(dtype) if parts else np.zeros(shape, dtype)
 
         kp_t, ln_t = cat(kp, 0, (0,), int), cat(ln, 0, (0,), int)
-        frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [np.full(len(c[2]), c[0]) for c in circles])
+        groups = group_circles(circles)
+        frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [g.row_frames for g in groups])
         return cls(kp_t, cat(kp, 1, (0, 3)), cat(kp, 2, (0, 2)), cat(kp, 3, (0,), bool), cat(kp, 4, (0,)), ln_t,
-                   cat(ln, 1, (0, 3)), cat(ln, 2, (0, 3)), cat(ln, 3, (0, 2)), cat(ln, 4, (0,)), circles,
+                   cat(ln, 1, (0, 3)), cat(ln, 2, (0, 3)), cat(ln, 3, (0, 2)), cat(ln, 4, (0,)), groups,
                    frame.astype(int), items)
 
 
@@ -376,23 +375,3 @@ def _segment_jacobian(A: np.ndarray, B: np.ndarray, dq: np.ndarray, R: np.ndarra
         return out
 
     return SegmentJacobian(ends_vjp, q_vjp, 6)
-
-
-def _circle_block(world: np.ndarray, pts: np.ndarray, R: np.ndarray, C: np.ndarray, f: float, k1: float,
-                  cx: float, cy: float, jac: bool) -> Block:
-    """A circle's observed points against its projected arc (:meth:`pnlviz.calib.problem.Problem._circle`)."""
-    Xc = to_camera(world, R, C)
-    front = Xc[:, 2] > MIN_DEPTH
-    if front.sum() < 2:
-        return Block(np.full(len(pts), BEHIND), np.zeros((len(pts), 8)) if jac else None)
-    Xc = Xc[front]
-    poly, _ = camera_to_pixels(Xc, R, f, 1.0, cx, cy, k1)
-    if not jac:
-        return polyline_block(poly, pts)
-
-    def vertex_jacobian(idx: np.ndarray) -> np.ndarray:
-        J = camera_to_pixels(Xc[idx], R, f, 1.0, cx, cy, k1, True)[1]
-        assert J is not None
-        return J
-
-    return polyline_block(poly, pts, vertex_jacobian)

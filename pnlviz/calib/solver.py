@@ -12,6 +12,7 @@ differences, asked for only at accepted steps, as a sparse matrix.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -115,9 +116,10 @@ def levenberg_marquardt(evaluate: Evaluate, retract: Callable[[Any, np.ndarray],
     return x, {"success": success, "cost": cost, "iterations": it}
 
 
-def _normal_equations(J, r: np.ndarray, p: SolverParams) -> tuple[np.ndarray, np.ndarray]:
-    """``J^T W J`` (dense) and ``J^T W r`` with the loss's IRLS weights ``W``; ``J`` a dense
-    array or a scipy sparse matrix."""
+def _normal_equations(J, r: np.ndarray, p: SolverParams) -> tuple[Any, np.ndarray]:
+    """``J^T W J`` and ``J^T W r`` with the loss's IRLS weights ``W``; ``J`` a dense array (the
+    normal matrix dense) or a scipy sparse matrix (sparse: a shot's is banded, but for its four
+    shared columns, and solved as such)."""
     dense = isinstance(J, np.ndarray)
     if p.loss == "linear":
         Jw, rw = J, r
@@ -131,7 +133,28 @@ def _normal_equations(J, r: np.ndarray, p: SolverParams) -> tuple[np.ndarray, np
 
             Jw = scipy.sparse.diags(w) @ J
     A, g = Jw.T @ Jw, Jw.T @ rw
-    return (A if dense else A.toarray()), g
+    return (A if dense else A.tocsc()), g
+
+
+def _damped_step(A, g: np.ndarray, damping: np.ndarray) -> np.ndarray | None:
+    """``-(A + diag(damping))^-1 g`` (None when singular); ``A`` dense or scipy sparse."""
+    if isinstance(A, np.ndarray):
+        damped = A.copy()
+        damped.flat[::len(damping) + 1] += damping
+        try:
+            return -np.linalg.solve(damped, g)
+        except np.linalg.LinAlgError:
+            return None
+    import scipy.sparse
+    import scipy.sparse.linalg
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", scipy.sparse.linalg.MatrixRankWarning)
+        try:
+            delta = scipy.sparse.linalg.spsolve((A + scipy.sparse.diags(damping)).tocsc(), g)
+        except (RuntimeError, scipy.sparse.linalg.MatrixRankWarning):
+            return None
+    return -delta if np.all(np.isfinite(delta)) else None
 
 
 def _descend(evaluate: Evaluate, retract, x, A: np.ndarray, g: np.ndarray, cost: float, lam: float,
@@ -142,11 +165,8 @@ def _descend(evaluate: Evaluate, retract, x, A: np.ndarray, g: np.ndarray, cost:
     trials = 0
     while lam <= 1e12 and (p.max_trials is None or trials < p.max_trials):
         trials += 1
-        damped = A.copy()
-        damped.flat[::len(d) + 1] += lam * d
-        try:
-            delta = -np.linalg.solve(damped, g)
-        except np.linalg.LinAlgError:
+        delta = _damped_step(A, g, lam * d)
+        if delta is None:
             lam *= 10
             continue
         x2 = retract(x, delta)
