@@ -246,6 +246,7 @@ def test_a_bad_sidecar_is_one_line_in_calibrate_and_export(tmp_path, capsys):
         zf.writestr("00000.json", json.dumps({"kp": {}, "lines": {}}))
     predictions_info_path(preds).write_text(json.dumps({"calibration": {"alpha": 7.5, "refine_k1": "maybe"}}))
     d = sample_copy(tmp_path / "d", stems=("00000",))
+    (tmp_path / "e" / "frames").mkdir(parents=True)  # an (empty) edits folder
     assert main(["calibrate", "--data", str(d), "--detections", str(preds), "--out", str(tmp_path / "c.zip"),
                  "--no-progress"]) == 2
     assert main(["export", "--data", str(d), "--detections", str(preds), "--out", str(tmp_path / "x"),

@@ -173,7 +173,7 @@ def test_detect_keeps_the_split_of_split_folders(layouts, tmp_path):
 
 def test_export_keeps_the_split_and_gives_each_frame_its_homography(layouts, tmp_path):
     out = tmp_path / "export"
-    assert main(["export", "--data", str(layouts["zip"]), "--edits", str(tmp_path / "edits"), "--out", str(out),
+    assert main(["export", "--data", str(layouts["zip"]), "--out", str(out),
                  "--all", "--no-progress"]) == 0
     assert (out / "annotations" / "valid" / "00004.json").is_file()
     assert (out / "cameras" / "train" / "camera_00001.json").is_file()

@@ -264,7 +264,7 @@ def test_exported_labels_train_as_corrected(tmp_path):
     data = tmp_path / "frames"
     generate(data, 2, 41, size=(W, H), progress=False)
     out = tmp_path / "export"
-    assert cli(["export", "--data", str(data), "--edits", str(tmp_path / "edits"), "--out", str(out), "--all"]) == 0
+    assert cli(["export", "--data", str(data), "--out", str(out), "--all"]) == 0
     frames = ExportedFrames(out, data)
     assert frames.stems == sorted(frames.stems) and len(frames) == 2
     _, kp, kpm, ln, _ = frames.sample(0, (W, H), 2.0)
@@ -323,7 +323,7 @@ def test_train_cli_fine_tunes_on_exported_labels(tmp_path, capsys):
     data = tmp_path / "frames"
     generate(data, 2, 43, size=SMALL, progress=False)
     export = tmp_path / "corrected.zip"
-    assert main(["export", "--data", str(data), "--edits", str(tmp_path / "edits"), "--out", str(export), "--all"]) == 0
+    assert main(["export", "--data", str(data), "--out", str(export), "--all"]) == 0
     save_checkpoint(LightNet(), tmp_path / "start.pt")
     config = tmp_path / "config.json"
     config.write_text(json.dumps({"data": {"seed": 1, "frames": 2, "size": list(SMALL)}, "input_size": list(SMALL),

@@ -86,12 +86,13 @@ def _main(argv: list[str] | None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from pnlviz.data.edits import EditsFolderError
     from pnlviz.data.errors import DataError
     from pnlviz.data.outputs import OutputError
 
     try:
         return int(args.func(args) or 0)
-    except OutputError as exc:  # an output over an input or inside a dataset: a usage error
+    except (OutputError, EditsFolderError) as exc:  # an output over an input, another dataset's edits: usage errors
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except DataError as exc:  # a bad input file: one line, no traceback

@@ -37,7 +37,7 @@ def failure_words() -> dict[str, str]:
 
 
 def add_calibrate_parser(sub) -> None:
-    from pnlviz.commands.common import parse_size
+    from pnlviz.commands.common import add_force_edits, parse_size
 
     p = sub.add_parser("calibrate", help="calibrate every frame (from annotations or PnLCalib detections)",
                        description="Calibrate every frame of a dataset and write camera_<stem>.json files "
@@ -56,6 +56,7 @@ def add_calibrate_parser(sub) -> None:
                         "annotation uses its detections")
     p.add_argument("--edits", type=Path, help="an edits folder of the app (pnlviz serve): its keypoint and annotation "
                                               "corrections apply (read only; default: none)")
+    add_force_edits(p)
     p.add_argument("--out", required=True, type=Path, help="output camera zip")
     p.add_argument("--no-pnl", action="store_true", help="skip the PnL refinement (and the focal/k1 refinement)")
     p.add_argument("--alpha", type=float, default=DEFAULT_ALPHA,
@@ -334,9 +335,8 @@ def _args_problem(args) -> str | None:
 def _open_inputs(args):
     """(the frames' dataset, the detections, the edits folder read-only or None), each problem
     with a file said in one line."""
-    from pnlviz.commands.common import open_input_dataset, print_skipped
+    from pnlviz.commands.common import open_input_dataset, print_skipped, read_edits_folder
     from pnlviz.data import read_predictions
-    from pnlviz.data.edits import EditsStore
 
     if args.video is not None:
         from pnlviz.data.video import VideoDataset
@@ -346,8 +346,7 @@ def _open_inputs(args):
         ds = open_input_dataset(args.data) if args.data is not None else _NoDataset()
     predictions = (read_predictions(args.detections, on_error=lambda e: print_skipped([e]), splits=ds.splits)
                    if args.detections else None)
-    edits = EditsStore(args.edits, writable=False) if args.edits is not None else None
-    print_skipped(edits.warnings if edits is not None else [], prefix="warning: ")
+    edits = read_edits_folder(args.edits, ds, args.force_edits) if args.edits is not None else None
     return ds, predictions, edits
 
 

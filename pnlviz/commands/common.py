@@ -30,7 +30,28 @@ def add_app_data_args(p) -> None:
     p.add_argument("--data", type=Path, help="dataset folder or zip (default: the bundled sample)")
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip")
     p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
+    add_force_edits(p)
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE, help="image size for frames without an image")
+
+
+def add_force_edits(p) -> None:
+    p.add_argument("--force-edits", action="store_true",
+                   help="use the edits folder even where its records are of other pictures than this dataset's "
+                        "(it was made for another dataset; the mismatches are listed)")
+
+
+def read_edits_folder(path, ds, force: bool):
+    """The edits folder ``--edits`` of a command that only reads it (``qa``, ``calibrate``): it
+    must be one (:func:`pnlviz.data.edits_folder.require_edits_folder`) and of this dataset's
+    pictures (:func:`~pnlviz.data.edits_folder.check_identity`), its warnings printed (a damaged
+    record: one line). DataError or EditsFolderError otherwise (the command exits with 2)."""
+    from pnlviz.data.edits import EditsStore
+    from pnlviz.data.edits_folder import check_identity, require_edits_folder
+
+    store = EditsStore(require_edits_folder(path), writable=False)
+    check_identity(store, ds, force=force)
+    print_skipped(store.warnings, prefix="warning: ")
+    return store
 
 
 def app_data(args):

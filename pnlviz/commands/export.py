@@ -89,6 +89,7 @@ def _say_done(args, frames: dict, total: int, cluster: bool) -> None:
 def run_export(args) -> int:
     from pnlviz.commands.batch import run_batch
     from pnlviz.commands.common import app_data
+    from pnlviz.data.edits_folder import check_identity, require_edits_folder
     from pnlviz.data.outputs import OutputError, check_output
     from pnlviz.pipeline import FrameReader
     from pnlviz.pipeline.export import ExportWriter, export_stems, failed_frame
@@ -103,11 +104,16 @@ def run_export(args) -> int:
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if args.edits is not None:
+        require_edits_folder(args.edits)  # a typo, a file or a FIFO is not "no edits"
     # read-only: export never creates, locks or changes the edits folder
-    with FrameReader.open(data, detections=args.detections, edits=args.edits, size=args.size) as reader:
+    with FrameReader.open(data, detections=args.detections, edits=args.edits, size=args.size,
+                          force_edits=args.force_edits) as reader:
+        stems = export_stems(reader, args.all)
+        # every record exported is of this dataset's picture (the folder's were checked in part when opened)
+        check_identity(reader.edits_folder, reader.ds, force=args.force_edits, stems=stems, limit=None)
         for warning in [str(e) for e in reader.ds.rejected] + reader.edits_folder.warnings:
             print(f"warning: {warning}", file=sys.stderr)
-        stems = export_stems(reader, args.all)
         job = ExportJob(str(Path(data).resolve()), None if args.detections is None else str(args.detections.resolve()),
                         str(reader.edits_folder.root.resolve()), tuple(args.size), reader.default_settings(),
                         args.gate_px)

@@ -21,7 +21,7 @@ from pnlviz.conventions import EVAL_SIZE
 
 def add_qa_parser(sub) -> None:
     from pnlviz.commands.batch import add_cluster_args
-    from pnlviz.commands.common import parse_size
+    from pnlviz.commands.common import add_force_edits, parse_size
 
     p = sub.add_parser("qa", help="find the label errors: every frame's annotation judged, most suspect first",
                        description="Judge every annotated frame's lines against the camera fitted to the others "
@@ -33,6 +33,7 @@ def add_qa_parser(sub) -> None:
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip to compare the annotation with")
     p.add_argument("--edits", type=Path, help="an edits folder of the app: its annotation corrections apply "
                                               "(read only)")
+    add_force_edits(p)
     p.add_argument("--out", required=True, type=Path, help="output JSON lines file (e.g. qa.jsonl)")
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE,
                    help="image size for frames without an image (default 960x540)")
@@ -177,18 +178,14 @@ def _params(args):
 def run_qa(args) -> int:
     from pnlviz.commands.batch import interrupted, pool_size, run_batch
     from pnlviz.commands.calibrate import frame_reader
-    from pnlviz.commands.common import open_input_dataset, print_skipped
+    from pnlviz.commands.common import open_input_dataset, print_skipped, read_edits_folder
     from pnlviz.data import LineStream, check_output, read_predictions
-    from pnlviz.data.edits import EditsStore
 
     params = _params(args)
-    if args.edits is not None and not args.edits.is_dir():
-        print(f"error: --edits {args.edits}: no such folder", file=sys.stderr)
-        return 2
     check_output(args.out, inputs=[args.detections], datasets=[args.data, args.edits])
     ds = open_input_dataset(args.data)
     predictions = read_predictions(args.detections, on_error=lambda e: print_skipped([e])) if args.detections else None
-    edits = EditsStore(args.edits, writable=False) if args.edits is not None else None
+    edits = read_edits_folder(args.edits, ds, args.force_edits) if args.edits is not None else None
     stems = _frames(ds, edits)
     if not stems:
         print(f"{args.data}: no annotated frame to judge", file=sys.stderr)

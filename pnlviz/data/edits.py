@@ -48,8 +48,9 @@ from pnlviz.data.reading import read_file
 from pnlviz.data.snapshot import edits_digest, validate_snapshot
 
 REVIEW_STATES = ("accepted", "corrected", "rejected")
-#: the fields a record may hold; anything else is dropped when it is read
-FIELDS = ("review", "annotation", "keypoints", "history", "snapshot", "updated")
+#: the fields a record may hold; anything else is dropped when it is read ("frame": the identity of
+#: the frame it was written for, :mod:`pnlviz.data.edits_folder`)
+FIELDS = ("review", "annotation", "keypoints", "history", "snapshot", "updated", "frame")
 #: the fields an undo step may restore
 UNDOABLE = ("annotation", "keypoints", "review")
 #: undo steps kept per frame (and per direction)
@@ -181,6 +182,14 @@ def validate_record(obj: Any, source: str, checked_before: Collection[int] = ())
     updated = as_number(obj.get("updated"))
     if updated is not None and math.isfinite(updated):
         rec["updated"] = updated
+    frame = obj.get("frame")
+    if frame is not None:
+        size = frame.get("size") if isinstance(frame, Mapping) else None
+        if not (isinstance(frame, Mapping) and isinstance(frame.get("digest"), str) and len(frame["digest"]) <= 128
+                and (size is None or (isinstance(size, list) and len(size) == 2
+                                      and all(type(v) is int and 0 < v < 1 << 20 for v in size)))):
+            raise DataError(source, f'"frame" must be {{"size": [W, H] | null, "digest": "..."}}, got {describe(frame)}')
+        rec["frame"] = {"size": size, "digest": frame["digest"]}
     return rec
 
 
@@ -244,6 +253,9 @@ class EditsStore:
         self._locks: dict[str, threading.RLock] = {}
         self._locks_lock = threading.Lock()
         self._lock_file: int | None = None
+        #: ``identity(stem)``: the frame's identity, kept in every record written
+        #: (:func:`pnlviz.data.edits_folder.frame_identity`; None: none kept)
+        self.identity: Callable[[str], dict] | None = None
         #: stem -> (merge key, time, undo steps) of the frame's last action that named a merge key
         self._merging: dict[str, tuple[object, float, int]] = {}
         if writable:
@@ -385,6 +397,8 @@ class EditsStore:
             yield rec
             rec = {k: v for k, v in rec.items() if v is not None and k in FIELDS}
             rec["updated"] = time.time()
+            if self.identity is not None:
+                rec["frame"] = self.identity(stem)
             path = self.frames / f"{stem}.json"  # a split's frame: frames/<split>/<stem>.json
             rec = validate_record(rec, str(path), self._checked_steps(stem))
             path.parent.mkdir(exist_ok=True)

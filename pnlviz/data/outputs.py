@@ -1,8 +1,10 @@
-"""Where a command may write: never over one of its inputs, never inside (or over) a dataset.
+"""Where a command may write: never into, over or under what it reads.
 
 An output inside a dataset folder would become part of the dataset (a ``preds.json`` there is a
-bogus frame); an output over an input destroys it. :func:`check_output` is called before any
-work starts; :class:`OutputError` makes the command exit with status 2.
+bogus frame); an output over an input destroys it; an output folder that holds an input (the
+dataset's annotations, the detections, the edits folder) would write its files among them, over
+them. :func:`check_output` is called before any work starts; :class:`OutputError` (one line naming
+both paths) makes the command exit with status 2.
 """
 
 from __future__ import annotations
@@ -61,15 +63,23 @@ def check_writable(out: PathLike, what: str = "--out", folder: bool = False) -> 
 
 def check_output(out: PathLike, *, inputs: Iterable[PathLike | None] = (), datasets: Iterable[PathLike | None] = (),
                  what: str = "--out", folder: bool = False) -> None:
-    """Raise :class:`OutputError` (a DataError, one line) when ``out`` is one of ``inputs`` (files
-    that must not be overwritten), or is, or lies inside, one of ``datasets`` (dataset folders or
-    zips), or cannot be written (:func:`check_writable`). ``what`` names the output in the message
-    (the option that gave it). None entries are ignored."""
+    """Raise :class:`OutputError` (a DataError, one line naming both paths) when ``out`` is one of
+    ``inputs`` (files or folders that must not be overwritten), or is, or lies inside, one of
+    ``datasets`` (dataset folders or zips, edits folders), or when ``out`` holds one of them (an
+    output folder above an input: its files would be written among and over the input's), or when
+    it cannot be written (:func:`check_writable`). ``what`` names the output in the message (the
+    option that gave it). None entries are ignored."""
     target = _resolved(out)
     source = f"{what} {os.fspath(out)}"
     for inp in inputs:
-        if inp is not None and _same_file(target, _resolved(inp)):
+        if inp is None:
+            continue
+        path = _resolved(inp)
+        if _same_file(target, path):
             raise OutputError(source, f"would overwrite the input {os.fspath(inp)}")
+        if target in path.parents:
+            raise OutputError(source, f"holds the input {os.fspath(inp)}: writing there would write over it; "
+                                      f"write elsewhere")
     for ds in datasets:
         if ds is None:
             continue
@@ -79,4 +89,7 @@ def check_output(out: PathLike, *, inputs: Iterable[PathLike | None] = (), datas
         if root.is_dir() and root in target.parents:
             raise OutputError(source, f"is inside the dataset folder {os.fspath(ds)}: it would become part of "
                                       f"the dataset; write it elsewhere")
+        if target in root.parents:
+            raise OutputError(source, f"holds the dataset {os.fspath(ds)}: writing there would write over it; "
+                                      f"write elsewhere")
     check_writable(out, what, folder)  # after the checks above, whose messages say more

@@ -23,6 +23,7 @@ from pnlviz.data import DataError, open_dataset, predictions_info_path, read_pre
 from pnlviz.data.annotations import parse_annotation
 from pnlviz.pipeline.settings import check_settings
 from pnlviz.data.edits import EditsStore, default_edits_dir
+from pnlviz.data.edits_folder import check_identity, frame_identity, write_dataset_file
 from pnlviz.geometry.camera import Camera
 
 __all__ = ["FrameRead", "FrameReader", "Settings"]
@@ -91,11 +92,14 @@ class FrameReader:
     @classmethod
     def open(cls, data: Path, *, detections: Path | None = None, edits: Path | None = None,
              size: tuple[int, int] = EVAL_SIZE, writable: bool = False,
-             detector_settings: Mapping | None = None) -> FrameReader:
+             detector_settings: Mapping | None = None, force_edits: bool = False) -> FrameReader:
         """The frames of the dataset at ``data`` with the prediction zip ``detections`` (its
         settings recorded beside it, else ``detector_settings``) and the edits folder ``edits``
         (default: :func:`pnlviz.data.edits.default_edits_dir`), opened read-only unless
-        ``writable``. DataError for a dataset without frames or a bad file; ValueError for an
+        ``writable``. The edits folder's records must be of this dataset's pictures
+        (:func:`pnlviz.data.edits_folder.check_identity`: an EditsFolderError lists the mismatches)
+        unless ``force_edits`` adopts it; a writable reader keeps each frame's identity in the records
+        it writes. DataError for a dataset without frames or a bad file; ValueError for an
         unknown calibration setting. A video file (:func:`pnlviz.data.video.is_video`) is read as
         a dataset of its frames, decoded when asked for (one clip: ``<video>-IMG_<n>``)."""
         from pnlviz.data.video import VideoDataset, is_video
@@ -109,6 +113,14 @@ class FrameReader:
         settings = check_settings(recorded or detector_settings or {}, source)  # fails here, not on a frame
         CalibParams().updated(settings)
         store = EditsStore(edits or default_edits_dir(data), writable=writable)
+        try:
+            check_identity(store, ds, force=force_edits)  # the folder's records are of these pictures
+        except BaseException:
+            store.close()
+            raise
+        if writable:
+            write_dataset_file(store.root, ds)
+            store.identity = lambda stem: frame_identity(ds, stem)
         return cls(ds, predictions=predictions, edits=store, size=size, detection_settings=settings, data=data)
 
     @property
