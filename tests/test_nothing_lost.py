@@ -121,3 +121,158 @@ def test_edits_that_is_not_an_edits_folder_is_an_error(two_datasets, tmp_path, c
         err = capsys.readouterr().err
         assert code != 0 and f"--edits {path}" in err, (command, err)
         assert not os.path.exists(out)
+
+
+def _in_time(fn, seconds=20.0):
+    """``fn()`` run in a thread: its result, or a failure when it has not returned in time (a
+    read blocked on a FIFO would hang the test itself)."""
+    import threading
+
+    out: dict = {}
+    th = threading.Thread(target=lambda: out.setdefault("value", fn()), daemon=True)
+    th.start()
+    th.join(seconds)
+    assert not th.is_alive(), f"{fn} did not return within {seconds} s"
+    return out.get("value")
+
+
+@pytest.mark.parametrize("what", ["fifo", "dev_zero", "damaged", "digits", "folder"])
+def test_a_bad_clips_file_is_set_aside_never_read_as_no_cuts_nor_written_over(tmp_path, what):
+    """The hand's cuts of a clip live in ``<edits>/clips/<clip>.json``. A FIFO there used to hang
+    the tab, a link to /dev/zero was read until MemoryError, a damaged file was read as "no cuts"
+    and then written over, "123" was read as cuts 1, 2 and 3. Now each is set aside
+    (``.damaged-<time>``) with a warning, without blocking; the hand's next cut is saved anew."""
+    import json
+
+    from pnlviz.pipeline.clip import read_cuts, set_cut
+    from pnlviz.pipeline.reader import FrameReader
+
+    data = _frames(tmp_path / "clip", [(f"0000{i}", f"m-IMG_{i + 1}") for i in range(4)])
+    reader = FrameReader.open(data, edits=tmp_path / "edits", writable=True)
+    try:
+        path = tmp_path / "edits" / "clips" / "m.json"
+        path.parent.mkdir(parents=True)
+        damaged = '{"cuts": {"added": [2], "removed": ['  # a write torn half way: the hand's cut is in it
+        if what == "fifo":
+            os.mkfifo(path)
+        elif what == "dev_zero":
+            os.symlink("/dev/zero", path)
+        elif what == "damaged":
+            path.write_text(damaged)
+        elif what == "digits":
+            path.write_text("123")
+        else:
+            path.mkdir()
+        cuts = _in_time(lambda: read_cuts(reader, "m"))
+        assert cuts.added == frozenset() and cuts.removed == frozenset()
+        aside = list(path.parent.glob("m.json.damaged-*"))
+        assert len(aside) == 1 and not os.path.lexists(path)
+        assert any("m.json" in w and "moved aside" in w for w in reader.edits_folder.warnings)
+        if what == "damaged":
+            assert aside[0].read_text() == damaged  # kept as it was
+        from pnlviz.pipeline.clip import clip_solver, dataset_clips
+
+        solver = clip_solver(reader, "m", dataset_clips(reader.stems)["m"])
+        set_cut(reader, solver, "m", 2, True)
+        assert json.loads(path.read_text()) == {"cuts": {"added": [2], "removed": []}}
+        assert len(list(path.parent.glob("m.json.damaged-*"))) == 1
+    finally:
+        reader.close()
+
+
+@pytest.mark.parametrize("what", ["fifo", "bad_lines", "not_a_folder"])
+def test_the_app_starts_and_draws_whatever_is_in_its_cache(tmp_path, what):
+    """A FIFO at ``<edits>/cache/summaries.jsonl`` used to hang the start; one bad line in it
+    stopped the first frame from drawing or the server from starting. Now the app starts, the bad
+    lines are skipped and counted, the good ones kept, anything not a file set aside."""
+    import json
+
+    from pnlviz.app.state import AppState
+
+    data = _frames(tmp_path / "set", [("00000", "00000"), ("00001", "00001")])
+    cache = tmp_path / "edits" / "cache"
+    summaries = cache / "summaries.jsonl"
+    cache.parent.mkdir(parents=True)
+    good = {"stem": "00001", "ok": True, "failure": None, "worst": 1.0, "median": 0.5, "jac5": 1.0,
+            "token": "x", "suspect": None, "suspect_note": None}
+    if what == "fifo":
+        cache.mkdir()
+        os.mkfifo(summaries)
+    elif what == "bad_lines":
+        cache.mkdir()
+        summaries.write_text("\n".join([json.dumps(good), "{not json", json.dumps({**good, "stem": 7}),
+                                        json.dumps({**good, "median": "x", "stem": "00000"}), "[]"]) + "\n")
+    else:
+        cache.write_text("a file where the cache folder goes")
+    st = _in_time(lambda: AppState(data, edits=tmp_path / "edits"))
+    try:
+        if what == "bad_lines":  # the good line kept, the three bad ones not
+            assert st.triage.store.get("00001") is not None
+            assert st.triage.store.get("00000") is None
+        view = _in_time(lambda: st.view("00000"))
+        assert view.result is not None and view.result.ok  # the first frame calibrates and draws
+        warnings = " | ".join(st.edits.warnings)
+        if what == "bad_lines":
+            assert "1 damaged line(s) skipped" in warnings and "3 line(s) that are not frame summaries" in warnings
+        else:
+            assert "moved aside" in warnings
+    finally:
+        st.close()
+
+
+def test_sigterm_ends_the_server_within_five_seconds(tmp_path):
+    """``kill`` (SIGTERM) stops ``pnlviz serve`` as Ctrl+C does, and within 5 s whatever it was
+    doing (the server used to ignore it after a read hung on a FIFO)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from helpers import free_port
+
+    data = _frames(tmp_path / "set", [("00000", "00000")])
+    proc = subprocess.Popen([sys.executable, "-m", "pnlviz", "serve", "--data", str(data), "--no-detect",
+                             "--port", str(free_port())], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.time() + 60
+        for line in proc.stdout:
+            if "pnlviz: open" in line or time.time() > deadline:
+                break
+        t0 = time.time()
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=10)
+        assert time.time() - t0 < 5.5 and proc.returncode is not None
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_qa_resume_goes_on_past_a_damaged_line_of_its_own_output(tmp_path, capsys):
+    """``qa --resume`` used to crash on a damaged line of its own output: now the line is not
+    kept (one warning), its frame is judged again, the others are kept as they were."""
+    import json
+
+    data = _frames(tmp_path / "set", [(f"0000{i}", f"0000{i}") for i in range(3)])
+    out = tmp_path / "qa.jsonl"
+    assert main(["qa", "--data", str(data), "--out", str(out), "--no-progress"]) == 0
+    lines = [json.loads(t) for t in out.read_text().splitlines()]
+    frames = [line for line in lines if "stem" in line]
+    damaged = dict(frames[0], score="high")
+    out.write_text("\n".join(json.dumps(x) for x in [damaged] + frames[1:]) + "\n{torn\n")
+    capsys.readouterr()
+    assert main(["qa", "--data", str(data), "--out", str(out), "--resume", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "2 damaged line(s) not kept" in err
+    again = {x["stem"]: x for x in map(json.loads, out.read_text().splitlines()) if "stem" in x}
+    assert sorted(again) == sorted(f["stem"] for f in frames)
+    assert again[frames[0]["stem"]]["score"] == frames[0]["score"]  # judged again
+    assert all(again[f["stem"]] == f for f in frames[1:])
+
+
+def test_qa_says_when_it_leaves_out_a_damaged_edit_record(two_datasets, capsys):
+    """``export`` warned about a damaged edit record while ``qa`` ignored it without a word."""
+    a, _, edits = two_datasets
+    (edits / "frames" / "00002.json").write_text("{damaged")
+    assert main(["qa", "--data", str(a), "--edits", str(edits), "--out", str(a.parent / "q.jsonl"),
+                 "--no-progress"]) == 0
+    assert "00002.json: damaged edit record ignored" in capsys.readouterr().err

@@ -3,9 +3,7 @@ pipeline in the shot's problem, each frame judged against its own camera, a shot
 frames disagree with it; and one rule for what a clip is and where it cuts."""
 
 import numpy as np
-import pytest
 
-from pnlviz.calib.calibrate import CalibParams, calibrate
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.problem import FrameData

@@ -13,9 +13,7 @@ not calibrated again.
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import threading
 import time
 from collections import OrderedDict
@@ -27,6 +25,7 @@ import numpy as np
 
 from pnlviz.data import DataError
 from pnlviz.data.predictions import parse_predictions, predictions_to_json
+from pnlviz.data.state_files import JsonLinesFile, state_folder
 
 CACHE_DIR = "cache"
 
@@ -51,6 +50,22 @@ class FrameSummary:
     def error(self) -> float:
         """The clip strip's error: the median residual, ``inf`` without a camera."""
         return self.median if self.ok else math.inf
+
+
+def summary_from_json(obj) -> FrameSummary | None:
+    """A summary as kept in ``summaries.jsonl``, None for anything else (a damaged line)."""
+    def number(v, optional: bool = False) -> bool:
+        return (optional and v is None) or (type(v) in (int, float) and math.isfinite(v))
+
+    def text(v, optional: bool = False) -> bool:
+        return (optional and v is None) or (isinstance(v, str) and len(v) <= 10000)
+
+    if not isinstance(obj, dict) or set(obj) - set(FrameSummary.__dataclass_fields__):
+        return None
+    ok = (text(obj.get("stem")) and type(obj.get("ok")) is bool and text(obj.get("failure"), True)
+          and number(obj.get("worst")) and number(obj.get("median")) and number(obj.get("jac5"), True)
+          and text(obj.get("token")) and number(obj.get("suspect"), True) and text(obj.get("suspect_note"), True))
+    return FrameSummary(**obj) if ok else None
 
 
 def summary_token(settings, digest: str, has_detections: bool) -> str:
@@ -117,63 +132,12 @@ def suspect_score(view) -> tuple[float | None, str | None]:
     return round(qa.score, 3), (qa.findings[0].message if qa.findings else None)
 
 
-class _JsonLines:
-    """An append-only file of JSON lines (``None`` path: memory only, for a read-only folder)."""
-
-    def __init__(self, path: Path | None):
-        self.path = path
-        self._lock = threading.Lock()
-        if path is not None and path.is_file() and path.stat().st_size:
-            with open(path, "rb+") as f:  # a line torn by a crash is ended, so the next one starts clean
-                f.seek(-1, os.SEEK_END)
-                if f.read(1) != b"\n":
-                    f.write(b"\n")
-
-    def rewrite(self, objects) -> None:
-        """The file with these lines only (atomically), e.g. the latest line of each frame."""
-        if self.path is None:
-            return
-        from pnlviz.data.atomic import atomic_write_text
-
-        with self._lock:
-            atomic_write_text(self.path, "".join(json.dumps(o, separators=(",", ":")) + "\n" for o in objects))
-
-    def lines(self):
-        """(offset, length, object) of each valid line; a torn last line (a crash) is skipped."""
-        if self.path is None or not self.path.is_file():
-            return
-        offset = 0
-        with open(self.path, "rb") as f:
-            for raw in f:
-                try:
-                    yield offset, len(raw), json.loads(raw)
-                except ValueError:
-                    pass
-                offset += len(raw)
-
-    def append(self, obj: dict) -> tuple[int, int] | None:
-        if self.path is None:
-            return None
-        data = (json.dumps(obj, separators=(",", ":"), allow_nan=False) + "\n").encode()
-        with self._lock:
-            with open(self.path, "ab") as f:
-                offset = f.seek(0, os.SEEK_END)
-                f.write(data)
-        return offset, len(data)
-
-    def read(self, offset: int, length: int) -> dict:
-        assert self.path is not None  # offsets come from append, which writes only to a file
-        with self._lock, open(self.path, "rb") as f:
-            f.seek(offset)
-            return json.loads(f.read(length))
-
-
 class DetectionCache:
     """The detector's results by stem, on disk (``detections.jsonl``), a few kept in memory: a
     mapping as :class:`pnlviz.pipeline.FrameReader` looks detections up (``get``, ``in``)."""
 
-    def __init__(self, path: Path | None, keep: int = 64):
-        self._file = _JsonLines(path)
+    def __init__(self, path: Path | None, warnings: list[str], keep: int = 64):
+        self._file = JsonLinesFile(path, warnings)
         self._where: dict[str, tuple[int, int]] = {}
         self._recent: OrderedDict[str, object] = OrderedDict()
         self._memory: dict[str, object] = {}  # without a file (read-only edits folder)
@@ -231,17 +195,19 @@ class DetectionCache:
 class SummaryStore:
     """Every frame's latest summary (in memory: small) and its file (``summaries.jsonl``)."""
 
-    def __init__(self, path: Path | None):
-        self._file = _JsonLines(path)
+    def __init__(self, path: Path | None, warnings: list[str]):
+        self._file = JsonLinesFile(path, warnings)
         self._by_stem: dict[str, FrameSummary] = {}
-        n = 0
+        n = bad = 0
         for _, _, obj in self._file.lines():
             n += 1
-            try:
-                s = FrameSummary(**obj)
-            except TypeError:
+            s = summary_from_json(obj)
+            if s is None:
+                bad += 1
                 continue
             self._by_stem[s.stem] = s
+        if bad:
+            warnings.append(f"{path}: {bad} line(s) that are not frame summaries skipped")
         if n > 2 * len(self._by_stem) + 100:  # mostly superseded lines: keep the latest of each frame
             self._file.rewrite(asdict(s) for s in self._by_stem.values()
                                if all(not isinstance(v, float) or math.isfinite(v) for v in asdict(s).values()))
@@ -262,12 +228,11 @@ class SummaryStore:
         return len(self._by_stem)
 
 
-def cache_paths(edits_root: Path, writable: bool) -> tuple[Path | None, Path | None]:
+def cache_paths(edits_root: Path, writable: bool, warnings: list[str]) -> tuple[Path | None, Path | None]:
     """Where the summaries and the detections are kept (None, None for a read-only folder)."""
     if not writable:
         return None, None
-    folder = Path(edits_root) / CACHE_DIR
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = state_folder(Path(edits_root) / CACHE_DIR, warnings)
     return folder / "summaries.jsonl", folder / "detections.jsonl"
 
 
@@ -325,10 +290,11 @@ class Triage:
 
     def __init__(self, state, writable: bool):
         self.state = state
-        summaries, detections = cache_paths(state.edits.root, writable)
-        self.store = SummaryStore(summaries)
+        warnings = state.edits.warnings
+        summaries, detections = cache_paths(state.edits.root, writable, warnings)
+        self.store = SummaryStore(summaries, warnings)
         if state.detector is not None:
-            state.reader.detected = DetectionCache(detections)
+            state.reader.detected = DetectionCache(detections, warnings)
         self.progress: PassProgress | None = None
 
     def has_detections(self, stem: str) -> bool:

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -47,7 +47,7 @@ from .shot import TemporalParams
 from .shot_check import CameraChoice
 from .shot_fit import ShotFit, distances
 from .sources import apply_keypoint_edits
-from .temporal import ShotPart, ShotSolver
+from .temporal import ShotSolver
 
 __all__ = ["DISTRUST_PX", "PROVENANCE", "ClipLabel", "ClipSolver", "carried_points"]
 

@@ -106,18 +106,33 @@ def previous_lines(out: Path, resume: bool) -> dict[str, dict]:
         return {}
     done: dict[str, dict] = {}
     stale = sorted(out.parent.glob(f".{out.name}.*.tmp"))
+    damaged = 0
     for path in ([out] if out.is_file() else []) + stale:
         with open(path, encoding="utf-8", errors="replace") as f:
             for text in f:
                 try:
                     line = json.loads(text)
                 except ValueError:
-                    continue  # a line torn by a kill
-                if isinstance(line, dict) and isinstance(line.get("stem"), str) and "error" not in line:
+                    damaged += path == out  # a line torn by a kill is expected in the temporary file
+                    continue
+                if _judged(line):
                     done[line["stem"]] = line
+                elif not (isinstance(line, dict) and ("summary" in line or "error" in line)):
+                    damaged += 1
     for path in stale:
         path.unlink(missing_ok=True)
+    if damaged:
+        print(f"warning: {out}: {damaged} damaged line(s) not kept: their frames are judged again", file=sys.stderr)
     return done
+
+
+def _judged(line) -> bool:
+    """A line of a frame this command judged (``stem``, a finite ``score``, a list of findings)."""
+    import math
+
+    return (isinstance(line, dict) and isinstance(line.get("stem"), str) and "error" not in line
+            and type(line.get("score")) in (int, float) and math.isfinite(line["score"])
+            and isinstance(line.get("findings"), list))
 
 
 class Summary:

@@ -80,6 +80,7 @@ def run_serve(args) -> int:
         print("error: --video goes instead of --data", file=sys.stderr)
         return 2
     data, args.edits = (args.video, args.edits) if args.video is not None else app_data(args)
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as Ctrl+C does (edits folder released), from now on
     _quiet_handshakes()
     try:
         detector = _detector(args)
@@ -112,7 +113,6 @@ def run_serve(args) -> int:
     if detector is not None and detector.light:
         detector.warm_up()  # torch and the weights load in the detector process while the browser connects
     _announce(args, data, state, app)
-    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as Ctrl+C does: edits folder released
     try:
         while True:
             time.sleep(1.0)
@@ -141,5 +141,18 @@ def _announce(args, data, state, app) -> None:
     print(f"pnlviz: open {urls[0]}" + "".join(f"\npnlviz:   or {u}" for u in urls[1:]), flush=True)
 
 
+#: seconds a stop asked by SIGTERM may take before the process ends anyway
+STOP_WITHIN_S = 5.0
+
+
 def _interrupt(signum, frame) -> None:
+    """SIGTERM: stop as Ctrl+C does, and end the process anyway after :data:`STOP_WITHIN_S`
+    should the stop hang (records are written atomically and the folder's lock goes with the
+    process: nothing is lost)."""
+    import os
+    import threading
+
+    timer = threading.Timer(STOP_WITHIN_S, lambda: os._exit(143))
+    timer.daemon = True
+    timer.start()
     raise KeyboardInterrupt

@@ -28,6 +28,7 @@ from pnlviz.data import atomic_write_text
 from pnlviz.data.errors import DataError
 from pnlviz.data.layout import video_clips
 from pnlviz.data.predictions import predictions_to_json
+from pnlviz.data.state_files import read_state_json
 from pnlviz.data.snapshot import edits_digest
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.pipeline.reader import FrameReader, Settings
@@ -48,13 +49,18 @@ def _cuts_path(reader: FrameReader, clip: str) -> Path:
     return reader.edits_folder.root / CLIPS_DIR / f"{safe}.json"
 
 
+def _cuts_of(obj) -> CutEdits:
+    if not isinstance(obj, dict) or set(obj) != {"cuts"}:
+        raise ValueError(f'expected {{"cuts": {{"added": [...], "removed": [...]}}}}, got {str(obj)[:80]!r}')
+    return CutEdits.from_json(obj["cuts"])
+
+
 def read_cuts(reader: FrameReader, clip: str) -> CutEdits:
-    """The cuts a hand changed in ``clip`` (none when nothing was saved, or the file is unreadable)."""
-    path = _cuts_path(reader, clip)
-    try:
-        return CutEdits.from_json(json.loads(path.read_text()).get("cuts"))
-    except (OSError, ValueError, TypeError, AttributeError):
-        return CutEdits()
+    """The cuts a hand changed in ``clip`` (none when nothing was saved). A file that is not
+    what :func:`set_cut` writes (damaged, a FIFO, ``/dev/zero``) is set aside with a warning
+    (:mod:`pnlviz.data.state_files`), never read as "no cuts" and then written over."""
+    cuts = read_state_json(_cuts_path(reader, clip), reader.edits_folder.warnings, check=_cuts_of)
+    return cuts if cuts is not None else CutEdits()
 
 
 def set_cut(reader: FrameReader, solver: ClipSolver, clip: str, t: int, cut: bool) -> None:
