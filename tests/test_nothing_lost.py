@@ -276,3 +276,51 @@ def test_qa_says_when_it_leaves_out_a_damaged_edit_record(two_datasets, capsys):
     assert main(["qa", "--data", str(a), "--edits", str(edits), "--out", str(a.parent / "q.jsonl"),
                  "--no-progress"]) == 0
     assert "00002.json: damaged edit record ignored" in capsys.readouterr().err
+
+
+def test_memory_is_bounded_by_what_a_frame_can_hold(tmp_path, capsys):
+    """A 31 MB annotation (under the old 64 MiB cap) took 2.0 GB in qa and 2.55 GB in serve; one
+    class of 650,000 points 4.4 GB. Annotation files over 4 MiB and classes over 500 points are
+    refused, one line each, the other frames done; the largest annotation still read stays small
+    (measured: 120 MB peak for qa, benchmarks/bench_serve_memory.py for the app)."""
+    import json
+
+    import numpy as np
+
+    from pnlviz.data.annotations import MAX_POINTS
+
+    data = _frames(tmp_path / "set", [(f"0000{i}", f"0000{i}") for i in range(3)])
+    rng = np.random.default_rng(0)
+    pts = [{"x": float(x), "y": float(y)} for x, y in rng.random((650_000, 2))]
+    (data / "00000.json").write_text(json.dumps({"Side line top": pts}))
+    ann = json.loads((data / "00001.json").read_text())
+    ann["Middle line"] = [{"x": 0.5, "y": i / (MAX_POINTS + 1)} for i in range(MAX_POINTS + 1)]
+    (data / "00001.json").write_text(json.dumps(ann))
+    out = tmp_path / "q.jsonl"
+    assert main(["qa", "--data", str(data), "--out", str(out), "--no-progress"]) == 0
+    said = capsys.readouterr()
+    assert "00000.json: file too large" in said.out + said.err and "the limit for this kind of file is 4 MiB" in said.out + said.err
+    assert f"'Middle line' has {MAX_POINTS + 1:,} points" in said.out + said.err
+    judged = [json.loads(t) for t in out.read_text().splitlines()]
+    assert [x["stem"] for x in judged if "score" in x] == ["00002"]
+
+
+def test_a_video_over_the_pixel_cap_is_refused(tmp_path, monkeypatch):
+    """Video frames obey the image pixel cap (a 9000x9000 video was served at 1.45 GB)."""
+    cv2 = pytest.importorskip("cv2")
+    import numpy as np
+
+    from pnlviz.data import DataError, limits
+    from pnlviz.data.video import VideoDataset
+
+    path = tmp_path / "v.mp4"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 25.0, (320, 240))
+    if not writer.isOpened():
+        pytest.skip("this OpenCV build cannot write mp4")
+    for _ in range(3):
+        writer.write(np.zeros((240, 320, 3), np.uint8))
+    writer.release()
+    assert len(VideoDataset(path)) == 3
+    monkeypatch.setattr(limits, "MAX_IMAGE_PIXELS", 320 * 240 - 1)  # as a 9000x9000 video is against 50 MP
+    with pytest.raises(DataError, match="image too large: 320x240"):
+        VideoDataset(path)

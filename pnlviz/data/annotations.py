@@ -43,6 +43,10 @@ Annotation = dict[str, np.ndarray]
 COORD_RANGE: tuple[float, float] = (-0.5, 1.5)
 #: Fewest points a class with geometry may have (a line needs 2; so does a circle arc).
 MIN_POINTS = 2
+#: Most points a class may have: SoccerNet's have 2 to 37 (a circle, in SN22 and WC14); a hand or a tool that
+#: gave a class thousands would make every judge and fit of it slow and large in memory (650,000
+#: points in one class took 4.4 GB in ``qa``)
+MAX_POINTS = 500
 
 
 def _name_for_message(name: Any) -> str:
@@ -64,6 +68,8 @@ def _parse_points(points: Any, cls: str, source: str, ignored: bool) -> np.ndarr
     label = repr(cls)
     if not isinstance(points, list):
         raise DataError(source, f"class {label}: expected a list of points, got {describe(points)}")
+    if len(points) > MAX_POINTS:
+        raise DataError(source, f"class {label} has {len(points):,} points; at most {MAX_POINTS:,} per class are read")
     out = np.empty((len(points), 2), dtype=np.float64)
     lo, hi = COORD_RANGE
     for i, p in enumerate(points):

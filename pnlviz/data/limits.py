@@ -5,10 +5,15 @@ A file over a cap is a one-line :class:`~pnlviz.data.errors.DataError` naming it
 
 from __future__ import annotations
 
-__all__ = ["MAX_JSON_BYTES", "MAX_IMAGE_BYTES", "MAX_IMAGE_PIXELS", "MIN_IMAGE_SIDE", "format_bytes"]
+__all__ = ["MAX_DATASET_JSON_BYTES", "MAX_JSON_BYTES", "MAX_IMAGE_BYTES", "MAX_IMAGE_PIXELS", "MIN_IMAGE_SIDE",
+           "format_bytes"]
 
-#: Largest JSON file (annotation, camera, predictions, homographies, match info) read, in bytes.
+#: Largest JSON file (camera, predictions, homographies, match info, an edit record with its
+#: history) read, in bytes.
 MAX_JSON_BYTES = 64 * 2**20
+#: Largest JSON file of a dataset's frame (its annotation) read, in bytes: SoccerNet's are 2-20 KB;
+#: a 31 MB one, parsed, took 2 GB in ``qa`` and 2.5 GB in ``serve``
+MAX_DATASET_JSON_BYTES = 4 * 2**20
 #: Largest encoded image file read, in bytes.
 MAX_IMAGE_BYTES = 256 * 2**20
 #: Largest image decoded, in pixels (an 8K UHD frame is 33 megapixels).

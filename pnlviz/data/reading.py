@@ -19,7 +19,7 @@ from typing import IO
 from .errors import DataError
 from .filekind import open_regular, require_input
 from .layout import is_junk, split_member
-from .limits import MAX_IMAGE_BYTES, MAX_JSON_BYTES, format_bytes
+from .limits import MAX_DATASET_JSON_BYTES, MAX_IMAGE_BYTES, MAX_JSON_BYTES, format_bytes
 
 __all__ = [
     "frame_files",
@@ -33,8 +33,9 @@ _IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 
 
 def limit_for(name: str) -> int:
-    """The byte cap of a file by its extension: images :data:`MAX_IMAGE_BYTES`, else JSON's."""
-    return MAX_IMAGE_BYTES if name.lower().endswith(_IMAGE_SUFFIXES) else MAX_JSON_BYTES
+    """The byte cap of a dataset's file by its extension: images :data:`MAX_IMAGE_BYTES`, else an
+    annotation's (:data:`MAX_DATASET_JSON_BYTES`)."""
+    return MAX_IMAGE_BYTES if name.lower().endswith(_IMAGE_SUFFIXES) else MAX_DATASET_JSON_BYTES
 
 
 def _too_large(source: str, size: int, limit: int) -> DataError:

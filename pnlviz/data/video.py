@@ -16,7 +16,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .dataset import Frame
+from . import limits
 from .errors import DataError
+from .imagesize import check_pixels
 
 if TYPE_CHECKING:  # imported when a frame is read
     import cv2
@@ -103,6 +105,11 @@ class VideoDataset:
         if count <= 0 or self.width <= 0 or self.height <= 0:
             cap.release()
             raise DataError(str(path), "the video has no frames")
+        try:  # a frame is an image: the same cap on its pixels (a 9000x9000 video was served at 1.45 GB)
+            check_pixels(self.width, self.height, str(path), limits.MAX_IMAGE_PIXELS)
+        except DataError:
+            cap.release()
+            raise
         _check_decodes(cap, count, str(path))
         self.name = self.path.stem
         self._stems = tuple(f"{self.name}-IMG_{i + 1:05d}" for i in range(count))
