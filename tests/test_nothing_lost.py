@@ -324,3 +324,51 @@ def test_a_video_over_the_pixel_cap_is_refused(tmp_path, monkeypatch):
     monkeypatch.setattr(limits, "MAX_IMAGE_PIXELS", 320 * 240 - 1)  # as a 9000x9000 video is against 50 MP
     with pytest.raises(DataError, match="image too large: 320x240"):
         VideoDataset(path)
+
+
+def test_image_to_pitch_gives_no_point_past_the_horizon_nor_where_the_lens_does_not_invert():
+    """A pixel 0.25 px below the horizon used to land 141 km away, and with lens distortion a pixel
+    far outside the image, where the model folds back, on a wrong ground point: both are NaN now;
+    pixels of the pitch are as before (their round trip within 1 mm)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    import pnlviz
+
+    cam = pnlviz.Camera.from_look_at((0.0, 60.0, -18.0), (0.0, 0.0, 0.0), hfov_deg=40, width=1280, height=720)
+    # the horizon's row at the image centre column: the limit of the ground's image going away
+    far = cam.project(np.array([[0.0, -1e7, 0.0]]))[0][0]
+    assert np.all(np.isnan(cam.image_to_pitch(far + [0.0, 0.25])))
+    assert np.all(np.isnan(cam.image_to_pitch(np.array([[640.0, far[1] - 5]]))))  # above it
+    ground = np.array([[x, y, 0.0] for x in (-40.0, 0.0, 30.0) for y in (-30.0, 0.0, 30.0)])
+    uv, _ = cam.project(ground)
+    assert np.allclose(cam.image_to_pitch(uv), ground[:, :2], atol=1e-3)
+    lens = replace(cam, radial=np.array([-0.4, 0.0, 0.0, 0.0, 0.0, 0.0]))  # folds back beyond r = 0.91
+    grid = np.array([[x, y, 0.0] for x in range(-30, 31, 5) for y in range(-30, 31, 5)], float)
+    inside, _ = lens.project(grid)
+    seen = lens.in_image(inside)
+    ground = grid
+    assert seen.sum() >= 4 and np.allclose(lens.image_to_pitch(inside[seen]), ground[seen, :2], atol=1e-3)
+    outside = np.array([[640.0 + 2.2 * lens.fx * 0.35, 360.0]])  # past where the distortion turns back
+    assert not lens.lens_inverts(outside)[0] and np.all(np.isnan(lens.image_to_pitch(outside)))
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("x_focal_length", 0, "must be positive"), ("y_focal_length", float("nan"), "must be finite"),
+    ("position_meters", [1e308, 0.0, -10.0], "farther than 10 km"), ("principal_point", [480.0], "2 numbers"),
+    ("pan_degrees", "left", "a number"), ("radial_distortion", [0.1, float("inf"), 0, 0, 0, 0], "must be finite"),
+    ("tilt_degrees", None, "a number")])
+def test_from_soccernet_refuses_nonsense_naming_the_key(key, value, words):
+    """``Camera.from_soccernet`` accepted focal 0, NaN and a position 1e308 away, and raised a bare
+    KeyError for a missing key: now every field is checked, an ArgumentError naming the key."""
+    import pnlviz
+
+    d = pnlviz.Camera.from_look_at((0.0, 60.0, -18.0), (0.0, 0.0, 0.0), hfov_deg=40, width=960,
+                                   height=540).to_soccernet()
+    with pytest.raises(pnlviz.ArgumentError, match=rf"^camera\['{key}'\]: .*{words}"):
+        pnlviz.Camera.from_soccernet(dict(d, **{key: value}))
+    missing = {k: v for k, v in d.items() if k != key}
+    if key not in ("radial_distortion",):  # the lens terms are optional
+        with pytest.raises(pnlviz.ArgumentError, match=rf"^camera\['{key}'\]: missing"):
+            pnlviz.Camera.from_soccernet(missing)

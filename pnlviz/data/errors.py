@@ -59,8 +59,4 @@ def member_source(zip_path: str | os.PathLike, member: str) -> str:
     return f"{os.fspath(zip_path)}:{member}"
 
 
-class ArgumentError(ValueError):
-    """A wrong argument of the Python API (:mod:`pnlviz.api`); the message starts with its name.
-    Shown (and importable) as ``pnlviz.ArgumentError``."""
-
-    __module__ = "pnlviz"
+from pnlviz.errors import ArgumentError  # noqa: E402 - defined once, for every room (re-exported here)

@@ -21,6 +21,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from pnlviz.errors import ArgumentError
+
 #: Points closer to the camera plane than this (metres along the optical axis) are not projected;
 #: the SoccerNet evaluator uses the same bound.
 MIN_DEPTH = 1e-3
@@ -93,6 +95,37 @@ def look_at_rotation(position: np.ndarray, target: np.ndarray, roll: float = 0.0
     return _rz(roll).T @ R if roll else R
 
 
+#: a camera's centre farther than this (metres) from the pitch's centre is not a broadcast camera
+MAX_CAMERA_DISTANCE_M = 10_000.0
+#: a pixel whose ground point is farther than this (metres) from the pitch is not on the pitch
+#: (:meth:`Camera.image_to_pitch`: rays grazing the horizon meet the ground kilometres away)
+MAX_PITCH_DISTANCE_M = 1_000.0
+
+
+def _numbers(d: Mapping[str, Any], key: str, n: int | None, *, positive: bool = False,
+             optional: bool = False) -> np.ndarray:
+    """``d[key]``: ``n`` finite numbers (one number when ``n`` is None), positive with
+    ``positive``; zeros when ``optional`` and missing; ArgumentError naming the key otherwise."""
+    if key not in d:
+        if optional:
+            return np.zeros(n or 1)
+        raise ArgumentError(f"camera[{key!r}]: missing (a SoccerNet camera dict has it)")
+    value = d[key]
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ArgumentError(f"camera[{key!r}]: expected {'a number' if n is None else f'{n} numbers'}, "
+                            f"got {str(value)[:60]!r}") from None
+    if value is None or isinstance(value, (bool, np.bool_, str, bytes)) or arr.shape != (() if n is None else (n,)):
+        raise ArgumentError(f"camera[{key!r}]: expected {'a number' if n is None else f'{n} numbers'}, "
+                            f"got {str(value)[:60]!r}")
+    if not np.all(np.isfinite(arr)):
+        raise ArgumentError(f"camera[{key!r}]: must be finite, got {str(value)[:60]!r}")
+    if positive and not np.all(arr > 0):
+        raise ArgumentError(f"camera[{key!r}]: must be positive, got {str(value)[:60]!r}")
+    return arr.reshape(-1)
+
+
 @dataclass(frozen=True)
 class Camera:
     """A calibrated camera for an image of ``width`` x ``height`` pixels."""
@@ -142,16 +175,24 @@ class Camera:
     @classmethod
     def from_soccernet(cls, d: Mapping[str, Any], width: float | None = None, height: float | None = None) -> "Camera":
         """From a SoccerNet camera dict. The image size defaults to twice the principal point, as
-        in the official evaluator."""
-        pp = [float(v) for v in d["principal_point"]]
-        R = rotation_from_pan_tilt_roll(*(math.radians(float(d[k])) for k in ("pan_degrees", "tilt_degrees", "roll_degrees")))
-        return cls(float(d["x_focal_length"]), float(d["y_focal_length"]), pp[0], pp[1], R,
-                   np.asarray(d["position_meters"], float),
+        in the official evaluator. Every field is checked (:class:`pnlviz.ArgumentError` naming
+        the key): the angles finite, the focal lengths and principal point finite and positive,
+        the position finite and within :data:`MAX_CAMERA_DISTANCE_M` of the pitch's centre, the
+        distortion terms (optional) of their lengths and finite."""
+        if not isinstance(d, Mapping):
+            raise ArgumentError(f"camera: expected a SoccerNet camera dict, got {type(d).__name__}")
+        pp = _numbers(d, "principal_point", 2, positive=True)
+        angles = [math.radians(_numbers(d, k, None)[0]) for k in ("pan_degrees", "tilt_degrees", "roll_degrees")]
+        C = _numbers(d, "position_meters", 3)
+        if np.max(np.abs(C)) > MAX_CAMERA_DISTANCE_M or float(np.linalg.norm(C)) > MAX_CAMERA_DISTANCE_M:
+            raise ArgumentError(f"camera['position_meters']: [{', '.join(f'{v:.6g}' for v in C)}] is farther than "
+                                f"{MAX_CAMERA_DISTANCE_M / 1000:g} km from the pitch")
+        fx, fy = _numbers(d, "x_focal_length", None, positive=True)[0], _numbers(d, "y_focal_length", None, positive=True)[0]
+        lens = [_numbers(d, k, n, optional=True) for k, n in (("radial_distortion", 6), ("tangential_distortion", 2),
+                                                              ("thin_prism_distortion", 4))]
+        return cls(fx, fy, pp[0], pp[1], rotation_from_pan_tilt_roll(*angles), C,
                    float(width) if width is not None else 2 * pp[0],
-                   float(height) if height is not None else 2 * pp[1],
-                   np.asarray(d.get("radial_distortion", np.zeros(6)), float),
-                   np.asarray(d.get("tangential_distortion", np.zeros(2)), float),
-                   np.asarray(d.get("thin_prism_distortion", np.zeros(4)), float))
+                   float(height) if height is not None else 2 * pp[1], *lens)
 
     def to_soccernet(self) -> dict:
         """SoccerNet camera dict (plus ``rotation_matrix``, as PnLCalib writes it)."""
@@ -287,16 +328,43 @@ class Camera:
 
     def image_to_pitch(self, uv: np.ndarray) -> np.ndarray:
         """Where on the pitch (the ground plane z = 0, metres, SoccerNet's centre-origin frame) the
-        pixels ``uv`` (N, 2) of this image are: (N, 2), lens distortion undone; NaN for a pixel
-        whose ray does not meet the ground in front of the camera (above the horizon). The point
-        a player stands on is the bottom middle of the player's box. One pixel (2,) gives one
-        point (2,); any other shape than (N, 2) or (2,) is refused (ValueError)."""
+        pixels ``uv`` (N, 2) of this image are: (N, 2), lens distortion undone. NaN for a pixel
+        whose ray does not meet the ground in front of the camera (above the horizon), meets it
+        farther than :data:`MAX_PITCH_DISTANCE_M` from the pitch (a ray grazing the horizon: no
+        pitch point), or where the lens model does not invert (far outside the image a distortion
+        folds back, and a pixel there has no ray). The point a player stands on is the bottom
+        middle of the player's box. One pixel (2,) gives one point (2,); any other shape than
+        (N, 2) or (2,) is refused (ArgumentError naming ``uv``)."""
         arr = np.asarray(uv, float)
         if arr.shape == (2,):
-            return self.back_project_to_ground(arr[None])[0, :2]
+            return self.image_to_pitch(arr[None])[0]
         if arr.ndim != 2 or arr.shape[1] != 2:
-            raise ValueError(f"uv: expected pixels (N, 2) or one pixel (2,), got an array of shape {arr.shape}")
-        return self.back_project_to_ground(arr)[:, :2]
+            raise ArgumentError(f"uv: expected pixels (N, 2) or one pixel (2,), got an array of shape {arr.shape}")
+        out = self.back_project_to_ground(arr)[:, :2]
+        with np.errstate(invalid="ignore"):
+            far = np.hypot(np.maximum(np.abs(out[:, 0]) - 52.5, 0), np.maximum(np.abs(out[:, 1]) - 34.0, 0))
+            out[~(far <= MAX_PITCH_DISTANCE_M)] = np.nan
+        out[~self.lens_inverts(arr)] = np.nan
+        return out
+
+    def lens_inverts(self, uv: np.ndarray, samples: int = 33) -> np.ndarray:
+        """(N,) whether the lens model maps a ray to each pixel of ``uv`` (N, 2) one way: the
+        undistorted point distorts back to the pixel, and on the way from the image centre to it
+        the distortion keeps moving outwards (beyond where it turns, the model folds back and the
+        same pixel has a second, wrong ray)."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        if not self.has_distortion:
+            return np.all(np.isfinite(uv), axis=1)
+        xd = np.stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy], axis=1)
+        with np.errstate(all="ignore"):
+            x = self.undistort(xd)
+            ok = np.all(np.isfinite(x), axis=1) & (np.linalg.norm(self.distort(x) - xd, axis=1) < 1e-9 + 1e-9 *
+                                                    np.linalg.norm(xd, axis=1))
+            t = np.linspace(0.0, 1.0, samples)[:, None, None]
+            path = self.distort((t * x[None]).reshape(-1, 2)).reshape(samples, -1, 2)
+            outward = np.einsum("snk,nk->sn", np.diff(path, axis=0), x)  # along the ray's direction
+            ok &= np.all(outward > 0, axis=0) | (np.linalg.norm(x, axis=1) == 0)
+        return ok
 
     def homography(self) -> np.ndarray:
         """3x3 homography from the ground plane (X, Y, 1) in metres to pixels, without lens
