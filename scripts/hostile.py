@@ -15,7 +15,22 @@ classified as:
 * ``silent wrong``: exit 0 where a refusal was due, a refusal where the run had to succeed,
   raw control characters printed, or a wrong result written;
 * ``destructive``: a non-regular file at an output path (device node, FIFO, symlink) replaced or
-  written through.
+  written through, or an input changed (every file the run did not write is checked: its kind,
+  size and modification time before and after; the outputs a run may write are named by its
+  ``--out``, ``--report``, ``--csv``);
+* ``data loss``: frames the fault does not concern missing from the output (the others must be
+  done), or a user's file not kept;
+* ``memory``: a peak resident size above :data:`MEMORY_FLAG_MB` (the largest of any case is
+  printed).
+
+A serve case is clean when the server starts, a browser page shows a frame (headless Chromium,
+when playwright and chromium are installed; else the port must answer), and no traceback is
+printed.
+
+``--mutate`` checks the screen itself: each fault of :data:`MUTATIONS` is planted in a copy of the
+package (a FIFO read as if it were a file, a refusal turned into a crash, a server that never
+shows a frame, an output over its dataset let through, ...) and the cases named for it run on the
+copy; the screen must find each one (any outcome but clean), else it exits 1.
 
 The full disk and the read-only folder are small tmpfs mounts (needs root; skipped otherwise).
 """
@@ -23,6 +38,8 @@ The full disk and the read-only folder are small tmpfs mounts (needs root; skipp
 from __future__ import annotations
 
 import argparse
+import contextlib
+import hashlib
 import json
 import os
 import resource
@@ -44,8 +61,12 @@ REPO = Path(__file__).resolve().parents[1]
 CODE = Path(os.environ.get("PNLVIZ_CODE", REPO))  # the pnlviz under test (default: this checkout)
 DOC = REPO / "docs" / "reliability.md"
 SECTION = "## 6. Hostile inputs, round two"
-KINDS = ("clean", "traceback", "hang", "silent wrong", "destructive")
+KINDS = ("clean", "traceback", "hang", "silent wrong", "destructive", "data loss", "memory")
 MEMORY_LIMIT = 6 * 2**30
+#: a case whose peak resident size is above this (MB) is classified "memory"
+MEMORY_FLAG_MB = 1024
+#: the options whose value is a path a run may write (everything else it must leave as it was)
+OUTPUT_OPTIONS = ("--out", "--report", "--csv", "--json")
 
 
 @dataclass
@@ -59,6 +80,12 @@ class Run:
     timeout: float | None = None
     custom: Callable[[], tuple[str, str]] | None = None  # runs itself: (kind, detail)
     mention: str | None = None  # the output must name this (the bad field or file)
+    done: Callable[[], str | None] | None = None  # "data loss: ..." when frames not concerned are missing
+
+    def outputs(self) -> list[Path]:
+        """The paths this run may write (the values of :data:`OUTPUT_OPTIONS`, their sidecars)."""
+        out = [Path(v) for k, v in zip(self.argv, self.argv[1:]) if k in OUTPUT_OPTIONS]
+        return out + [p.with_suffix(".json") for p in out if p.suffix and p.suffix != ".json"]
 
 
 # ------------------------------------------------------------------------------ running
@@ -72,20 +99,38 @@ def _limits(user: int | None):
     return pre
 
 
+PEAK_MB: list[float] = []  # the peak resident size of the last run (MB), set by execute
+
+
 def execute(run: Run, cwd: Path, timeout: float) -> tuple[int | None, str]:
-    """(exit code or None on a time-out, stdout + stderr)."""
+    """(exit code or None on a time-out, stdout + stderr); the run's peak resident size goes to
+    :data:`PEAK_MB` (from the kernel's accounting of the process, ``wait4``)."""
+    import threading
+
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "PYTHONPATH": str(CODE),
            "PYTHONDONTWRITEBYTECODE": "1"}
     cmd = [sys.executable, "-c", run.code] if run.code else [sys.executable, "-m", "pnlviz.cli", *run.argv]
     p = subprocess.Popen(cmd, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, preexec_fn=_limits(run.user))
-    try:
-        out, _ = p.communicate(timeout=run.timeout or timeout)
-    except subprocess.TimeoutExpired:
-        os.killpg(p.pid, signal.SIGKILL)
-        out, _ = p.communicate()
-        return None, out.decode("utf-8", "backslashreplace")
-    return p.returncode, out.decode("utf-8", "backslashreplace")
+    chunks: list[bytes] = []
+    reader = threading.Thread(target=lambda: chunks.append(p.stdout.read()), daemon=True)  # type: ignore[union-attr]
+    reader.start()
+    timed_out = threading.Event()
+
+    def kill() -> None:
+        timed_out.set()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGKILL)
+
+    timer = threading.Timer(run.timeout or timeout, kill)
+    timer.start()
+    _, status, usage = os.wait4(p.pid, 0)
+    timer.cancel()
+    p.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait for it again
+    reader.join(10)
+    PEAK_MB[:] = [usage.ru_maxrss / 1024]
+    out = b"".join(chunks).decode("utf-8", "backslashreplace")
+    return (None if timed_out.is_set() else p.returncode), out
 
 
 def classify(run: Run, rc: int | None, out: str) -> tuple[str, str]:
@@ -100,6 +145,11 @@ def classify(run: Run, rc: int | None, out: str) -> tuple[str, str]:
     problem = run.check() if run.check else None
     if problem and problem.startswith("destructive"):
         return "destructive", problem
+    lost = run.done() if run.done else None
+    if lost:
+        return "data loss", lost
+    if PEAK_MB and PEAK_MB[0] > MEMORY_FLAG_MB:
+        return "memory", f"peak {PEAK_MB[0]:.0f} MB (exit {rc})"
     if "\x1b" in out:
         return "silent wrong", "raw terminal escape printed"
     if problem:
@@ -111,6 +161,40 @@ def classify(run: Run, rc: int | None, out: str) -> tuple[str, str]:
     if run.expect == "ok" and rc != 0:
         return "silent wrong", f"refused (exit {rc}): {last[:150]}"
     return "clean", f"exit {rc}: {last[:150]}"
+
+
+def snapshot(root: Path) -> dict[str, tuple]:
+    """Every entry under ``root``: (kind, size, modification time), links not followed."""
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
+        for name in dirnames + filenames:
+            path = os.path.join(dirpath, name)
+            with contextlib.suppress(OSError):
+                st = os.lstat(path)
+                out[path] = (stat.S_IFMT(st.st_mode), st.st_size, st.st_mtime_ns)
+    return out
+
+
+def changed_inputs(before: dict[str, tuple], after: dict[str, tuple], outputs: list[Path]) -> str | None:
+    """``destructive: ...`` when a run changed or removed an entry that is none of its outputs,
+    or made one inside a dataset folder (``D``: the material's and every case's copy)."""
+    allowed = [os.path.abspath(o) for o in outputs]
+
+    def output(path: str) -> bool:
+        return any(path == a or path.startswith(a.rstrip("/") + "/") for a in allowed)
+
+    for path, was in before.items():
+        if output(path) or stat.S_ISDIR(was[0]):
+            continue
+        now = after.get(path)
+        if now is None:
+            return f"destructive: the input {os.path.basename(path)} was removed"
+        if now != was:
+            return f"destructive: the input {os.path.basename(path)} was changed"
+    for path in after.keys() - before.keys():
+        if not output(path) and "/D/" in path:
+            return f"destructive: {os.path.basename(path)} written into the dataset"
+    return None
 
 
 # ------------------------------------------------------------------------------ material
@@ -177,6 +261,36 @@ class Material:
         self.config = root / "tiny.json"
         self.config.write_text(json.dumps(tiny_config()))
         self.n = 0
+        self._baseline: dict[str, set[str]] = {}
+
+    def other_dataset(self) -> dict:
+        """Another synthetic dataset with the same stems, and its edits folder made by the app (a
+        review and a moved point)."""
+        if not hasattr(self, "_other"):
+            b = self.root / "B"
+            rc, out = execute(Run(pn("synth", "--out", b, "-n", 6, "--seed", 2, "--no-progress")), self.root, 300)
+            assert rc == 0, out
+            edits = self.root / "B.edits"
+            code = ("from pnlviz.app.state import AppState\n"
+                    f"st = AppState({str(b)!r}, edits={str(edits)!r})\n"
+                    "st.set_review('00000', 'accepted'); st.move_keypoint('00001', 5, 100.0, 100.0); st.close()\n")
+            rc, out = execute(Run(code=code), self.root, 120)
+            assert rc == 0, out
+            self._other = {"data": b, "edits": edits}
+        return self._other
+
+    def baseline(self, cmd: str) -> set[str]:
+        """The frames ``cmd`` gives on the clean material (run once)."""
+        if cmd not in self._baseline:
+            w = self.root / f"baseline-{cmd}"
+            w.mkdir()
+            run = dataset_run(self, cmd, self.data, w, "ok")
+            run.done = None
+            execute(run, self.root, 300)
+            out = {"calibrate": w / "cams.zip", "labels": w / "labels", "export": w / "export",
+                   "detect": w / "preds.zip"}[cmd]
+            self._baseline[cmd] = stems_in(cmd, out)
+        return self._baseline[cmd]
 
     def work(self) -> Path:
         self.n += 1
@@ -221,18 +335,50 @@ def tiny_config() -> dict:
 DATASET_COMMANDS = ("validate", "calibrate", "labels", "export", "sheet", "eval", "detect")
 
 
-def dataset_run(m: Material, cmd: str, d: Path | str, w: Path, expect: str = "refuse") -> Run:
-    """``cmd`` on dataset ``d``, writing into ``w``."""
+def dataset_run(m: Material, cmd: str, d: Path | str, w: Path, expect: str = "refuse",
+                concerned: tuple[str, ...] = ("00001",)) -> Run:
+    """``cmd`` on dataset ``d``, writing into ``w``. When it succeeds, the frames the fault does
+    not ``concern`` must all be in its output (those the same command gives on the clean
+    material, :meth:`Material.baseline`)."""
     argv = {
         "validate": pn("validate", "--data", d, "--images"),
         "calibrate": pn("calibrate", "--data", d, "--out", w / "cams.zip", "--no-progress"),
         "labels": pn("labels", "--data", d, "--out", w / "labels"),
-        "export": pn("export", "--data", d, "--out", w / "export", "--all", "--edits", w / "edits", "--no-progress"),
+        "export": pn("export", "--data", d, "--out", w / "export", "--all", "--no-progress"),
         "sheet": pn("sheet", "--data", d, "--out", w / "sheet.png", "-n", 6),
         "eval": pn("eval", "--gt", d, "--pred", m.cams, "--no-progress"),
         "detect": pn("detect", "--data", d, "--out", w / "preds.zip", "--no-progress", "--threads", 1),
     }[cmd]
-    return Run(argv, expect=expect)
+    run = Run(argv, expect=expect)
+    out = {"calibrate": w / "cams.zip", "labels": w / "labels", "export": w / "export",
+           "detect": w / "preds.zip"}.get(cmd)
+    if out is not None and expect != "refuse":
+        run.done = others_done(m, cmd, out, concerned)
+    return run
+
+
+def stems_in(cmd: str, out: Path) -> set[str]:
+    """The frames an output holds (a camera zip, a prediction zip, a label folder, an export)."""
+    if not out.exists():
+        return set()
+    if cmd in ("calibrate", "detect"):
+        with zipfile.ZipFile(out) as zf:
+            names = [n.rsplit("/", 1)[-1] for n in zf.namelist() if n.endswith(".json")]
+        return {n[len("camera_"):-5] if n.startswith("camera_") else n[:-5] for n in names}
+    if cmd == "labels":
+        return {p.stem for p in out.glob("*.json")}
+    manifest = json.loads((out / "manifest.json").read_text())
+    return {stem for stem, e in manifest["frames"].items() if e.get("exported")}
+
+
+def others_done(m: Material, cmd: str, out: Path, concerned: tuple[str, ...]) -> Callable[[], str | None]:
+    def check() -> str | None:
+        if not out.exists():
+            return None  # refused as a whole: classified by its exit and message
+        missing = sorted(m.baseline(cmd) - set(concerned) - stems_in(cmd, out))
+        return f"data loss: frames {missing} not in the output (the fault concerns {list(concerned)})" if missing \
+            else None
+    return check
 
 
 def not_files(m: Material):
@@ -325,7 +471,7 @@ def output_runs(m: Material, w: Path, target: Path) -> dict[str, list[str]]:
     return {
         "calibrate": pn("calibrate", "--data", m.data, "--out", target, "--no-progress"),
         "detect": pn("detect", "--data", m.data, "--out", target, "--no-progress", "--threads", 1),
-        "export": pn("export", "--data", m.data, "--edits", w / "edits", "--out", target, "--all", "--no-progress"),
+        "export": pn("export", "--data", m.data, "--out", target, "--all", "--no-progress"),
         "eval --csv": pn("eval", "--gt", m.data, "--pred", m.cams, "--csv", target, "--no-progress"),
         "sheet": pn("sheet", "--data", m.data, "--out", target, "-n", 2),
         "render": pn("render", "--data", m.data, "--cameras", m.cams, "--out", target, "--no-progress"),
@@ -434,7 +580,7 @@ def camera_readers(m: Material, w: Path, text: str) -> dict[str, Run]:
         "eval": Run(pn("eval", "--gt", m.data, "--pred", cams, "--no-progress")),
         "sheet": Run(pn("sheet", "--data", d, "--out", w / "s.png", "-n", 3)),
         "render": Run(pn("render", "--data", m.data, "--cameras", cams, "--out", w / "r.mp4", "--no-progress")),
-        "export": Run(pn("export", "--data", d, "--edits", w / "edits", "--out", w / "x", "--all", "--no-progress")),
+        "export": Run(pn("export", "--data", d, "--out", w / "x", "--all", "--no-progress")),
     }
 
 
@@ -457,8 +603,7 @@ def impossible(m: Material):
             z = m.preds_with(w, info=info)
             argv = (pn("calibrate", "--data", m.data, "--detections", z, "--out", w / "c.zip", "--no-progress")
                     if cmd == "calibrate" else
-                    pn("export", "--data", m.data, "--detections", z, "--edits", w / "e", "--out", w / "x", "--all",
-                       "--no-progress"))
+                    pn("export", "--data", m.data, "--detections", z, "--out", w / "x", "--all", "--no-progress"))
             yield "impossible value", f"detector sidecar {what}: {cmd}", Run(argv)
     for p in ("-5", "1e308", "NaN"):
         text = json.dumps({"kp": {"3": {"x": 0.1, "y": 0.5, "p": float(p)}}, "lines": {}})
@@ -467,8 +612,8 @@ def impossible(m: Material):
             z = m.preds_with(w, member="00001.json", text=text)
             argv = {"calibrate": pn("calibrate", "--data", m.data, "--detections", z, "--out", w / "c.zip",
                                     "--no-progress"),
-                    "export": pn("export", "--data", m.data, "--detections", z, "--edits", w / "e", "--out", w / "x",
-                                 "--all", "--no-progress")}[cmd]
+                    "export": pn("export", "--data", m.data, "--detections", z, "--out", w / "x", "--all",
+                                 "--no-progress")}[cmd]
             yield "impossible value", f"detection probability {p}: {cmd}", Run(argv, expect="any", mention="probab")
     import cv2
     import numpy as np
@@ -514,8 +659,7 @@ def training(m: Material):
                                                            garbage, "--out", w / "m.pt", "--no-progress"),
                                                         check=no_file(w / "m.pt"))
     w = m.work()
-    rc, out = execute(Run(pn("export", "--data", m.data, "--edits", w / "e", "--out", w / "x", "--all",
-                             "--no-progress")), w, 120)
+    rc, out = execute(Run(pn("export", "--data", m.data, "--out", w / "x", "--all", "--no-progress")), w, 120)
     for manifest in (w / "x").glob("manifest*"):
         manifest.unlink()
     yield "training", "train --labels a partial export (no manifest)", Run(
@@ -562,40 +706,211 @@ def smaller(m: Material):
     yield "smaller", "bare TCP connects to serve (a port scan)", Run(custom=serve_case(m, w, [], connects=5))
 
 
+def lost(m: Material):
+    """Issue #32: what cost a user data or time: outputs over inputs, another dataset's edits, an
+    --edits that is not one, the app's own files damaged or not files, memory, nonsense cameras."""
+    for inner in ("annotations", "keypoints"):
+        w = m.work()
+        x = w / "X"
+        shutil.copytree(m.data, x / inner)
+        yield "nothing lost", f"export --data X/{inner} --out X (over its own dataset)", Run(
+            pn("export", "--data", x / inner, "--out", x, "--all", "--no-progress"), mention="holds the dataset")
+    other = m.other_dataset()
+    for cmd in ("export", "qa", "calibrate"):
+        w = m.work()
+        out = {"export": w / "x", "qa": w / "q.jsonl", "calibrate": w / "c.zip"}[cmd]
+        argv = pn(cmd, "--data", m.data, "--edits", other["edits"], "--out", out, "--no-progress")
+        yield "nothing lost", f"an edits folder of another dataset (same stems): {cmd}", Run(
+            argv + (["--all"] if cmd == "export" else []), mention="another dataset", check=no_file(out))
+    w = m.work()
+    yield "nothing lost", "an edits folder of another dataset: serve", Run(
+        custom=serve_case(m, w, ["--edits", str(other["edits"])], connects=0, refused="another dataset"))
+    for what in ("a typo", "a file", "a FIFO", "/dev/zero", "an empty folder"):
+        for cmd in ("export", "qa", "calibrate"):
+            w = m.work()
+            e = {"a typo": w / "edtis", "a file": w / "edits.txt", "a FIFO": w / "edits.fifo", "/dev/zero": "/dev/zero",
+                 "an empty folder": w / "empty"}[what]
+            if what == "a file":
+                Path(e).write_text("{}")
+            elif what == "a FIFO":
+                fifo(Path(e))
+            elif what == "an empty folder":
+                Path(e).mkdir()
+            out = {"export": w / "x", "qa": w / "q.jsonl", "calibrate": w / "c.zip"}[cmd]
+            yield "nothing lost", f"--edits {what}: {cmd}", Run(
+                pn(cmd, "--data", m.data, "--edits", e, "--out", out, "--no-progress"), mention="--edits",
+                check=no_file(out))
+    for what in ("a FIFO", "a link to /dev/zero", "damaged", "'123'"):
+        w = m.work()
+        yield "nothing lost", f"a clip's cuts file {what}", Run(code=cuts_case(m, w, what), expect="ok")
+    for what in ("a FIFO", "a bad line", "a file for the folder"):
+        w = m.work()
+        edits = w / "edits"
+        cache = edits / "cache"
+        if what == "a file for the folder":
+            edits.mkdir()
+            cache.write_text("not a folder")
+        else:
+            cache.mkdir(parents=True)
+            if what == "a FIFO":
+                fifo(cache / "summaries.jsonl")
+            else:
+                (cache / "summaries.jsonl").write_text('{"stem": "00000", "ok": true}\n{broken\n[1, 2]\n')
+        yield "nothing lost", f"the triage cache {what}: serve", Run(
+            custom=serve_case(m, w, ["--edits", str(edits)], connects=0))
+    w = m.work()
+    d = m.copy(w)
+    rng_points = [{"x": (i % 997) / 997, "y": (i % 991) / 991} for i in range(650_000)]
+    (d / "00001.json").write_text(json.dumps({"Side line top": rng_points}))
+    run = Run(pn("qa", "--data", d, "--out", w / "q.jsonl", "--no-progress"), expect="ok", mention="00001.json")
+    yield "nothing lost", "a 31 MB annotation: qa", run
+    yield "nothing lost", "a 31 MB annotation: serve", Run(custom=serve_case(m, w, ["--data", str(d)], connects=0))
+    w = m.work()
+    out = w / "q.jsonl"
+    execute(Run(pn("qa", "--data", m.data, "--out", out, "--no-progress")), w, 300)
+    lines = out.read_text().splitlines() if out.exists() else []
+    if lines:
+        first = json.loads(lines[0])
+        out.write_text("\n".join([json.dumps({**first, "score": "high"}), *lines[1:], "{torn"]) + "\n")
+    yield "nothing lost", "qa --resume over a damaged line of its own output", Run(
+        pn("qa", "--data", m.data, "--out", out, "--resume", "--no-progress"), expect="ok", mention="damaged")
+    w = m.work()
+    edits = w / "edits"
+    (edits / "frames").mkdir(parents=True)
+    (edits / "frames" / "00002.json").write_text("{damaged")
+    yield "nothing lost", "qa with a damaged edit record", Run(
+        pn("qa", "--data", m.data, "--edits", edits, "--out", w / "q.jsonl", "--no-progress"), expect="ok",
+        mention="damaged edit record")
+    code = ("import pnlviz, numpy as np\n"
+            "cam = pnlviz.Camera.from_look_at((0.0, 60.0, -18.0), (0.0, 0.0, 0.0), hfov_deg=40, width=1280, height=720)\n"
+            "far = cam.project(np.array([[0.0, -1e7, 0.0]]))[0][0]\n"
+            "p = cam.image_to_pitch(far + [0.0, 0.25])\n"
+            "print('a pitch point', p) if np.all(np.isfinite(p)) else print('no pitch point: nan')\n"
+            "raise SystemExit(0 if np.all(np.isnan(p)) else 3)\n")
+    yield "nothing lost", "image_to_pitch 0.25 px below the horizon", Run(code=code, expect="ok")
+    for key, value in (("x_focal_length", "0"), ("x_focal_length", "float('nan')"),
+                       ("position_meters", "[1e308, 0.0, -10.0]"), ("pan_degrees", None)):
+        change = (f"d.pop({key!r})" if value is None else f"d[{key!r}] = {value}")
+        code = ("import pnlviz\n"
+                "d = pnlviz.Camera.from_look_at((0.0, 60.0, -18.0), (0.0, 0.0, 0.0), hfov_deg=40, width=960, "
+                "height=540).to_soccernet()\n"
+                f"{change}\n"
+                "try:\n    pnlviz.Camera.from_soccernet(d)\nexcept pnlviz.ArgumentError as e:\n"
+                "    print('refused:', e); raise SystemExit(1)\nprint('accepted')\n")
+        yield "nothing lost", f"from_soccernet with {key} {value or 'missing'}", Run(code=code, mention=key)
+    w = m.work()
+    yield "nothing lost", "SIGTERM to serve", Run(custom=serve_case(m, w, [], connects=0, sigterm=True))
+
+
+def cuts_case(m: Material, w: Path, what: str) -> str:
+    """Python that opens a clip with a bad cuts file and checks it is set aside, not read as cuts
+    nor written over (exit 0: so; else a message and exit 3)."""
+    return f"""
+import os, json, shutil
+from pathlib import Path
+from pnlviz.pipeline.reader import FrameReader
+from pnlviz.pipeline.clip import read_cuts
+data = Path({str(w)!r}) / "clip"
+data.mkdir()
+for i, src in enumerate(sorted(Path({str(m.data)!r}).glob("*.json"))[:4]):
+    shutil.copy(src, data / f"m-IMG_{{i + 1}}.json")
+edits = Path({str(w)!r}) / "edits"
+path = edits / "clips" / "m.json"
+path.parent.mkdir(parents=True)
+what = {what!r}
+if what == "a FIFO":
+    os.mkfifo(path)
+elif what == "a link to /dev/zero":
+    os.symlink("/dev/zero", path)
+elif what == "damaged":
+    path.write_text('{{"cuts": {{"added": [2], "removed": [')
+else:
+    path.write_text("123")
+reader = FrameReader.open(data, edits=edits, writable=True)
+cuts = read_cuts(reader, "m")
+aside = list(path.parent.glob("m.json.damaged-*"))
+print("; ".join(reader.edits_folder.warnings))
+reader.close()
+if cuts.added or cuts.removed or len(aside) != 1 or os.path.lexists(path):
+    print("read as cuts, or not set aside:", cuts, aside); raise SystemExit(3)
+"""
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 
 
-def serve_case(m: Material, w: Path, extra: list[str], connects: int) -> Callable[[], tuple[str, str]]:
-    """Start ``serve``, wait for its URL (60 s), make ``connects`` bare TCP connections, stop it;
-    clean when it started (or refused in one line) and printed no traceback."""
+BROWSER_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+def page_shows_frame(url: str) -> str | None:
+    """Why a browser page on ``url`` shows no calibrated frame within 60 s (None: it does, or no
+    browser is at hand to look: playwright and Debian's chromium)."""
+    chromium = shutil.which("chromium")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        return None
+    if chromium is None:
+        return None
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium, args=BROWSER_FLAGS)
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.goto(url)
+            page.get_by_text("focal").first.wait_for(timeout=60_000)
+        except Exception as exc:  # noqa: BLE001 - any failure to show a frame is the finding
+            return f"no frame shown within 60 s ({type(exc).__name__})"
+        finally:
+            browser.close()
+    return None
+
+
+def serve_case(m: Material, w: Path, extra: list[str], connects: int, refused: str | None = None,
+               sigterm: bool = False) -> Callable[[], tuple[str, str]]:
+    """Start ``serve`` and wait for its URL (60 s); make ``connects`` bare TCP connections; look
+    at a page (:func:`page_shows_frame`); stop it (with ``sigterm``: SIGTERM must end it within
+    5 s). Clean when it started, showed a frame and printed no traceback; with ``refused``, when
+    it refused in one line naming that."""
     def run() -> tuple[str, str]:
         port = free_port()
         env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(CODE)}
-        log = w / "serve.log"
+        log = w / f"serve{port}.log"
         with open(log, "wb") as f:
             p = subprocess.Popen([sys.executable, "-m", "pnlviz.cli", "serve", "--data", str(m.data), "--no-detect",
                                   "--port", str(port), *extra], cwd=w, env=env, stdout=f, stderr=subprocess.STDOUT,
                                  preexec_fn=_limits(None))
+        shown = stopped = None
         try:
-            up = False
+            url = None
             deadline = time.time() + 60
-            while time.time() < deadline and p.poll() is None:
-                try:
-                    socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                    up = True
-                    break
-                except OSError:
-                    time.sleep(0.5)
-            for _ in range(connects):
+            while time.time() < deadline and p.poll() is None and url is None:
+                url = next((line.split("open ", 1)[1].strip() for line in log.read_text(errors="replace").splitlines()
+                            if line.startswith("pnlviz: open ")), None)
+                time.sleep(0.3)
+            for _ in range(connects if url else 0):
                 with socket.create_connection(("127.0.0.1", port), timeout=2) as s:
                     s.sendall(b"\x16\x03\x01garbage")
-            time.sleep(2)
+            if url and refused is None:
+                shown = page_shows_frame(url)
+            time.sleep(1)
+            if sigterm and p.poll() is None:
+                t0 = time.time()
+                p.send_signal(signal.SIGTERM)
+                try:
+                    p.wait(10)
+                    stopped = None if time.time() - t0 <= 5.5 else f"ended {time.time() - t0:.1f} s after SIGTERM"
+                except subprocess.TimeoutExpired:
+                    stopped = "still running 10 s after SIGTERM"
         finally:
             rc = p.poll()
             if rc is None:
+                with contextlib.suppress(OSError, ValueError):  # the server's peak resident size (kB)
+                    status = Path(f"/proc/{p.pid}/status").read_text()
+                    PEAK_MB[:] = [int(status.split("VmHWM:")[1].split()[0]) / 1024]
                 p.terminate()
                 try:
                     p.wait(10)
@@ -607,17 +922,32 @@ def serve_case(m: Material, w: Path, extra: list[str], connects: int) -> Callabl
         if "Traceback" in out or "Exception in callback" in out or "ERROR" in out:
             lines = [line for line in out.splitlines() if line and not line.startswith(" ")]
             return "traceback", lines[-1][:160] if lines else "traceback"
-        if rc is None and not up:
-            return "hang", "not listening after 60 s"
-        return "clean", ("served" if rc is None else f"exit {rc}") + f": {last[:120]}"
+        if PEAK_MB and PEAK_MB[0] > MEMORY_FLAG_MB:
+            return "memory", f"serve peaked at {PEAK_MB[0]:.0f} MB"
+        if refused is not None:
+            if rc is None or rc == 0:
+                return "silent wrong", f"served where a refusal was due: {last[:120]}"
+            if refused.lower() not in out.lower():
+                return "silent wrong", f"no word of {refused!r}: {last[:120]}"
+            return "clean", f"exit {rc}: {last[:150]}"
+        if stopped:
+            return "hang", stopped
+        if url is None:
+            return "hang", f"no URL after 60 s (exit {rc}): {last[:120]}"
+        if shown:
+            return "hang", shown
+        return "clean", ("served, a frame shown" if rc is None or sigterm else f"exit {rc}") + f": {last[:100]}"
     return run
 
 
 # ------------------------------------------------------------------------------ main
-GROUPS = (not_files, not_file_outputs, write_failures, impossible, training, smaller)
+GROUPS = (not_files, not_file_outputs, write_failures, impossible, training, smaller, lost)
 
 
-def run_all(root: Path, pattern: str | None, timeout: float, groups: list[int] | None = None) -> list[dict]:
+def run_all(root: Path, pattern: str | None, timeout: float, groups: list[int] | None = None,
+            patterns: list[str] | None = None) -> list[dict]:
+    """Every case (or those whose name contains ``pattern``, or one of ``patterns``)."""
+    root.mkdir(parents=True, exist_ok=True)
     m = Material(root)
     results = []
     try:
@@ -625,20 +955,84 @@ def run_all(root: Path, pattern: str | None, timeout: float, groups: list[int] |
             if groups is not None and i not in groups:
                 continue
             for kind, name, run in group(m):
-                if pattern and pattern.lower() not in f"{kind} {name}".lower():
+                if patterns is not None:
+                    if not any(p.lower() in f"{kind} {name}".lower() for p in patterns):
+                        continue
+                elif pattern and pattern.lower() not in f"{kind} {name}".lower():
                     continue
                 t0 = time.time()
+                PEAK_MB.clear()
                 if run.custom:
                     outcome, detail = run.custom()
                 else:
+                    before = snapshot(root)
                     rc, out = execute(run, root, timeout)
                     outcome, detail = classify(run, rc, out)
+                    changed = changed_inputs(before, snapshot(root), run.outputs())
+                    if changed and outcome != "destructive":
+                        outcome, detail = "destructive", changed
                 results.append({"kind": kind, "case": name, "outcome": outcome, "detail": detail,
-                                "seconds": round(time.time() - t0, 1)})
+                                "seconds": round(time.time() - t0, 1),
+                                "peak_mb": round(PEAK_MB[0]) if PEAK_MB else None})
                 print(f"{outcome:>12}  {name}  ({time.time() - t0:.1f} s)  {detail}", flush=True)
     finally:
         unmount_all()
     return results
+
+
+#: faults planted by ``--mutate``: (what, file in the package, text, its replacement, the cases
+#: that must find it: a part of their names)
+MUTATIONS = [
+    ("a FIFO or device in the app's files silently passed over (not set aside)",
+     [("data/state_files.py", 'set_aside(path, f"is {kind_of(st.st_mode)}, not a regular file", warnings)\n'
+                              "        return False", "return False")],
+     ["cuts file a FIFO", "cuts file a link to /dev/zero"]),
+    ("a refusal turned into a crash (--edits that is a file)",
+     [("data/edits_folder.py", 'raise DataError(source, "is not a folder (an edits folder holds frames/ with one '
+                               'record per frame)")', 'raise RuntimeError("not a folder")')],
+     ["--edits a file:", "--edits a FIFO:"]),
+    ("a server that never shows a frame",
+     [("app/session.py", "            view = self.view()\n            self.painter.draw(view)",
+       "            view = self.view()")],
+     ["SIGTERM to serve", "bare TCP connects"]),
+    ("an output folder over its dataset let through",
+     [("data/outputs.py", "        if target in root.parents:\n", "        if False:\n")],
+     ["over its own dataset"]),
+    ("another dataset's edits adopted without a word",
+     [("data/edits_folder.py", "    names = list(store.stems() if stems is None else stems)", "    return []")],
+     ["edits folder of another dataset"]),
+    ("memory unbounded (the annotation caps lifted)",
+     [("data/reading.py", "else MAX_DATASET_JSON_BYTES", "else MAX_JSON_BYTES"),
+      ("data/annotations.py", "MAX_POINTS = 500", "MAX_POINTS = 10**9")],
+     ["a 31 MB annotation: qa"]),
+]
+
+
+def mutate(root: Path, timeout: float) -> list[dict]:
+    """Plant each fault of :data:`MUTATIONS` in a copy of the package and run its cases on it:
+    one result per fault (``caught``: some case found it)."""
+    global CODE
+    original = CODE
+    out = []
+    for i, (what, changes, patterns) in enumerate(MUTATIONS):
+        copy = root / f"mutant{i}"
+        shutil.copytree(original / "pnlviz", copy / "pnlviz", symlinks=False,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+        for rel, old, new in changes:
+            path = copy / "pnlviz" / rel
+            text = path.read_text()
+            assert text.count(old) == 1, f"mutation {what!r}: the text to replace is not found once in {rel}"
+            path.write_text(text.replace(old, new))
+        CODE = copy
+        try:
+            results = run_all(root / f"run{i}", " | ".join(patterns), timeout, patterns=patterns)
+        finally:
+            CODE = original
+        found = [r for r in results if r["outcome"] != "clean"]
+        out.append({"mutation": what, "cases": len(results), "caught": bool(found),
+                    "by": "; ".join(f"{r['case']}: {r['outcome']}" for r in found[:3])})
+        print(f"{'caught' if found else 'MISSED':>7}  {what}  ({len(found)} of {len(results)} cases)", flush=True)
+    return out
 
 
 def summary(results: list[dict], before: list[dict] | None = None) -> list[str]:
@@ -697,10 +1091,22 @@ def main() -> None:
                     help="only these groups of cases (0-based, comma-separated; no docs update)")
     ap.add_argument("--no-doc", action="store_true", help="do not update docs/reliability.md")
     ap.add_argument("--before", type=Path, help="results JSON of an earlier run, summed in the table")
+    ap.add_argument("--mutate", action="store_true",
+                    help="check the screen: plant each fault of MUTATIONS in a copy and run its cases (exit 1 when "
+                         "one is missed)")
     args = ap.parse_args()
     root = Path(tempfile.mkdtemp(prefix="pnlviz-hostile-"))
     root.chmod(0o755)
     t0 = time.time()
+    if args.mutate:
+        try:
+            found = mutate(root, args.timeout)
+        finally:
+            unmount_all()
+            shutil.rmtree(root, ignore_errors=True)
+        missed = [f for f in found if not f["caught"]]
+        print(f"{len(found) - len(missed)} of {len(found)} planted faults found in {time.time() - t0:.0f} s")
+        raise SystemExit(1 if missed else 0)
     try:
         results = run_all(root, args.k, args.timeout, args.groups)
     finally:

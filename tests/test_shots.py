@@ -53,10 +53,10 @@ def test_a_clip_of_few_keypoints_and_a_missed_cut_is_no_worse_than_its_frames():
     for t, cam in enumerate(res.cameras):  # every frame within 2 m of its true camera centre
         assert np.linalg.norm(cam.C - plan.cameras[t].C) < 2.0
     assert all(c.use == "shot" for c in res.choices)
-    # a fit left as one shot over the cut (a cut removed by hand) is worse than the frames: they keep their own
+    # a fit left as one shot over the cut (every cut removed by hand) is worse than the frames: they keep their own
     from pnlviz.calib.cuts import CutEdits
 
-    forced = calibrate_clip(obs, clip.per_frame, (W, H), cuts=CutEdits(removed=frozenset({true_cut})))
+    forced = calibrate_clip(obs, clip.per_frame, (W, H), cuts=CutEdits(removed=frozenset(range(1, 40))))
     assert len(forced.shots) == 1
     kept = [c for c in forced.choices if c.use == "own"]
     assert len(kept) >= 20 and all("misses" in c.reason or "verdict" in c.reason for c in kept)
@@ -161,3 +161,20 @@ def test_unrelated_pictures_named_as_a_clip_keep_their_own_cameras():
     assert all(a is b for a, b in zip(res.cameras, own))
     assert all(c.use == ("own" if cam is not None else "none") and "not a clip" in c.reason
                for c, cam in zip(res.choices, own))
+
+
+def test_a_frame_alone_in_preferring_its_own_camera_keeps_the_shots():
+    """A broadcast camera moves smoothly: the shot's camera cannot be wrong on one frame only.
+    A frame whose items prefer its own camera while its neighbours' do not has observations that
+    are off (its own camera follows them): it keeps the shot's camera, reported suspect; three
+    frames in a row (or a whole shorter shot) keep their own."""
+    from pnlviz.calib.shot_check import CameraChoice, alone_kept_by_shot
+
+    own = CameraChoice("own", "the shot's camera misses keypoint 4 (9 px, own 0.5), which the frame's own camera fits",
+                       ("keypoint 4", "keypoint 7"), (), by_items=True)
+    shot = CameraChoice("shot", "the shot's camera fits the frame as well as its own")
+    verdict = CameraChoice("own", "the shot's camera fails the frame's verdict (keypoint RMS 20.0 px > 15.0)")
+    got = alone_kept_by_shot([shot, own, shot, own, own, own, shot, verdict, shot])
+    assert [c.use for c in got] == ["shot", "shot", "shot", "own", "own", "own", "shot", "own", "shot"]
+    assert "suspect observations" in got[1].reason and got[1].worse == own.worse
+    assert [c.use for c in alone_kept_by_shot([own, own])] == ["own", "own"]  # the whole shot

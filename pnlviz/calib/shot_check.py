@@ -13,7 +13,11 @@ it within ``3 sigma``. The shot's camera is **worse** than the frame's own when 
 that the frame's own camera bends to is not enough). Noise cannot tip it (a camera fitted to the frame alone
 is closer on every item, but within its noise), and a frame with too few observations for a
 reliable camera of its own is carried by the shot.
-The frame then keeps its own camera.
+The frame then keeps its own camera, but for a frame alone in that (:func:`alone_kept_by_shot`): a
+broadcast camera moves smoothly, so a shot's camera that is wrong on one frame is wrong on its
+neighbours too; a frame whose items prefer its own camera while its neighbours' do not is a frame
+whose observations are off (a detector's bad frame: its own camera follows them), and it keeps the
+shot's camera, reported so.
 
 The shot's camera is also held to the frame's verdict (``CalibParams.max_rms``: the RMS of the
 keypoints it keeps), and a shot whose solve did not converge gives no frame its camera.
@@ -34,12 +38,14 @@ from .problem import FrameData
 from .shot import FrameDistances, TemporalParams
 from .shot_fit import distances
 
-__all__ = ["CameraChoice", "Use", "frame_noise", "judge_frame"]
+__all__ = ["MIN_RUN", "CameraChoice", "Use", "alone_kept_by_shot", "frame_noise", "judge_frame"]
 
 #: which camera a clip frame uses: its shot's, its own (per-frame calibration), or none
 Use = Literal["shot", "own", "none"]
 #: the shot's camera is worse when this many more of the frame's items prefer its own camera
 WORSE_BY = 2
+#: ... on at least this many consecutive frames (or the whole shot, when shorter)
+MIN_RUN = 3
 
 
 @dataclass(frozen=True)
@@ -51,6 +57,8 @@ class CameraChoice:
     #: items (keypoints, line and circle classes) that prefer the frame's own camera / the shot's
     worse: tuple[str, ...] = ()
     better: tuple[str, ...] = ()
+    #: the frame's own camera was kept because items prefer it (not by the verdict or the solve)
+    by_items: bool = False
 
     def to_json(self) -> dict:
         return {"use": self.use, "reason": self.reason, "worse": list(self.worse), "better": list(self.better)}
@@ -109,7 +117,7 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
                         for k in worse[:3])
         more = f" and {len(worse) - 3} more" if len(worse) > 3 else ""
         return CameraChoice("own", f"the shot's camera misses {far}{more}, which the frame's own camera fits",
-                            worse, better)
+                            worse, better, by_items=True)
     if better:
         return CameraChoice("shot", f"the shot's camera fits {len(better)} item(s) the frame's own camera misses",
                             worse, better)
@@ -128,3 +136,28 @@ def _verdict(data: FrameData, d: FrameDistances, calib: CalibParams, width: floa
     rms = float(np.sqrt(np.mean(np.square(kept))))
     limit = calib.px(calib.max_rms, width)
     return None if rms <= limit else f"keypoint RMS {rms:.1f} px > {limit:.1f}"
+
+
+def alone_kept_by_shot(choices: list[CameraChoice]) -> list[CameraChoice]:
+    """The choices of a shot's frames (in order) with each run of frames that keep their own
+    camera by their items (``by_items``) shorter than :data:`MIN_RUN` frames (and than the shot)
+    given back to the shot's camera: see the module docstring."""
+    out = list(choices)
+    need = min(MIN_RUN, len(choices))
+    i = 0
+    while i < len(out):
+        if not out[i].by_items:
+            i += 1
+            continue
+        j = i
+        while j < len(out) and out[j].by_items:
+            j += 1
+        if j - i < need:
+            for k in range(i, j):
+                c = out[k]
+                out[k] = CameraChoice("shot", c.reason.replace("the shot's camera misses", "its observations disagree "
+                                                               "with its neighbours': the shot's camera misses", 1)
+                                      .replace(", which the frame's own camera fits", ", which only the frame's own "
+                                               "camera fits (suspect observations)"), c.worse, c.better)
+        i = j
+    return out

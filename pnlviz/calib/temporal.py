@@ -28,7 +28,7 @@ from .cuts import CutEdits, apply_cuts, find_shots
 from .observations import Observations
 from .problem import FrameData
 from .shot import FrameDistances, TemporalParams, frame_data
-from .shot_check import CameraChoice, judge_frame
+from .shot_check import CameraChoice, alone_kept_by_shot, judge_frame
 from .shot_fit import ShotFit, distances, fit_shot
 
 if TYPE_CHECKING:  # imported when called (frame imports this module's neighbours)
@@ -198,7 +198,7 @@ class ShotSolver:
         if start is not None or any(c is not None for c in own):
             fit = fit_shot([None if d is None else d.obs for d in fd], self._start(frames, own, params), self.size,
                            params, self.model, start=start, calib=self.calib, data=fd)
-        return ShotPart(frames, fit, [self._judge(t, i, fit) for i, t in enumerate(frames)])
+        return ShotPart(frames, fit, alone_kept_by_shot([self._judge(t, i, fit) for i, t in enumerate(frames)]))
 
     def _start(self, frames: range, own: list[Camera | None], params: TemporalParams) -> list[Camera | None]:
         """The own cameras a cold solve starts from: not the stale ones, not the outliers

@@ -327,8 +327,14 @@ def _args_problem(args) -> str | None:
         return "--video goes with --detections (made by pnlviz detect --video), instead of --data"
     if args.source == "detections" and args.detections is None:
         return "--source detections needs --detections"
-    if args.edits is not None and not args.edits.is_dir():
-        return f"--edits {args.edits}: no such folder"
+    if args.edits is not None:
+        from pnlviz.data import DataError
+        from pnlviz.data.edits_folder import require_edits_folder
+
+        try:
+            require_edits_folder(args.edits)
+        except DataError as exc:
+            return str(exc)
     return None
 
 
