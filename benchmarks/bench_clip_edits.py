@@ -66,13 +66,14 @@ def parse_seeds(text: str) -> list[int]:
     return out
 
 
-def draw_clip(seed: int):
-    """The clip of ``seed``: its length, shots and motions drawn from the seed, then its plan."""
+def draw_clip(seed: int, frames: int | None = None, shots: int | None = None):
+    """The clip of ``seed``: its length, shots and motions drawn from the seed (``frames`` and
+    ``shots`` when given), then its plan."""
     from pnlviz.synth.clip import Motion, plan_clip
 
     rng = np.random.default_rng([seed, 31])
-    frames = int(rng.integers(40, 151))
-    shots = int(rng.integers(1, 5))
+    drawn_frames, drawn_shots = int(rng.integers(40, 151)), int(rng.integers(1, 5))
+    frames, shots = frames or drawn_frames, shots or drawn_shots
     motions = [Motion(pan=float(rng.choice([0.3, 1.0, 3.0])), zoom=float(rng.choice([0.5, 1.0, 3.0])))
                for _ in range(shots)]
     return plan_clip(seed, frames, cuts=shots - 1, motions=motions)
@@ -90,7 +91,7 @@ def render_and_detect(plan, cache: Path | None):
     anns = [parse_annotation(annotation_to_json(annotate(cam, np.random.default_rng([plan.seed, t, 7]))))
             for t, cam in enumerate(plan.cameras)]
     stems = [f"{t:04d}" for t in range(len(plan.cameras))]
-    where = None if cache is None else cache / f"clip{plan.seed}-{len(stems)}"
+    where = None if cache is None else cache / f"clip{plan.seed}-{len(stems)}-{len(set(plan.shot_of))}"
     if where is not None and (where / "preds.zip").exists():
         preds = read_predictions(where / "preds.zip")
         return anns, [preds[s] for s in stems], json.loads((where / "changes.json").read_text())
@@ -366,7 +367,7 @@ def run_clip(seed: int, args) -> dict:
     from pnlviz.field import load_field_model
 
     model = load_field_model()
-    plan = draw_clip(seed)
+    plan = draw_clip(seed, args.frames, args.shots)
     t0 = time.perf_counter()
     anns, preds, changes = render_and_detect(plan, args.cache)
     prep = time.perf_counter() - t0
@@ -379,11 +380,16 @@ def run_clip(seed: int, args) -> dict:
     shot = ShotModel(per, changes, params, cp, size, model)  # from the per-frame cameras before any edit
     out["shots"] = len(shot.solver.shots)
     for name, mode in (("per_frame", per), ("shot", shot)):
+        if name not in args.arms:
+            out[name] = (0, 0.0, 0.0, 0, 0.0)
+            continue
         annotator = Annotator(mode, plan.cameras, model, np.random.default_rng([seed, 99]), args)
         t0 = time.perf_counter()
         n, a, b = annotator.run(anns, args.target, args.limit)
         out[name] = (n, a, b, annotator.looks, time.perf_counter() - t0)
     out["solve_s"] = shot.seconds
+    edited = {k: sum(1 for t in shot.solver.keyframes if t in r) for k, r in enumerate(shot.solver.shots)}
+    out["keyframes"] = [edited[k] for k in range(len(shot.solver.shots))]
     return out
 
 
@@ -400,7 +406,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--moved-px", type=float, default=2.0,
                     help="a frame looked at is looked at again when its overlay moves more than this (default 2 px)")
     ap.add_argument("--cache", type=Path, default=None, help="keep each clip's detections here (re-runs skip them)")
+    ap.add_argument("--frames", type=int, default=None, help="frames of every clip (default: drawn, 40-150)")
+    ap.add_argument("--shots", type=int, default=None, help="shots of every clip (default: drawn, 1-4)")
+    ap.add_argument("--arms", default="per_frame,shot", help="which arms run (default per_frame,shot)")
     args = ap.parse_args(argv)
+    args.arms = args.arms.split(",")
     import cv2
     import torch
 
@@ -417,8 +427,8 @@ def main(argv: list[str] | None = None) -> int:
         (n1, a1, b1, l1, s1), (n2, a2, b2, l2, s2) = r["per_frame"], r["shot"]
         print(f"clip {seed}: {r['frames']} frames, {r['true_shots']} shots ({r['shots']} found); per-frame {n1} edits "
               f"({l1} looks, FS@5 {a1:.3f} -> {b1:.3f}), shot model {n2} edits ({l2} looks, {a2:.3f} -> {b2:.3f}), "
-              f"{n1 / max(n2, 1):.1f}x; render+detect {r['prep_s']:.0f} s, annotating {s1:.0f} + {s2:.0f} s",
-              flush=True)
+              f"{n1 / max(n2, 1):.1f}x; render+detect {r['prep_s']:.0f} s, annotating {s1:.0f} + {s2:.0f} s; "
+              f"frames edited per shot (shot model) {r['keyframes']}", flush=True)
 
     def total(key):
         n = sum(r[key][0] for r in runs)

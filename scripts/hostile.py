@@ -60,7 +60,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 CODE = Path(os.environ.get("PNLVIZ_CODE", REPO))  # the pnlviz under test (default: this checkout)
 DOC = REPO / "docs" / "reliability.md"
-SECTION = "## 6. Hostile inputs, round two"
+SECTION = "## 7. Hostile inputs, round two"
 KINDS = ("clean", "traceback", "hang", "silent wrong", "destructive", "data loss", "memory")
 MEMORY_LIMIT = 6 * 2**30
 #: a case whose peak resident size is above this (MB) is classified "memory"

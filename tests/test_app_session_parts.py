@@ -321,7 +321,7 @@ def clip_tab(errors):
     stems = [f"f{i}" for i in range(8)]
     views = {f"f{i}": fake_view(residuals=(e,)) for i, e in zip(range(2, 7), errors) if e is not None}
     tab = SimpleNamespace(index=2, settings=None, notes=[], panels=SimpleNamespace(clip_text=None),
-                          state=SimpleNamespace(stems=stems, subscribe=lambda callback: None, triage=SimpleNamespace(
+                          state=SimpleNamespace(stems=stems, subscribe=lambda callback, first=False: None, triage=SimpleNamespace(
                               lookup=lambda stem, settings: views.get(stem))))
     tab.goto = lambda i: setattr(tab, "index", i)
     tab.notify = lambda title, body, error=True: tab.notes.append(title)

@@ -189,3 +189,34 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     tab.goto(6)
     tab.clip.toggle_cut()
     assert [s.start for s in clip_shots(st).build("match", tab.settings).shots] == [0, 6]
+
+
+def test_an_edit_on_a_clip_frame_redraws_the_other_tabs_on_its_shot(video, tmp_path, serve):
+    """Clip edits reached a second tab on a neighbouring frame only when it navigated: now the
+    shot is solved again before the tabs redraw, and a tab on another frame of the shot redraws
+    with its new camera at once."""
+    path, preds, plan = video
+    app = serve(path, detections=preds, edits=tmp_path / "edits")
+    st = app.state
+    a, b = app.session(), app.session()
+    a.goto(8)
+    b.goto(10)
+    solver = clip_shots(st).build("match", a.settings)
+    stems = clip_shots(st).clips["match"]
+    a.show()
+    b.show()
+    b.flush()
+    before = b.view().camera
+    drawn: list[str] = []
+    original = b.show
+    b.show = lambda: (drawn.append(b.stem), original())[1]
+    model = load_field_model()
+    ids = np.array(model.keypoint_ids)
+    uv, z = plan.cameras[8].project(model.keypoint_xyz(ids))
+    inside = (z > 0) & (uv[:, 0] > 20) & (uv[:, 0] < W - 20) & (uv[:, 1] > 20) & (uv[:, 1] < H - 20)
+    detected = set(solver.frame_observations(8).kp_ids.tolist())
+    j = next(j for j in np.flatnonzero(inside) if int(ids[j]) not in detected)
+    st.move_keypoint(stems[8], int(ids[j]), float(uv[j, 0]), float(uv[j, 1]), a.settings)
+    b.flush()
+    assert drawn == [stems[10]]  # redrawn without navigating
+    assert b.view().camera is solver.camera(10) and solver.camera(10) is not before

@@ -46,6 +46,10 @@ class PnlvizApp:
         self._background_text = ""
         self._add_lights()
         state.subscribe(self._frame_changed)
+        if state.clips:  # a video: an edit solves its shot again, and every tab on the shot redraws
+            from pnlviz.app.shots import clip_shots
+
+            clip_shots(state).listen(self._shot_changed)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
         self._stop = threading.Event()
@@ -114,6 +118,13 @@ class PnlvizApp:
     def tabs(self) -> list[Session]:
         """The sessions of connected browser tabs, oldest first."""
         return [s for s in self._all_sessions() if s.client is not None]
+
+    def _shot_changed(self, stems: list[str]) -> None:
+        """A shot was solved again after an edit: every tab showing one of its frames redraws."""
+        shown = set(stems)
+        for session in self._all_sessions():
+            if session.stem in shown:
+                session.queue.enqueue(session.show)
 
     def _frame_changed(self, stem: str) -> None:
         """A frame changed (an edit from any tab, new detections): every tab showing it redraws,

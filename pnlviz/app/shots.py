@@ -48,6 +48,13 @@ class ClipShots:
         self._building: set[tuple] = set()
         self._gates: dict[tuple, threading.Lock] = {}
         self._lock = threading.RLock()
+        #: ``callback(stems)`` after a shot was solved again: its frames show another camera
+        self._shot_listeners: list = []
+
+    def listen(self, callback) -> None:
+        """Call ``callback(stems)`` with the frames of a shot whenever it is solved again after an
+        edit (the tabs showing any of them redraw)."""
+        self._shot_listeners.append(callback)
 
     def place(self, stem: str, settings, build: bool = True) -> ShotPlace | None:
         """The frame's clip and model (None outside a clip); ``build``: start building the model
@@ -124,6 +131,7 @@ class ClipShots:
             return
         clip, t = where
         record = self.state.edits.get(stem)
+        solved: set[str] = set()
         with self._lock:
             for key, solver in list(self._solvers.items()):
                 if key[0] != clip:
@@ -134,8 +142,12 @@ class ClipShots:
                 edits = dict(record.get("keypoints") or {})
                 if edits != solver.edits.get(t, {}):
                     k = solver.set_edits(t, edits)
+                    solved |= {self.clips[clip][u] for u in solver.shots[k]}
                     if key[1] == self.state.default_settings:
                         self._refresh_reviewed(clip, solver, k, key[1])
+        if solved:
+            for callback in list(self._shot_listeners):
+                callback(sorted(solved - {stem}))  # the edited frame's tabs redraw as it changed
 
     def _refresh_reviewed(self, clip: str, solver: ClipSolver, k: int, settings) -> None:
         """The frames of shot ``k`` reviewed with their shot record what it shows now."""
@@ -220,5 +232,5 @@ def clip_shots(state) -> ClipShots:
         shots = getattr(state, "_clip_shots", None)
         if shots is None:
             shots = state._clip_shots = ClipShots(state)
-            state.subscribe(shots.changed)
+            state.subscribe(shots.changed, first=True)  # the shot solved again before the tabs redraw
     return shots

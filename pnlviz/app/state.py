@@ -269,9 +269,13 @@ class AppState:
         return view
 
     # ------------------------------------------------------------------ change notices
-    def subscribe(self, callback: Callable[[str], None]) -> None:
-        """Call ``callback(stem)`` after every change to a frame (edit, review, new detections)."""
-        self._listeners.append(callback)
+    def subscribe(self, callback: Callable[[str], None], first: bool = False) -> None:
+        """Call ``callback(stem)`` after every change to a frame (edit, review, new detections);
+        ``first``: before the listeners already there (a model the others read follows first)."""
+        if first:
+            self._listeners.insert(0, callback)
+        else:
+            self._listeners.append(callback)
 
     def _changed(self, stem: str, changed: bool = True) -> bool:
         """Tell the listeners that ``stem`` changed (when it did); returns ``changed``."""
