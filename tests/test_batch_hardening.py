@@ -547,7 +547,7 @@ def test_member_and_file_sizes_are_capped_before_reading(tmp_path, capsys):
     ds = open_dataset(z)
     with pytest.raises(DataError) as ei:
         ds.annotation("00001")
-    assert str(ei.value) == f"{z}:00001.json: file too large: 2.0 GiB (the limit for this kind of file is 64 MiB)"
+    assert str(ei.value) == f"{z}:00001.json: file too large: 2.0 GiB (the limit for this kind of file is 4 MiB)"
     for read in (ds.image, ds.image_size):
         with pytest.raises(DataError, match="00002.jpg: file too large: 2.0 GiB .* 256 MiB"):
             read("00002")
@@ -555,12 +555,12 @@ def test_member_and_file_sizes_are_capped_before_reading(tmp_path, capsys):
     assert capsys.readouterr().err.count("file too large") == 2
 
     d = copy_frames(tmp_path / "d", stems=("00000",))
-    os.truncate(d / "00000.json", 64 * 2**20 + 1)  # sparse: costs no disk; the JSON cap is 64 MiB
+    os.truncate(d / "00000.json", 4 * 2**20 + 1)  # sparse: costs no disk; an annotation's cap is 4 MiB
     big = d / "00001.jpg"
     big.touch()
     os.truncate(big, 256 * 2**20 + 1)  # the image cap
     ds = open_dataset(d)
-    with pytest.raises(DataError, match="00000.json: file too large: 64 MiB"):
+    with pytest.raises(DataError, match="00000.json: file too large: 4 MiB"):
         ds.annotation("00000")
     with pytest.raises(DataError, match="00001.jpg: file too large"):
         ds.image_size("00001")

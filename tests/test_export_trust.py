@@ -105,7 +105,12 @@ def test_the_button_and_the_command_write_the_same_files_where_the_server_detect
         # --all: the unreviewed frames are there, marked so, the same from both
         (b_members, b_manifest), (c_members, c_manifest) = _export_both(st, data, edits, tmp_path, "--all")
         assert b_members == c_members and b_manifest == c_manifest
-        assert json.loads(b_members["keypoints/00004.json"])["reviewed"] is False
+        # an unreviewed frame with something to export is there, marked so; one with nothing
+        # (no annotation, no detections the command can read, no hand point) is listed, not written
+        unreviewed = [s for s, e in b_manifest["frames"].items() if e["review"] is None]
+        assert unreviewed and all(
+            json.loads(b_members[f"keypoints/{s}.json"])["reviewed"] is False if b_manifest["frames"][s]["exported"]
+            else b_manifest["frames"][s]["empty"] and f"keypoints/{s}.json" not in b_members for s in unreviewed)
 
 
 def test_a_reviewed_frame_exports_what_was_on_screen_and_an_old_record_no_detections(images_only, tmp_path):

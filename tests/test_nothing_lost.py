@@ -98,6 +98,17 @@ def test_an_edits_folder_of_another_dataset_is_refused_and_can_be_adopted(two_da
     assert main(["export", "--data", str(a), "--edits", str(edits), "--out", str(tmp_path / "a_out"),
                  "--no-progress"]) == 0
     assert sorted(p.stem for p in (tmp_path / "a_out" / "annotations").glob("*.json")) == ["00000", "00001"]
+    # the app adopts it too, and its export button exports what it shows
+    from pnlviz.app.export import export_zip_bytes
+
+    st = AppState(b, edits=edits, force_edits=True)
+    try:
+        assert export_zip_bytes(st)
+        st.move_keypoint("00002", 5, 90.0, 90.0)  # written again: the record is now B's
+    finally:
+        st.close()
+    with pytest.raises(EditsFolderError, match="00000"):  # 00000 and 00001 are still A's records
+        AppState(b, edits=edits)
 
 
 @pytest.mark.parametrize("kind", ["typo", "file", "fifo", "dev_zero", "empty_folder"])
@@ -372,3 +383,32 @@ def test_from_soccernet_refuses_nonsense_naming_the_key(key, value, words):
     if key not in ("radial_distortion",):  # the lens terms are optional
         with pytest.raises(pnlviz.ArgumentError, match=rf"^camera\['{key}'\]: missing"):
             pnlviz.Camera.from_soccernet(missing)
+
+
+def test_export_writes_no_empty_label_file_for_a_frame_it_knows_nothing_of(tmp_path, capsys):
+    """``export --all`` of an image-only folder without detections wrote an empty label file for
+    every unreviewed frame (83 of 93) without a word: now it says how many and why, writes none
+    for them, and lists them in the manifest; a reviewed frame without labels is exported empty
+    (someone confirmed there is nothing)."""
+    import json
+
+    from pnlviz.app.state import AppState
+
+    data = tmp_path / "images"
+    data.mkdir()
+    for i in range(4):
+        shutil.copy(EXAMPLES_DIR / "sample" / f"0000{i}.jpg", data / f"0000{i}.jpg")
+    st = AppState(data, edits=tmp_path / "edits")
+    try:
+        st.set_review("00003", "accepted")
+    finally:
+        st.close()
+    out = tmp_path / "out"
+    assert main(["export", "--data", str(data), "--edits", str(tmp_path / "edits"), "--out", str(out), "--all",
+                 "--no-progress"]) == 0
+    said = capsys.readouterr()
+    assert "3 unreviewed frame(s) with nothing to export" in said.err and "exported 1 frames of 4" in said.out
+    assert sorted(p.name for p in (out / "keypoints").glob("*.json")) == ["00003.json"]
+    frames = json.loads((out / "manifest.json").read_text())["frames"]
+    assert [s for s, e in frames.items() if e.get("empty")] == ["00000", "00001", "00002"]
+    assert json.loads((out / "keypoints" / "00003.json").read_text())["keypoints"] == {}

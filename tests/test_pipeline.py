@@ -89,7 +89,7 @@ def test_calibrate_refuses_a_source_it_cannot_use(wc14, tmp_path, capsys):
     assert main(["calibrate", "--data", str(data), "--source", "detections", "--out", str(out)]) == 2
     assert "--source detections needs --detections" in capsys.readouterr().err
     assert main(["calibrate", "--data", str(data), "--edits", str(tmp_path / "nope"), "--out", str(out)]) == 2
-    assert "no such folder" in capsys.readouterr().err
+    assert "nope: does not exist" in capsys.readouterr().err
     assert main(["calibrate", "--data", str(data), "--edits", str(edits), "--out", str(edits / "c.zip")]) == 2
 
 

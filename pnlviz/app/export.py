@@ -18,7 +18,7 @@ def export_zip_bytes(state: AppState, include_all: bool = False) -> bytes:
     every zip pnlviz writes: the same labels give the same bytes), as ``pnlviz export`` with the
     server's ``--data``, ``--detections``, ``--edits`` and ``--size`` writes it."""
     with FrameReader.open(state.data, detections=state.detections_path, edits=state.edits.root,
-                          size=state.size) as reader:
+                          size=state.size, force_edits=state.force_edits) as reader:
         files = export_files(reader, include_all)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:

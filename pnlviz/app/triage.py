@@ -136,8 +136,8 @@ class DetectionCache:
     """The detector's results by stem, on disk (``detections.jsonl``), a few kept in memory: a
     mapping as :class:`pnlviz.pipeline.FrameReader` looks detections up (``get``, ``in``)."""
 
-    def __init__(self, path: Path | None, warnings: list[str], keep: int = 64):
-        self._file = JsonLinesFile(path, warnings)
+    def __init__(self, path: Path | None, warnings: list[str] | None = None, keep: int = 64):
+        self._file = JsonLinesFile(path, [] if warnings is None else warnings)
         self._where: dict[str, tuple[int, int]] = {}
         self._recent: OrderedDict[str, object] = OrderedDict()
         self._memory: dict[str, object] = {}  # without a file (read-only edits folder)
@@ -195,7 +195,8 @@ class DetectionCache:
 class SummaryStore:
     """Every frame's latest summary (in memory: small) and its file (``summaries.jsonl``)."""
 
-    def __init__(self, path: Path | None, warnings: list[str]):
+    def __init__(self, path: Path | None, warnings: list[str] | None = None):
+        warnings = [] if warnings is None else warnings
         self._file = JsonLinesFile(path, warnings)
         self._by_stem: dict[str, FrameSummary] = {}
         n = bad = 0

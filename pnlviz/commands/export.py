@@ -74,13 +74,19 @@ def _interrupted(args, writer, done: int, total: int) -> int:
 
 
 def _say_done(args, frames: dict, total: int, cluster: bool) -> None:
-    unreadable = {stem: e["error"] for stem, e in frames.items() if not e["exported"]}
+    empty = [stem for stem, e in frames.items() if e.get("empty")]
+    unreadable = {stem: e["error"] for stem, e in frames.items() if not e["exported"] and not e.get("empty")}
     for stem, e in frames.items():
         if e["error"]:
             print(f"{'skipped' if stem in unreadable else 'warning'}: {e['error']}", file=sys.stderr)
+    if empty:
+        print(f"warning: {len(empty)} unreviewed frame(s) with nothing to export (no annotation, no detections, no "
+              f"keypoint placed by hand: {', '.join(empty[:3])}{' ...' if len(empty) > 3 else ''}): no label files "
+              f"written for them, listed in the manifest; give --detections to export the detector's points",
+              file=sys.stderr)
     which = "frames" if args.all else "accepted/corrected frames"
     flagged = sum(e.get("flagged", 0) for e in frames.values())
-    print(f"exported {len(frames) - len(unreadable)} {which} of {total} to {args.out}; "
+    print(f"exported {len(frames) - len(unreadable) - len(empty)} {which} of {total} to {args.out}; "
           f"{flagged} points beyond the outlier gate flagged ({args.gate_px:g} px at 960x540)"
           + (" on the dask cluster" if cluster else "")
           + (f" ({len(unreadable)} unreadable or failed, listed in the manifest)" if unreadable else ""))
@@ -94,6 +100,7 @@ def run_export(args) -> int:
     from pnlviz.pipeline import FrameReader
     from pnlviz.pipeline.export import ExportWriter, export_stems, failed_frame
 
+    given_edits = args.edits is not None
     data, args.edits = app_data(args)
     if not (args.gate_px > 0 and args.gate_px < float("inf")):
         print(f"error: --gate-px must be a positive number of pixels, got {args.gate_px}", file=sys.stderr)
@@ -104,7 +111,7 @@ def run_export(args) -> int:
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    if args.edits is not None:
+    if given_edits:
         require_edits_folder(args.edits)  # a typo, a file or a FIFO is not "no edits"
     # read-only: export never creates, locks or changes the edits folder
     with FrameReader.open(data, detections=args.detections, edits=args.edits, size=args.size,

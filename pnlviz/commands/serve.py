@@ -99,7 +99,7 @@ def run_serve(args) -> int:
     source = "annotation" if detector is not None and detector.light else None
     try:
         state = AppState(data, detections=args.detections, edits=args.edits, size=args.size, detector=detector,
-                         source=source)
+                         source=source, force_edits=args.force_edits)
     except EditsFolderError as exc:
         if detector is not None:
             detector.close()

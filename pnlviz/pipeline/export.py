@@ -29,7 +29,9 @@ Only accepted and corrected frames are exported unless ``include_all``; a review
 what its review recorded (its snapshot), whatever the reader's detections, and unreviewed ones
 (``include_all``) are calibrated from the reader's inputs and marked ``"reviewed": false``. A frame whose files
 cannot be read is listed in the manifest with its error and gets no label files (an empty label
-file would say "no keypoints", which is not what is known).
+file would say "no keypoints", which is not what is known); so does an unreviewed frame with
+nothing to export (no annotation, no detections, no point placed by hand: ``"empty"`` says so),
+while a reviewed frame without labels (an annotator confirmed there is none) is exported empty.
 """
 
 from __future__ import annotations
@@ -124,6 +126,11 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
         ann, entry["error"] = None, entry["error"] or str(exc)
     if ann is None and not fl.labels and entry["error"]:  # unreadable: no labels
         entry["exported"] = False
+        return FrameExport(stem, entry)
+    if ann is None and not fl.labels and fl.basis == "unreviewed":
+        # nothing is known of its markings: an empty label file would say "no keypoints here"
+        entry["exported"] = False
+        entry["empty"] = "nothing to export: no annotation, no detections, no keypoint placed by hand"
         return FrameExport(stem, entry)
     entry["exported"] = True
     files = {}

@@ -12,6 +12,7 @@ reader's.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,12 +113,14 @@ class FrameReader:
         source = str(predictions_info_path(detections)) if recorded and detections else "detector settings"
         settings = check_settings(recorded or detector_settings or {}, source)  # fails here, not on a frame
         CalibParams().updated(settings)
-        store = EditsStore(edits or default_edits_dir(data), writable=writable)
-        try:
+        root = edits or default_edits_dir(data)
+        if writable and os.path.isdir(root):  # checked read-only first: a refused folder is left as it was
+            check_identity(EditsStore(root, writable=False), ds, force=force_edits)
+        store = EditsStore(root, writable=writable)
+        if not writable:
             check_identity(store, ds, force=force_edits)  # the folder's records are of these pictures
-        except BaseException:
-            store.close()
-            raise
+        else:
+            check_identity(store, ds, force=True)  # the warnings of an adopted folder, on the store kept
         if writable:
             write_dataset_file(store.root, ds)
             store.identity = lambda stem: frame_identity(ds, stem)
