@@ -153,7 +153,8 @@ class ClipSolver:
         self.found = apply_cuts([range(0, self.T)], CutEdits(frozenset(starts)), self.T)
         self._parts = parts
         self._seconds = [0.0] * len(parts)
-        self._labels: list[dict[int, ClipLabel]] | None = None
+        self._labels: dict[int, dict[int, ClipLabel]] | None = None
+        self._carried_by_shot: dict[int, dict[int, dict[int, np.ndarray]]] | None = None
         self._drop: list[frozenset[int]] = [frozenset()] * len(parts)
         for k in range(len(parts)):  # the edits made before: their shots leave the detections they corrected out
             if self._trust(k):
@@ -307,7 +308,7 @@ class ClipSolver:
         for k in range(len(parts)):
             if self._trust(k):
                 self._solve(k, warm=False)
-        self._labels = None
+        self._labels = self._carried_by_shot = None
 
     def solve(self, k: int | None = None, warm: bool = True) -> None:
         """Solve shot ``k`` (every shot when None) again."""
@@ -316,33 +317,40 @@ class ClipSolver:
 
     # ------------------------------------------------------------------ labels
     def labels(self, t: int) -> dict[int, ClipLabel]:
-        """Frame ``t``'s labels with provenance (see the module docstring)."""
+        """Frame ``t``'s labels with provenance (see the module docstring), computed when asked
+        for (the points carried through its shot once per shot and solve)."""
         if self._labels is None:
-            self._labels = self._all_labels()
+            self._labels = {}
+        if t not in self._labels:
+            self._labels[t] = self._frame_labels(t)
         return self._labels[t]
 
-    def _all_labels(self) -> list[dict[int, ClipLabel]]:
-        cams = self.cameras_of()
-        carried: dict[int, dict[int, np.ndarray]] = {}
-        for p in self._parts:
-            carried.update(carried_points(p.frames, self.edits, cams, self.field_model))
-        out = []
-        for t in range(self.T):
-            obs, cam = self.shown_observations(t), cams[t]
-            labels: dict[int, ClipLabel] = {}
-            own = (self.origins[t] if self.origins is not None else None) or "detection"
-            if obs is not None and obs.n_keypoints:
-                res = np.hypot(*(cam.project(obs.kp_xyz)[0] - obs.kp_xy).T) if cam is not None else None
-                for i, kid in enumerate(obs.kp_ids.tolist()):
-                    r = None if res is None or not np.isfinite(res[i]) else float(res[i])
-                    labels[int(kid)] = ClipLabel(float(obs.kp_xy[i, 0]), float(obs.kp_xy[i, 1]),
-                                                 "hand" if obs.pins[i] else own, r, str(obs.kp_sets[i]))
-            for kid, uv in carried.get(t, {}).items():
-                if kid not in labels:
-                    labels[kid] = ClipLabel(float(uv[0]), float(uv[1]), "shot", 0.0,
-                                            self.field_model.keypoints[kid].group)
-            out.append(labels)
-        return out
+    def _carried(self, k: int) -> dict[int, dict[int, np.ndarray]]:
+        """The hand's points carried through shot ``k`` (:func:`carried_points`), per frame."""
+        if self._carried_by_shot is None:
+            self._carried_by_shot = {}
+        if k not in self._carried_by_shot:
+            frames = self._parts[k].frames
+            cams: list[Camera | None] = [None] * self.T
+            for t in frames:
+                cams[t] = self.camera(t)
+            self._carried_by_shot[k] = carried_points(frames, self.edits, cams, self.field_model)
+        return self._carried_by_shot[k]
+
+    def _frame_labels(self, t: int) -> dict[int, ClipLabel]:
+        obs, cam = self.shown_observations(t), self.camera(t)
+        labels: dict[int, ClipLabel] = {}
+        own = (self.origins[t] if self.origins is not None else None) or "detection"
+        if obs is not None and obs.n_keypoints:
+            res = np.hypot(*(cam.project(obs.kp_xyz)[0] - obs.kp_xy).T) if cam is not None else None
+            for i, kid in enumerate(obs.kp_ids.tolist()):
+                r = None if res is None or not np.isfinite(res[i]) else float(res[i])
+                labels[int(kid)] = ClipLabel(float(obs.kp_xy[i, 0]), float(obs.kp_xy[i, 1]),
+                                             "hand" if obs.pins[i] else own, r, str(obs.kp_sets[i]))
+        for kid, uv in self._carried(self.shot_of(t)).get(t, {}).items():
+            if kid not in labels:
+                labels[kid] = ClipLabel(float(uv[0]), float(uv[1]), "shot", 0.0, self.field_model.keypoints[kid].group)
+        return labels
 
     # ------------------------------------------------------------------ internals
     def _own_camera(self, obs: Observations | None) -> Camera | None:
@@ -379,4 +387,4 @@ class ClipSolver:
         start = p.fit if warm and p.fit is not None else None
         self._parts[k] = self._solver.part(p.frames, start=start)
         self._seconds[k] = time.perf_counter() - t0
-        self._labels = None
+        self._labels = self._carried_by_shot = None

@@ -313,8 +313,10 @@ class _Rows:
 
     @classmethod
     def stack(cls, frames: Sequence[FrameData | None], selections: Sequence[Selection | None], alpha: float) -> _Rows:
-        kp: list[tuple] = []
-        ln: list[tuple] = []
+        kp_parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        kp_frames, kp_counts, kp_weights = [], [], []
+        ln_rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        ln_frames, ln_counts, ln_weights = [], [], []
         circles: list[tuple[int, np.ndarray, np.ndarray, float, str]] = []
         items: dict[tuple[int, str], np.ndarray] = {}
         n_ln = 0
@@ -325,14 +327,21 @@ class _Rows:
             obs = data.obs
             lines = [(name, rows) for name, rows in zip(data.line_names, data.line_rows) if name in sel.lines]
             arcs = [(name, w, p) for name, w, p in data.arcs(0.5) if name in sel.circles]
-            K = int(sel.keypoints.sum())
+            m = sel.keypoints
+            K = int(m.sum())
             w_pt = math.sqrt(1 - alpha) if (lines or arcs) else 1.0
             w_ln = math.sqrt(alpha) if K else 1.0
-            m = sel.keypoints
-            kp.append((np.full(K, t), obs.kp_xyz[m], obs.kp_xy[m], obs.pins[m], np.full(K, w_pt)))
+            if K:
+                kp_parts.append((obs.kp_xyz[m], obs.kp_xy[m], obs.pins[m]))
+                kp_frames.append(t)
+                kp_counts.append(K)
+                kp_weights.append(w_pt)
             for name, rows in lines:
                 n = rows.stop - rows.start
-                ln.append((np.full(n, t), data.line_a[rows], data.line_b[rows], data.line_pts[rows], np.full(n, w_ln)))
+                ln_rows.append((data.line_a[rows], data.line_b[rows], data.line_pts[rows]))
+                ln_frames.append(t)
+                ln_counts.append(n)
+                ln_weights.append(w_ln)
                 items[(t, name)] = np.arange(n_ln, n_ln + n)
                 n_ln += n
             circles += [(t, w, p, w_ln, name) for name, w, p in arcs]
@@ -340,12 +349,14 @@ class _Rows:
         def cat(parts: list[tuple], i: int, shape: tuple, dtype=float) -> np.ndarray:
             return np.concatenate([p[i] for p in parts]).astype(dtype) if parts else np.zeros(shape, dtype)
 
-        kp_t, ln_t = cat(kp, 0, (0,), int), cat(ln, 0, (0,), int)
+        kp_t = np.repeat(np.array(kp_frames, int), kp_counts)
+        ln_t = np.repeat(np.array(ln_frames, int), ln_counts)
         groups = group_circles(circles)
         frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [g.row_frames for g in groups])
-        return cls(kp_t, cat(kp, 1, (0, 3)), cat(kp, 2, (0, 2)), cat(kp, 3, (0,), bool), cat(kp, 4, (0,)), ln_t,
-                   cat(ln, 1, (0, 3)), cat(ln, 2, (0, 3)), cat(ln, 3, (0, 2)), cat(ln, 4, (0,)), groups,
-                   frame.astype(int), items)
+        return cls(kp_t, cat(kp_parts, 0, (0, 3)), cat(kp_parts, 1, (0, 2)), cat(kp_parts, 2, (0,), bool),
+                   np.repeat(np.array(kp_weights, float), kp_counts), ln_t, cat(ln_rows, 0, (0, 3)),
+                   cat(ln_rows, 1, (0, 3)), cat(ln_rows, 2, (0, 2)), np.repeat(np.array(ln_weights, float), ln_counts),
+                   groups, frame.astype(int), items)
 
 
 def _put(r: np.ndarray, J: np.ndarray | None, at: int, weight, block: Block) -> int:

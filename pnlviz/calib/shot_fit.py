@@ -160,6 +160,21 @@ def _gated(data: Sequence[FrameData | None], dist: Sequence[FrameDistances | Non
     return [None if d is None or m is None else m.selection(d.obs, point_gate, line_gate) for d, m in zip(data, dist)]
 
 
+def _kept_selections(data: Sequence[FrameData | None], start: ShotFit, point_gate: float,
+                     line_gate: float) -> list[Selection | None]:
+    """The observations a warm solve starts with: the previous solve's, but for the frames whose
+    observations changed since (an edit), gated anew against their camera of that solve."""
+    old = start.selections or [None] * len(data)
+    out: list[Selection | None] = []
+    for d, s, cam in zip(data, old, start.cameras):
+        fits = (d is None and s is None) or (d is not None and s is not None and s.keypoints.shape == (d.obs.n_keypoints,)
+                                             and set(s.lines) <= set(d.obs.lines)
+                                             and set(s.circles) <= set(d.obs.circles)
+                                             and not (d.obs.pins & ~s.keypoints).any())
+        out.append(s if fits else None if d is None else distances(d, cam).selection(d.obs, point_gate, line_gate))
+    return out
+
+
 def _same(a: Sequence[Selection | None], b: Sequence[Selection | None]) -> bool:
     return all((x is None and y is None) or (x is not None and y is not None and x.same(y)) for x, y in zip(a, b))
 
@@ -187,7 +202,7 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
     whole = ShotProblem(fd, size, params, alpha=calib.alpha)
     if start is not None:
         x = _start_vector(start, T)
-        sel = _gated(fd, whole.distances(x), point_gate, line_gate)
+        sel = _kept_selections(fd, start, point_gate, line_gate)
         params = replace(params, max_iterations=min(params.max_iterations, WARM_ITERATIONS))
         tol = WARM_TOL  # from a previous solution an edit moves the cameras a little: a looser stop is as good
     else:

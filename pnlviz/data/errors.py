@@ -59,4 +59,4 @@ def member_source(zip_path: str | os.PathLike, member: str) -> str:
     return f"{os.fspath(zip_path)}:{member}"
 
 
-from pnlviz.errors import ArgumentError  # noqa: E402 - defined once, for every room (re-exported here)
+from pnlviz.errors import ArgumentError as ArgumentError  # noqa: E402 - defined once, for every room (re-exported)
