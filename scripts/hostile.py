@@ -1066,7 +1066,9 @@ def section(results: list[dict], before: list[dict] | None, commit: str) -> list
              f"({MEMORY_LIMIT // 2**30} GiB address space). Outcomes: clean (the refusal or result due, in "
              "one line), traceback, hang (or killed), silent wrong (exit 0 where a refusal was due, the bad "
              "field not named, raw terminal escapes printed, a checkpoint written after a failure), "
-             "destructive (a device node, FIFO or symlink at an output path replaced or written through).", "",
+             "destructive (a device node, FIFO or symlink at an output path replaced or written through), "
+             "data loss (an input changed, or frames the fault does not concern left undone), "
+             f"memory (a peak resident size over {MEMORY_FLAG_MB} MB).", "",
              *summary(results, before), "",
              *([BEFORE_NOTE, ""] if before else []),
              "| kind | case | outcome | what was printed (last line) |", "|---|---|---|---|"]
