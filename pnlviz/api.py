@@ -298,13 +298,46 @@ def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: f
     return detect_image(image, weights, threshold=threshold)
 
 
-def top_view(camera: Camera | None = None, *, points=None, keypoints=None, px_per_m: float = 8.0) -> np.ndarray:
-    """A bird's-eye view of the pitch (BGR uint8): the camera's footprint and position, image
-    ``points`` (N, 2) put on the ground (players' feet) and image ``keypoints`` ``{id: (x, y)}``."""
+def top_view(camera: Camera | None = None, image: np.ndarray | None = None, points_pitch=None,
+             points_image=None, *, keypoints=None, points=None, px_per_m: float = 8.0) -> np.ndarray:
+    """A bird's-eye view of the pitch (BGR uint8, (int(117 px_per_m), int(80 px_per_m), 3): the
+    pitch and 6 m around it, the far touchline at the top): the camera's footprint and position;
+    ``image``, the camera's picture (BGR, any size of its aspect), drawn on the ground it sees;
+    ``points_pitch`` (N, 2) pitch positions in metres (a tracker's players) and ``points_image``
+    (N, 2) pixels of the image put on the ground (players' feet, the bottom middle of their
+    boxes) as red discs; ``keypoints`` ``{id: (x, y)}`` image keypoints put on the ground with
+    their ids. ``points`` is the older name of ``points_image``. About 2 ms at 3 px/m, 12 ms at
+    8 px/m, 35 ms with an image at 8 px/m (one core)."""
     from pnlviz.viz import top_view as draw
 
     if camera is not None and not isinstance(camera, Camera):
         raise ArgumentError(f"camera: expected a pnlviz.Camera, got {type(camera).__name__}")
     if not (isinstance(px_per_m, (int, float)) and 1 <= px_per_m <= 64):
         raise ArgumentError(f"px_per_m: expected a number in 1..64, got {px_per_m!r}")
-    return draw(camera, points=points, keypoints=keypoints, px_per_m=float(px_per_m))
+    if points is not None and points_image is not None:
+        raise ArgumentError("points: the older name of points_image; give one of them")
+    points_image = points if points_image is None else points_image
+    arrays = {}
+    for name, value in (("points_pitch", points_pitch), ("points_image", points_image)):
+        if value is None:
+            continue
+        try:
+            arr = np.asarray(value, float)
+        except (TypeError, ValueError):
+            raise ArgumentError(f"{name}: expected numbers (N, 2), got {type(value).__name__}") from None
+        if arr.ndim != 2 or arr.shape[1] != 2:
+            raise ArgumentError(f"{name}: expected an array (N, 2), got shape {arr.shape}")
+        arrays[name] = arr
+    if points_image is not None and camera is None:
+        raise ArgumentError("points_image: image points need the camera that puts them on the ground")
+    if image is not None:
+        if camera is None:
+            raise ArgumentError("image: a picture needs the camera that took it")
+        image = np.asarray(image)
+        if image.ndim != 3 or image.shape[2] not in (3, 4) or image.dtype != np.uint8:
+            raise ArgumentError(f"image: expected a BGR uint8 image (H, W, 3), got {image.dtype} {image.shape}")
+        if abs(image.shape[1] / image.shape[0] - camera.width / camera.height) > 0.02:
+            raise ArgumentError(f"image: {image.shape[1]}x{image.shape[0]} is not the camera's aspect "
+                                f"({camera.width:g}x{camera.height:g}); a swapped or cropped picture?")
+    return draw(camera, image=image, points=arrays.get("points_image"), keypoints=keypoints,
+                points_pitch=arrays.get("points_pitch"), px_per_m=float(px_per_m))

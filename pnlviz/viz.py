@@ -3,6 +3,7 @@ keypoints, and contact sheets. Images are BGR uint8, as OpenCV reads them."""
 
 from __future__ import annotations
 
+import functools
 import math
 import zlib
 from collections.abc import Mapping
@@ -167,11 +168,35 @@ def _free_spot(box_w: int, box_h: int, at: tuple[int, int], taken: list, bounds:
     return places[0]
 
 
+_TOP_GRASS = (40, 92, 46)  # the top view's background (BGR)
+
+
+def _ground_picture(camera: Camera, picture: np.ndarray, size: tuple[int, int], px_per_m: float,
+                    margin: float, step: int = 4) -> np.ndarray:
+    """``picture`` (the camera's image) as seen from above on a top-view canvas of ``size``: each
+    canvas pixel's ground point projected into it (lens included) on a grid every ``step``
+    pixels, the map between grid nodes interpolated (a projection is smooth at that scale)."""
+    W, H = size
+    gw, gh = W // step + 3, H // step + 3
+    # node j sits at canvas pixel (j - 1) * step + (step - 1) / 2: where a linear resize by
+    # ``step`` puts it at pixel j * step + (step - 1) / 2, i.e. the canvas shifted by ``step``
+    cx = (np.arange(gw) - 1) * step + (step - 1) / 2
+    cy = (np.arange(gh) - 1) * step + (step - 1) / 2
+    gx, gy = np.meshgrid((cx + 0.5) / px_per_m - 52.5 - margin, (cy + 0.5) / px_per_m - 34 - margin)
+    uv, _ = camera.project(np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1))
+    ph, pw = picture.shape[:2]
+    uv = np.nan_to_num(uv * [pw / camera.width, ph / camera.height], nan=-1e4).clip(-1e4, 1e4).astype(np.float32)
+    full = cv2.resize(uv.reshape(gh, gw, 2), (gw * step, gh * step), interpolation=cv2.INTER_LINEAR)
+    full = np.ascontiguousarray(full[step:step + H, step:step + W])
+    return cv2.remap(np.ascontiguousarray(picture[:, :, :3]), full[..., 0], full[..., 1], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=_TOP_GRASS)
+
+
 def _top_canvas(model: FieldModel, px_per_m: float, margin: float = 6.0):
     """The pitch seen from above (the far touchline at the top) with ``margin`` metres around it:
     ``(image BGR, px)``, ``px`` mapping pitch metres (N, 2) to image pixels."""
     W, H = int((105 + 2 * margin) * px_per_m), int((68 + 2 * margin) * px_per_m)
-    image = np.full((H, W, 3), (40, 92, 46), np.uint8)
+    image = np.full((H, W, 3), _TOP_GRASS, np.uint8)
 
     def px(xy) -> np.ndarray:
         return (np.asarray(xy, float) + [52.5 + margin, 34 + margin]) * px_per_m
@@ -183,46 +208,72 @@ def _top_canvas(model: FieldModel, px_per_m: float, margin: float = 6.0):
     return image, px
 
 
-def top_view(camera: Camera | None = None, *, points=None, keypoints=None, model: FieldModel | None = None,
-             px_per_m: float = 8.0) -> np.ndarray:
+@functools.lru_cache(maxsize=8)
+def _cached_top_canvas(px_per_m: float):
+    image, _ = _top_canvas(load_field_model(), px_per_m)
+    image.setflags(write=False)
+    return image
+
+
+def top_view(camera: Camera | None = None, *, image: np.ndarray | None = None, points=None, keypoints=None,
+             points_pitch=None, model: FieldModel | None = None, px_per_m: float = 8.0) -> np.ndarray:
     """A bird's-eye view of the pitch (BGR uint8, the far touchline at the top): where ``camera``
-    sees the ground (its footprint, shaded, and its position), ``keypoints`` ``{id: (u, v)}``
-    pixels of its image put on the ground (yellow, with their ids) and ``points`` (N, 2) pixels
-    put on the ground (players' feet: red discs)."""
-    model = model or load_field_model()
-    image, px = _top_canvas(model, px_per_m)
+    sees the ground (its footprint, shaded: :func:`pnlviz.geometry.footprint.ground_footprint`, and
+    its position), ``keypoints`` ``{id: (u, v)}`` pixels of its image put on the ground (yellow,
+    with their ids), ``points`` (N, 2) pixels put on the ground (players' feet: red discs) and
+    ``points_pitch`` (N, 2) pitch positions in metres (a tracker's: red discs too, drawn with or
+    without a camera). ``image``: the camera's picture (BGR, any size of its aspect), drawn on the
+    ground it sees instead of the shading, the pitch's lines over it at half strength."""
+    from pnlviz.geometry.footprint import ground_footprint
+
+    picture = image
+    margin = 6.0
+    if model is None:
+        image = _cached_top_canvas(float(px_per_m)).copy()
+    else:
+        image, _ = _top_canvas(model, px_per_m, margin)
     H, W = image.shape[:2]
+
+    def px(xy) -> np.ndarray:
+        return (np.asarray(xy, float) + [52.5 + margin, 34 + margin]) * px_per_m
+
     if camera is not None:
-        # the footprint: every ground point of the view that the camera puts inside its image
-        margin = 6.0
-        xs = (np.arange(W) + 0.5) / px_per_m - 52.5 - margin
-        ys = (np.arange(H) + 0.5) / px_per_m - 34 - margin
-        gx, gy = np.meshgrid(xs, ys)
-        ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
-        uv, _ = camera.project(ground)
-        seen = (np.all(np.isfinite(uv), axis=1) & camera.in_image(np.nan_to_num(uv, nan=-1.0))).reshape(H, W)
-        shade = image.copy()
-        shade[seen] = (0.55 * shade[seen] + 0.45 * np.array([255, 200, 90])).astype(np.uint8)
-        image = shade
-        edges = cv2.findContours(seen.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]
-        cv2.drawContours(image, edges, -1, (255, 200, 90), 1, cv2.LINE_AA)
+        polygon = ground_footprint(camera)
+        if len(polygon) >= 3:
+            seen = np.zeros((H, W), np.uint8)
+            # fixed point, pixel centres at +0.5 (as the canvas's own drawing); the reach keeps it in int32
+            cv2.fillPoly(seen, [_to_int(px(polygon) - 0.5)], 1, cv2.LINE_8, shift=4)
+            mask = seen.astype(bool)
+            if picture is not None:
+                lines = np.any(image != _TOP_GRASS, axis=2) & mask
+                warped = _ground_picture(camera, picture, (W, H), px_per_m, margin)
+                image[lines] = (0.5 * image[lines] + 0.5 * warped[lines]).astype(np.uint8)
+                image[mask & ~lines] = warped[mask & ~lines]
+            else:
+                image[mask] = (0.55 * image[mask] + 0.45 * np.array([255, 200, 90])).astype(np.uint8)
+            edges = cv2.findContours(seen, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]
+            cv2.drawContours(image, edges, -1, (255, 200, 90), 1, cv2.LINE_AA)
         c = px(camera.C[:2])
         inside = 0 <= c[0] < W and 0 <= c[1] < H
         at = tuple(int(v) for v in np.clip(c, 4, [W - 5, H - 5]))
         cv2.circle(image, at, 5, (255, 200, 90), -1 if inside else 2, cv2.LINE_AA)
-    for kid, uv in (keypoints or {}).items():
-        if camera is None:
-            break
-        xy = camera.image_to_pitch(np.asarray(uv, float).reshape(1, 2))[0]
-        if np.all(np.isfinite(xy)):
-            q = tuple(int(v) for v in px(xy))
-            cv2.circle(image, q, 3, (0, 220, 255), -1, cv2.LINE_AA)
-            cv2.putText(image, str(kid), (q[0] + 4, q[1] - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 220, 255), 1,
-                        cv2.LINE_AA)
-    if points is not None and camera is not None:
-        for xy in camera.image_to_pitch(np.asarray(points, float).reshape(-1, 2)):
+    if keypoints and camera is not None:
+        kids = list(keypoints)
+        ground = camera.image_to_pitch(np.array([keypoints[k] for k in kids], float).reshape(-1, 2))
+        for kid, xy in zip(kids, ground):
             if np.all(np.isfinite(xy)):
-                cv2.circle(image, tuple(int(v) for v in px(xy)), 4, (40, 40, 230), -1, cv2.LINE_AA)
+                q = tuple(int(v) for v in px(xy))
+                cv2.circle(image, q, 3, (0, 220, 255), -1, cv2.LINE_AA)
+                cv2.putText(image, cv_text(str(kid)), (q[0] + 4, q[1] - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
+                            (0, 220, 255), 1, cv2.LINE_AA)
+    feet = []
+    if points is not None and camera is not None:
+        feet.append(camera.image_to_pitch(np.asarray(points, float).reshape(-1, 2)))
+    if points_pitch is not None:
+        feet.append(np.asarray(points_pitch, float).reshape(-1, 2))
+    for xy in (np.vstack(feet) if feet else ()):
+        if np.all(np.isfinite(xy)) and np.all(np.abs(px(xy)) < 1e6):
+            cv2.circle(image, tuple(int(v) for v in px(xy)), 4, (40, 40, 230), -1, cv2.LINE_AA)
     return image
 
 

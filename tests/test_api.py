@@ -125,11 +125,87 @@ def test_the_top_view_shades_what_the_camera_sees():
     assert r > 150 and g < 120 and b < 120
 
 
+@pytest.mark.parametrize("cam", cameras(), ids=["no k1", "k1"])
+def test_the_footprint_is_the_ground_the_camera_puts_in_its_image(cam):
+    """The footprint polygon against the definition, pixel by pixel: a ground point is seen when
+    its projection lands in the image and that pixel's ray comes back to it (else the projection is
+    a fold of the distortion model, not a ray of the camera)."""
+    import cv2
+
+    from pnlviz.geometry.footprint import ground_footprint
+
+    ppm = 4.0
+    gx, gy = np.meshgrid((np.arange(int(117 * ppm)) + 0.5) / ppm - 58.5, (np.arange(int(80 * ppm)) + 0.5) / ppm - 40)
+    ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    uv, _ = cam.project(ground)
+    inside = cam.in_image(np.nan_to_num(uv, nan=-1.0))
+    back = np.full_like(uv, np.nan)
+    back[inside] = cam.image_to_pitch(uv[inside])
+    truth = (inside & (np.linalg.norm(np.nan_to_num(back, nan=1e9) - ground[:, :2], axis=1) < 0.01)).reshape(gx.shape)
+    seen = np.zeros(gx.shape, np.uint8)
+    poly = (ground_footprint(cam) + [58.5, 40]) * ppm - 0.5
+    cv2.fillPoly(seen, [np.round(poly * 16).astype(np.int32)], 1, cv2.LINE_8, shift=4)
+    assert truth.sum() > 1000 and abs(int(seen.sum()) - int(truth.sum())) < 0.02 * truth.sum()
+    near = np.ones((3, 3), np.uint8)  # pixels straddling the border may go either way, no other
+    assert not (truth & ~cv2.dilate(seen, near).astype(bool)).any()
+    extra = (seen.astype(bool) & ~cv2.dilate(truth.astype(np.uint8), near).astype(bool)).ravel()
+    # else only where the border's samples are far apart on the ground: a few pixels off the image
+    off = np.maximum(np.maximum(-uv[extra], uv[extra] - [cam.width, cam.height]), 0).max(axis=1, initial=0)
+    assert extra.sum() < 10 and np.all(off < 4)
+
+
+def test_a_camera_above_the_pitch_looking_up_has_no_footprint():
+    from pnlviz.geometry.footprint import ground_footprint
+
+    sky = pnlviz.Camera.from_look_at((0.0, 50.0, -20.0), (0.0, 0.0, -60.0), hfov_deg=20, width=960, height=540)
+    assert ground_footprint(sky).shape == (0, 2)
+    bare = pnlviz.top_view(None, px_per_m=3.0)
+    view = pnlviz.top_view(sky, px_per_m=3.0)
+    changed = np.any(view != bare, axis=2)
+    ys, xs = np.nonzero(changed)
+    # only the camera's mark (a disc of radius 5 at its position) differs
+    assert changed.sum() < 150 and np.ptp(xs) <= 16 and np.ptp(ys) <= 16
+
+
+def test_the_top_view_draws_a_trackers_metres_and_the_picture_on_the_ground():
+    cam = cameras()[0]
+    ppm = 8.0
+    W, H = int(cam.width), int(cam.height)
+    picture = np.zeros((H // 2, W // 2, 3), np.uint8)  # the picture at half size: scaled, not refused
+    picture[:, : W // 4] = (255, 0, 0)  # the image's left half blue, the right half red (BGR)
+    picture[:, W // 4:] = (0, 0, 255)
+    view = pnlviz.top_view(cam, picture, points_pitch=[[30.0, -20.0]], px_per_m=ppm)
+
+    def at(xy):
+        x, y = ((np.asarray(xy) + [58.5, 40]) * ppm).astype(int)
+        return view[y, x].astype(int)
+
+    left, right = cam.image_to_pitch([[W * 0.2, H * 0.7], [W * 0.8, H * 0.7]])
+    assert tuple(at(left)) == (255, 0, 0) and tuple(at(right)) == (0, 0, 255)
+    b, g, r = at([30.0, -20.0])  # the tracker's player, a red disc where its metres are
+    assert r > 150 and g < 120 and b < 120
+    outside = view[2, 2].astype(int)  # the corner of the canvas, far behind the view: grass
+    assert tuple(outside) == (40, 92, 46)
+    # without a camera the metres are still drawn
+    alone = pnlviz.top_view(None, points_pitch=np.array([[30.0, -20.0]]), px_per_m=ppm)
+    x, y = ((np.array([30.0, -20.0]) + [58.5, 40]) * ppm).astype(int)
+    assert alone[y, x, 2] > 150
+
+
 def test_top_view_arguments_are_named():
     with pytest.raises(ArgumentError, match="^camera"):
         pnlviz.top_view({"x_focal_length": 1})
     with pytest.raises(ArgumentError, match="^px_per_m"):
         pnlviz.top_view(None, px_per_m=0)
+    cam = cameras()[0]
+    with pytest.raises(ArgumentError, match="^points_pitch: expected an array \\(N, 2\\), got shape \\(3,\\)"):
+        pnlviz.top_view(cam, points_pitch=[1.0, 2.0, 3.0])
+    with pytest.raises(ArgumentError, match="^points_image: image points need the camera"):
+        pnlviz.top_view(None, points_image=[[1.0, 2.0]])
+    with pytest.raises(ArgumentError, match="^image: 1080x1920 is not the camera's aspect"):
+        pnlviz.top_view(cam, np.zeros((1920, 1080, 3), np.uint8))  # a picture given as (W, H)
+    with pytest.raises(ArgumentError, match="^image: a picture needs the camera"):
+        pnlviz.top_view(None, np.zeros((1080, 1920, 3), np.uint8))
 
 
 def test_open_dataset_names_a_missing_path(tmp_path):
