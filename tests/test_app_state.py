@@ -414,3 +414,56 @@ def test_releasing_the_caches_starts_no_process(monkeypatch):
     monkeypatch.setattr(subprocess.Popen, "__init__", no_process)
     state._return_free_memory()
     assert started == []
+
+
+def test_the_background_pass_waits_while_a_tab_acts_and_goes_on_after(data, tmp_path):
+    """The pass takes no frame while a tab's action runs nor until the tabs have been quiet for a
+    moment; then it calibrates every frame."""
+    import threading
+
+    from pnlviz.app.tabqueue import TabQueue
+
+    with AppState(data, edits=tmp_path / "edits") as st:
+        queue = TabQueue(lambda *a, **k: None, activity=st.activity)
+        acting, release = threading.Event(), threading.Event()
+
+        def long_action():
+            acting.set()
+            release.wait(30)
+
+        queue.enqueue(long_action)
+        assert acting.wait(10) and st.activity.busy()
+        done = []
+        worker = threading.Thread(target=lambda: done.append(st.triage.run(threading.Event(), lambda text: None)))
+        worker.start()
+        worker.join(1.5)
+        assert worker.is_alive() and len(st.triage.store) == 0  # waiting: not one frame taken
+        release.set()
+        queue.flush()
+        worker.join(120)
+        assert done and done[0].finished and done[0].done == len(st.stems)
+        assert set(st.triage.summaries()) == set(st.stems)
+        queue.close(wait=True)
+
+
+def test_waiting_for_quiet_tabs_ends_on_stop_and_after_the_quiet_time():
+    import threading
+    import time
+
+    from pnlviz.app.activity import UserActivity
+
+    activity = UserActivity(quiet=0.2)
+    stop = threading.Event()
+    assert activity.wait_quiet(stop) < 0.1  # nobody acted yet
+    activity.begin()
+    stop.set()
+    assert activity.wait_quiet(stop) < 0.1 and activity.busy()  # stopping does not wait for the tab
+    stop.clear()
+    activity.end()
+    waited = activity.wait_quiet(stop)
+    assert 0.15 <= waited < 5 and not activity.busy()
+    activity.begin()
+    activity.begin()
+    activity.end()  # one of two actions ended: still busy
+    t = time.monotonic()
+    assert activity.wait_quiet(stop, longest=0.3) >= 0.3 and time.monotonic() - t < 5  # a tab busy for good

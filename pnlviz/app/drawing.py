@@ -90,7 +90,8 @@ class Painter:
         self.tab.view_control.frame_placed(before)
 
     def preload_neighbours(self) -> None:
-        """Send the frames before and after this one (in the filter's order) ahead, hidden."""
+        """Send the frames before and after this one (in the filter's order) ahead, hidden, and
+        calibrate the next one."""
         tab = self.tab
         with tab.lock:
             frames = tab.frames
@@ -98,6 +99,8 @@ class Painter:
                 return
             pos = frames.order.index(frames.index)
             stems = [tab.state.stems[frames.order[p]] for p in (pos + 1, pos - 1) if 0 <= p < len(frames.order)]
+            ahead = tab.state.stems[frames.order[pos + 1]] if pos + 1 < len(frames.order) else None
+            settings = tab.settings
         for stem in stems:  # the pixels are read outside the lock, the scene changed under it
             with tab.lock:
                 if tab.queue.closed or tab.workspace.holds(stem):
@@ -106,6 +109,9 @@ class Painter:
             with tab.lock:
                 if not tab.queue.closed:
                     tab.workspace.preload(stem, lambda pixels=pixels: pixels)
+        if ahead is not None and not tab.queue.closed:
+            # the next frame calibrated ahead too (the state keeps the view): "next" only draws it
+            tab.state.view(ahead, settings)
 
     # ------------------------------------------------------------------ overlays
     def hidden_ids(self, stem: str) -> set[int]:

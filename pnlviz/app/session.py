@@ -50,7 +50,7 @@ class Session:
             self.notify(title, body, error)  # looked up on each call: a script may redirect a tab's messages
 
         self.frames = FrameOrder(len(st.stems), st.first_index)
-        self.queue = TabQueue(notify, app.server.get_event_loop)
+        self.queue = TabQueue(notify, app.server.get_event_loop, app.state.activity)
         self.painter = Painter(self)
         self.guard = ActionGuard(notify, self.show, lambda: self.painter.drawn)
         self.editor = Editor(self)

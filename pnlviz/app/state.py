@@ -34,6 +34,7 @@ from pnlviz.data.edits import (
     set_keypoint,
 )
 from pnlviz.field.model import load_field_model
+from pnlviz.app.activity import UserActivity
 from pnlviz.app.triage import Triage
 from pnlviz.pipeline import FrameReader, FrameView, Settings, frame_view
 
@@ -111,6 +112,8 @@ class AppState:
         #: every frame's calibration summary and the background pass (the detector's results
         #: are kept on disk beside them)
         self.triage = Triage(self, writable)
+        #: the tabs' actions mark it; the background pass waits for a pause in them
+        self.activity = UserActivity()
         self.predictions, self.detected = self.reader.predictions, self.reader.detected
         #: the settings a new tab starts with: "both" once there are detections, unless told otherwise
         self.default_settings = Settings(source=source or self.reader.default_settings().source)

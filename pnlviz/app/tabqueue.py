@@ -17,6 +17,7 @@ import traceback
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
+from pnlviz.app.activity import UserActivity
 from pnlviz.app.state import EditError
 
 
@@ -25,8 +26,10 @@ class TabQueue:
     shows an unexpected error to the tab; ``loop``: viser's event loop, which a value set from
     Python goes through before it reaches the queue (None: no server)."""
 
-    def __init__(self, notify: Callable[..., None], loop: Callable[[], asyncio.AbstractEventLoop] | None = None):
+    def __init__(self, notify: Callable[..., None], loop: Callable[[], asyncio.AbstractEventLoop] | None = None,
+                 activity: UserActivity | None = None):
         self.notify, self._loop = notify, loop
+        self.activity = activity  # marked while an action runs (the background pass waits for a pause)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pnlviz-tab")
         # id(widget) -> values set by this tab whose callbacks are to come (viser's event carries the
         # widget's handle itself as its target; the panel keeps its handles for the tab's life)
@@ -73,11 +76,16 @@ class TabQueue:
 
     def _run(self, action: Callable[[], object]) -> None:
         """One queued action; an unexpected error is printed and shown, and the tab goes on."""
+        if self.activity is not None:
+            self.activity.begin()
         try:
             action()
         except Exception as exc:  # noqa: BLE001 - the queue would swallow it silently
             traceback.print_exc()
             self.notify("internal error", f"{type(exc).__name__}: {exc}")
+        finally:
+            if self.activity is not None:
+                self.activity.end()
 
     def close(self, wait: bool = False) -> None:
         """No more actions; those queued still run (``wait``: until they have)."""

@@ -258,10 +258,12 @@ class PassProgress:
 def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None], every: int = 10) -> PassProgress:
     """Detect (when the state has a detector) and calibrate every frame of the triage's state
     under its default settings, keeping summaries only; frames whose summary is up to date are
-    skipped. ``say``: the progress line, every ``every`` frames and at the end."""
+    skipped. ``say``: the progress line, every ``every`` frames and at the end. Before each frame
+    it waits for a pause in the tabs' actions (the state's :class:`pnlviz.app.activity.UserActivity`)."""
     state = triage.state
     progress = PassProgress(len(state.stems), started=time.perf_counter())
     for i, stem in enumerate(state.stems):
+        state.activity.wait_quiet(stop)  # the tab the user is on goes first
         if stop.is_set():
             return progress
         if state.needs_detection(stem):
