@@ -104,6 +104,10 @@ def _pixel(value, where: str) -> tuple[float, float]:
     return float(arr[0]), float(arr[1])
 
 
+#: detected keypoints scored under this are not used (the command line's threshold for detections)
+KEYPOINT_SCORE_THRESHOLD = 0.1
+
+
 def _keypoints_arg(keypoints, model) -> dict[int, tuple[float, float]]:
     if keypoints is None:
         return {}
@@ -115,6 +119,17 @@ def _keypoints_arg(keypoints, model) -> dict[int, tuple[float, float]]:
             raise ArgumentError(f"keypoints: ids are whole numbers 1-73, got {k!r}")
         if int(k) not in model.keypoints:
             raise ArgumentError(f"keypoints[{k}]: no such keypoint id (1-73: see pnlviz.keypoints())")
+        try:
+            arr = np.asarray(v, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            arr = np.zeros(0)
+        if arr.shape == (3,):  # (x, y, score), as detect() gives them
+            score = float(arr[2])
+            if not 0.0 <= score <= 1.0:
+                raise ArgumentError(f"keypoints[{k}]: a score is in [0, 1], got {score!r}")
+            if score < KEYPOINT_SCORE_THRESHOLD:
+                continue
+            v = arr[:2]
         out[int(k)] = _pixel(v, f"keypoints[{k}]")
     return out
 
@@ -149,7 +164,9 @@ def calibrate(keypoints: Mapping[int, Sequence[float]] | None = None,
     """Calibrate one frame from what is seen in it.
 
     ``keypoints``: ``{id: (x, y)}`` pixels of catalogue keypoints (ids 1-73, see
-    :func:`keypoints`). ``lines``: ``{SoccerNet class name: (M, 2) pixels on it}`` (straight lines
+    :func:`keypoints`), or ``{id: (x, y, score)}`` as :func:`detect` gives them (a keypoint
+    scored under :data:`KEYPOINT_SCORE_THRESHOLD` is left out, as the command line's calibration
+    from detections does; the fit weighs the others alike). ``lines``: ``{SoccerNet class name: (M, 2) pixels on it}`` (straight lines
     and circles, e.g. ``"Side line top"``, ``"Circle central"``); keypoints where annotated lines
     meet are derived from them, as PnLCalib does. ``image_size``: (width, height) of the image
     the pixels are in. ``pnl``: the point-and-line refinement; ``alpha``: its weight of lines

@@ -224,9 +224,11 @@ def test_detect_finds_what_calibrate_takes():
     assert len(found["keypoints"]) >= 4
     assert all(0 <= x < image.shape[1] and 0 <= y < image.shape[0] and 0.1 <= p <= 1
                for x, y, p in found["keypoints"].values())
-    res = pnlviz.calibrate({k: (x, y) for k, (x, y, _) in found["keypoints"].items()}, found["lines"],
-                           image_size=image.shape[1::-1])
+    res = pnlviz.calibrate(**found, image_size=image.shape[1::-1])  # what detect gives, as it is
     assert res.ok, res.reason
+    plain = pnlviz.calibrate({k: (x, y) for k, (x, y, _) in found["keypoints"].items()}, found["lines"],
+                             image_size=image.shape[1::-1])
+    assert np.allclose(res.camera.P, plain.camera.P)  # every detected keypoint is over the threshold
     with pytest.raises(ArgumentError, match="^image"):
         pnlviz.detect(image[:, :, 0])
 
@@ -265,3 +267,23 @@ def test_the_api_reference_page_is_current():
     script = Path(__file__).resolve().parents[1] / "scripts" / "api_reference.py"
     run = subprocess.run([sys.executable, str(script), "--check"], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
+
+
+def test_calibrate_takes_keypoints_with_scores_as_detect_gives_them():
+    cam = cameras()[0]
+    ids = [k for k in pnlviz.keypoints() if k <= 57]
+    world = np.array([pnlviz.keypoints()[k] for k in ids])
+    uv, _ = cam.project(world)
+    seen = {k: (float(x), float(y)) for k, (x, y) in zip(ids, uv) if cam.in_image(np.array([[x, y]]))[0]}
+    assert len(seen) >= 6
+    plain = pnlviz.calibrate(seen, image_size=(1920, 1080))
+    scored = {k: (x, y, 0.9) for k, (x, y) in seen.items()}
+    wrong = next(iter(seen))
+    scored[wrong] = (seen[wrong][0] + 300.0, seen[wrong][1], 0.05)  # far off, but scored under the threshold
+    with_scores = pnlviz.calibrate(keypoints=scored, lines={}, image_size=(1920, 1080))
+    assert plain.camera is not None and with_scores.camera is not None
+    assert wrong not in with_scores.point_residuals and wrong in plain.point_residuals
+    probe = np.array([[0.0, 0.0, 0.0], [30.0, 20.0, 0.0]])
+    assert np.abs(with_scores.camera.project(probe)[0] - cam.project(probe)[0]).max() < 0.5
+    with pytest.raises(ArgumentError, match=r"^keypoints\[\d+\]: a score is in \[0, 1\], got 1.5"):
+        pnlviz.calibrate({wrong: (10.0, 10.0, 1.5)}, image_size=(1920, 1080))
