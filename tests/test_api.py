@@ -287,3 +287,36 @@ def test_calibrate_takes_keypoints_with_scores_as_detect_gives_them():
     assert np.abs(with_scores.camera.project(probe)[0] - cam.project(probe)[0]).max() < 0.5
     with pytest.raises(ArgumentError, match=r"^keypoints\[\d+\]: a score is in \[0, 1\], got 1.5"):
         pnlviz.calibrate({wrong: (10.0, 10.0, 1.5)}, image_size=(1920, 1080))
+
+
+def test_a_soccernet_camera_is_scaled_to_the_image_it_is_used_on():
+    cam = cameras()[1]  # 1280x720, with a lens
+    d = cam.scaled(960, 540).to_soccernet()  # written at 960x540, as pnlviz and PnLCalib write them
+    full = pnlviz.Camera.from_soccernet(d, image_size=(1280, 720))
+    assert full.allclose(cam, atol=1e-6)
+    assert pnlviz.Camera.from_soccernet(d, 1280, 720).allclose(cam, atol=1e-6)  # the positional form agrees
+    ground = np.array([[0.0, 0.0, 0.0], [-20.0, 10.0, 0.0]])
+    assert np.abs(full.project(ground)[0] - cam.project(ground)[0]).max() < 1e-6
+    assert pnlviz.Camera.from_soccernet(d) == pnlviz.Camera.from_soccernet(d, image_size=(960, 540))
+    with pytest.raises(ArgumentError, match=r"^image_size: 720x1280 is not the aspect"):
+        pnlviz.Camera.from_soccernet(d, image_size=(720, 1280))  # (height, width) swapped
+    with pytest.raises(ArgumentError, match="^image_size: give the size once"):
+        pnlviz.Camera.from_soccernet(d, 1280, image_size=(1280, 720))
+    with pytest.raises(ArgumentError, match="^image_size: expected a positive"):
+        pnlviz.Camera.from_soccernet(d, image_size=(0, 720))
+
+
+def test_cameras_compare_hash_and_compare_within_a_tolerance():
+    a, lens = cameras()
+    same = pnlviz.Camera.from_look_at((-10.0, 50.0, -18.0), (5.0, 0.0, 0.0), hfov_deg=45, width=1920, height=1080,
+                                      roll_deg=1.5)
+    assert a == same and hash(a) == hash(same) and len({a, same, lens}) == 2
+    assert a != lens and a != "a camera"
+    round_trip = pnlviz.Camera.from_soccernet(a.to_soccernet())  # through degrees: equal to ~1e-12, not exactly
+    assert round_trip.allclose(a, atol=1e-6) and not lens.allclose(a)
+    nudged = a.scaled(1920.0, 1080.0 * (1 + 1e-7))
+    assert nudged != a and nudged.allclose(a, rtol=1e-6) and not nudged.allclose(a, rtol=1e-9, atol=0)
+    with pytest.raises(ArgumentError, match="^other: expected a Camera"):
+        a.allclose(a.to_soccernet())
+    with pytest.raises(Exception):
+        a.fx = 1.0  # immutable: what makes it hashable

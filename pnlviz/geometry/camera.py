@@ -126,6 +126,23 @@ def _numbers(d: Mapping[str, Any], key: str, n: int | None, *, positive: bool = 
     return arr.reshape(-1)
 
 
+def _image_size_arg(width, height, image_size) -> tuple[float, float] | None:
+    """(width, height) from ``image_size`` or ``width`` and ``height`` (one way only), checked."""
+    if image_size is not None and (width is not None or height is not None):
+        raise ArgumentError("image_size: give the size once, as image_size or as width and height")
+    if image_size is None and width is None and height is None:
+        return None
+    if image_size is None:
+        image_size = (width, height)
+    try:
+        w, h = (float(v) for v in image_size)
+    except (TypeError, ValueError):
+        raise ArgumentError(f"image_size: expected (width, height), got {image_size!r:.60}") from None
+    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
+        raise ArgumentError(f"image_size: expected a positive (width, height), got {image_size!r:.60}")
+    return w, h
+
+
 @dataclass(frozen=True)
 class Camera:
     """A calibrated camera for an image of ``width`` x ``height`` pixels."""
@@ -161,6 +178,28 @@ class Camera:
                 or (self.thin_prism is not _NO_THIN_PRISM and self.thin_prism.any()) or self.radial[1:].any())
         object.__setattr__(self, "_lens", "full" if rest else "k1" if self.radial[0] != 0.0 else "none")
 
+    # ------------------------------------------------------------------ comparison
+    def _values(self) -> tuple:
+        return (self.fx, self.fy, self.cx, self.cy, self.width, self.height, self.R, self.C, self.radial,
+                self.tangential, self.thin_prism)
+
+    def __eq__(self, other: object) -> bool:
+        """Exactly the same camera (every parameter equal); :meth:`allclose` for a tolerance."""
+        if not isinstance(other, Camera):
+            return NotImplemented
+        return all(np.array_equal(a, b) for a, b in zip(self._values(), other._values()))
+
+    def __hash__(self) -> int:
+        """Cameras are immutable (frozen, read-only arrays): hashable, equal cameras alike."""
+        return hash(tuple(np.asarray(v, float).tobytes() for v in self._values()))
+
+    def allclose(self, other: "Camera", *, rtol: float = 1e-9, atol: float = 1e-9) -> bool:
+        """Every parameter of ``other`` within ``atol + rtol * |value|`` of this camera's (as
+        :func:`numpy.allclose`; pixels, metres and the rotation's entries alike)."""
+        if not isinstance(other, Camera):
+            raise ArgumentError(f"other: expected a Camera, got {type(other).__name__}")
+        return all(np.allclose(a, b, rtol=rtol, atol=atol) for a, b in zip(self._values(), other._values()))
+
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_look_at(cls, position, target, *, hfov_deg: float, width: float, height: float,
@@ -173,12 +212,22 @@ class Camera:
                    np.asarray(position, float), width, height, radial)
 
     @classmethod
-    def from_soccernet(cls, d: Mapping[str, Any], width: float | None = None, height: float | None = None) -> "Camera":
-        """From a SoccerNet camera dict. The image size defaults to twice the principal point, as
-        in the official evaluator. Every field is checked (:class:`pnlviz.ArgumentError` naming
-        the key): the angles finite, the focal lengths and principal point finite and positive,
-        the position finite and within :data:`MAX_CAMERA_DISTANCE_M` of the pitch's centre, the
-        distortion terms (optional) of their lengths and finite."""
+    def from_soccernet(cls, d: Mapping[str, Any], width: float | None = None, height: float | None = None, *,
+                       image_size: tuple[float, float] | None = None) -> "Camera":
+        """From a SoccerNet camera dict, made for an image of twice its principal point (as the
+        official evaluator takes it). ``image_size`` (width, height), or ``width`` and ``height``:
+        the size of the image it is used on; the camera is scaled to it when it differs (a camera
+        written at 960x540 used on the 1920x1080 frame), and a size of another aspect is refused
+        (a swapped (height, width), or a camera of another picture). Every field is checked
+        (:class:`pnlviz.ArgumentError` naming the key): the angles finite, the focal lengths and
+        principal point finite and positive, the position finite and within
+        :data:`MAX_CAMERA_DISTANCE_M` of the pitch's centre, the distortion terms (optional) of
+        their lengths and finite.
+
+        >>> d = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540).to_soccernet()
+        >>> bool(Camera.from_soccernet(d, image_size=(1920, 1080)).fx == 2 * Camera.from_soccernet(d).fx)
+        True
+        """
         if not isinstance(d, Mapping):
             raise ArgumentError(f"camera: expected a SoccerNet camera dict, got {type(d).__name__}")
         pp = _numbers(d, "principal_point", 2, positive=True)
@@ -190,9 +239,16 @@ class Camera:
         fx, fy = _numbers(d, "x_focal_length", None, positive=True)[0], _numbers(d, "y_focal_length", None, positive=True)[0]
         lens = [_numbers(d, k, n, optional=True) for k, n in (("radial_distortion", 6), ("tangential_distortion", 2),
                                                               ("thin_prism_distortion", 4))]
-        return cls(fx, fy, pp[0], pp[1], rotation_from_pan_tilt_roll(*angles), C,
-                   float(width) if width is not None else 2 * pp[0],
-                   float(height) if height is not None else 2 * pp[1], *lens)
+        cam = cls(fx, fy, pp[0], pp[1], rotation_from_pan_tilt_roll(*angles), C, 2 * pp[0], 2 * pp[1], *lens)
+        size = _image_size_arg(width, height, image_size)
+        if size is None or (abs(size[0] - cam.width) < 1e-6 and abs(size[1] - cam.height) < 1e-6):
+            return cam
+        made = cam.width / cam.height
+        if abs(size[0] / size[1] - made) > 0.01 * made:
+            raise ArgumentError(f"image_size: {size[0]:g}x{size[1]:g} is not the aspect of the image the camera was "
+                                f"made for ({cam.width:g}x{cam.height:g}, twice its principal point): "
+                                f"a swapped (height, width), or another picture's camera?")
+        return cam.scaled(*size)
 
     def to_soccernet(self) -> dict:
         """SoccerNet camera dict (plus ``rotation_matrix``, as PnLCalib writes it)."""
