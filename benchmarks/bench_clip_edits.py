@@ -180,8 +180,8 @@ def _in_view(cam, model):
     """Every catalogue keypoint the picture shows through camera ``cam``: {id: (x, y)}."""
     ids = np.array(model.keypoint_ids)
     X = model.keypoint_xyz(ids)
-    uv, z = cam.project(X)
-    flat, _ = cam.project(X, distort=False)
+    uv, z = cam.project_with_depth(X)
+    flat = cam.project(X, distort=False)
     ok = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
     ok &= (np.abs(flat[:, 0] - cam.cx) < cam.width) & (np.abs(flat[:, 1] - cam.cy) < cam.height)
     return {int(i): uv[j] for j, i in enumerate(ids) if ok[j]}
@@ -195,8 +195,8 @@ def _moved(a, b, model) -> float:
     from pnlviz.field.model import pitch_grid
 
     grid = pitch_grid(5.0)
-    pa, za = a.project(grid)
-    pb, _ = b.project(grid)
+    pa, za = a.project_with_depth(grid)
+    pb = b.project(grid)
     seen = (za > 0) & a.in_image(pa) & np.all(np.isfinite(pb), 1)
     return float(np.median(np.linalg.norm(pa[seen] - pb[seen], axis=1))) if seen.any() else 0.0
 
@@ -205,7 +205,7 @@ def _follows(cam, model, kid: int, marker: np.ndarray, miss: float) -> bool:
     """Whether the overlay of ``cam`` passes by a wrong marker (closer to it than half the way the
     marker is off its point in the picture, ``miss`` px, and within 10 px): the marker pulls the
     camera. A stray marker the overlay ignores is no cause of an overlay off the picture."""
-    uv, z = cam.project(model.keypoint_xyz(np.array([kid])))
+    uv, z = cam.project_with_depth(model.keypoint_xyz(np.array([kid])))
     near = min(0.5 * miss, 10.0 * cam.width / 960.0)
     return bool(z[0] > 0 and np.all(np.isfinite(uv[0])) and np.hypot(*(uv[0] - marker)) < near)
 
@@ -213,11 +213,11 @@ def _follows(cam, model, kid: int, marker: np.ndarray, miss: float) -> bool:
 def _overlay_off(cam, truth, markings: np.ndarray) -> float:
     """How far the pitch drawn by ``cam`` sits off the markings the picture shows (``truth``): the
     largest displacement (px) of the marking points in view, sampled every metre."""
-    pt, zt = truth.project(markings)
+    pt, zt = truth.project_with_depth(markings)
     seen = (zt > 0) & truth.in_image(pt)
     if not seen.any():
         return 0.0
-    pc, zc = cam.project(markings[seen])
+    pc, zc = cam.project_with_depth(markings[seen])
     d = np.where(zc > 0, np.linalg.norm(pc - pt[seen], axis=1), np.inf)
     return float(np.max(np.nan_to_num(d, nan=np.inf)))
 
@@ -244,7 +244,7 @@ def labelling(mode, t, truth):
         return twin if np.linalg.norm(cam.C - twin.C) < np.linalg.norm(cam.C - truth.C) else truth
 
     def fit(cam):
-        uv, z = cam.project(obs.kp_xyz)
+        uv, z = cam.project_with_depth(obs.kp_xyz)
         return float(np.median(np.where(z > 0, np.hypot(*(uv - obs.kp_xy).T), np.inf)))
 
     return twin if fit(twin) < fit(truth) else truth
@@ -293,7 +293,7 @@ class Annotator:
             if _overlay_off(cam, truth, self.markings) <= a.overlay_px:
                 return None
             ids = np.array(sorted(in_view))
-            uv, z = cam.project(self.model.keypoint_xyz(ids))
+            uv, z = cam.project_with_depth(self.model.keypoint_xyz(ids))
             overlay = {int(k): (float(np.hypot(*(uv[j] - in_view[int(k)]))) if z[j] > 0 and np.all(np.isfinite(uv[j]))
                                 else np.inf) for j, k in enumerate(ids)}
         if obs is not None and obs.n_keypoints:  # a marker off the point the picture shows, that the overlay follows

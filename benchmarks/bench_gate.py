@@ -82,7 +82,7 @@ def check(export: Path, gate_px: float) -> dict:
         for key, k in labels.items():
             kid = int(key)
             xyz = model.keypoint_xyz([kid], pnlcalib=k["provenance"] == "detection")
-            uv, _ = cam.project(xyz)
+            uv = cam.project(xyz)
             r = float(np.hypot(*(uv[0] - [k["x"], k["y"]])))
             r = r if math.isfinite(r) else math.inf
             visible = 0 <= k["x"] < SIZE[0] and 0 <= k["y"] < SIZE[1]

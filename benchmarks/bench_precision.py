@@ -82,7 +82,7 @@ def camera_gaps(ref: list, other: list) -> tuple[np.ndarray, int]:
             one += 1
         if a is None or b is None:
             continue
-        pa, pb = a.project(grid)[0], b.project(grid)[0]
+        pa, pb = a.project(grid), b.project(grid)
         inside = a.in_image(pa) & np.isfinite(pb).all(axis=1)
         if inside.any():
             gaps.append(float(np.linalg.norm(pa - pb, axis=1)[inside].max()))

@@ -122,11 +122,11 @@ def _split(ann, det, cam, names, rng, model):
     """2 or 3 clicks on another marking the camera shows in the image, appended to a class."""
     polys = model.sample_polylines(0.5, 0.5)
     for c in names:
-        own, _ = cam.project(polys[c])
+        own = cam.project(polys[c])
         for other in rng.permutation(list(MODEL_CLASSES)):
             if other == c:
                 continue
-            uv, _ = cam.project(polys[other])
+            uv = cam.project(polys[other])
             inside = uv[np.isfinite(uv).all(axis=1) & (uv[:, 0] > 20) & (uv[:, 0] < 940) & (uv[:, 1] > 20)
                         & (uv[:, 1] < 520)]
             if len(inside) < 10:

@@ -73,7 +73,7 @@ def _residual(cams: dict, obs: dict, scale: float) -> float:
         o = obs.get(s)
         if cam is None or o is None or o.n_keypoints == 0:
             continue
-        uv, _ = cam.project(o.kp_xyz)
+        uv = cam.project(o.kp_xyz)
         r.append(np.linalg.norm(uv - o.kp_xy, axis=1) * scale)
     return float(np.median(np.concatenate(r))) if r else float("nan")
 

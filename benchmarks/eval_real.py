@@ -86,7 +86,7 @@ def run_frames(det: Detector, images: dict[str, np.ndarray], homographies: dict[
             if not lab:
                 continue
             xyz = model.keypoint_xyz(list(lab))
-            px, ok = fc.result.camera.project(xyz)
+            px, ok = fc.result.camera.project_with_depth(xyz)
             gt = np.array([[v.x, v.y] for v in lab.values()])
             e = np.linalg.norm(px - gt, axis=1)
             errs.append(float(np.median(np.where(ok, e, np.inf))))

@@ -6,7 +6,7 @@ The Python API (:mod:`pnlviz.api`): :func:`keypoints`, :func:`calibrate` -> :cla
 with ``pip install 'pnlviz[detect]'``.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 from pnlviz.paths import ASSETS_DIR, EXAMPLES_DIR, REPO_ROOT, SAMPLE_DIR  # noqa: E402
 

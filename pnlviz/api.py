@@ -10,14 +10,14 @@ z = -2.44). Pixels: x to the right, y down, (0, 0) the centre of the top-left pi
 >>> world[45]  # the left penalty mark
 (-41.5, 0.0, 0.0)
 >>> cam = pnlviz.Camera.from_look_at((0.0, 45.0, -15.0), (0.0, 0.0, 0.0), hfov_deg=60, width=1280, height=720)
->>> pixels = {k: cam.project([xyz])[0][0] for k, xyz in world.items()}
+>>> pixels = {k: cam.project([xyz])[0] for k, xyz in world.items()}
 >>> pixels = {k: uv for k, uv in pixels.items() if cam.in_image(uv[None])[0]}  # the keypoints in view
 >>> len(pixels)
 18
 >>> result = pnlviz.calibrate(pixels, image_size=(1280, 720))
 >>> result.ok, round(result.camera.hfov_deg, 2)
 (True, 60.0)
->>> feet = result.camera.project([(10.0, 5.0, 0.0)])[0]  # a player's feet in the image
+>>> feet = result.camera.project([(10.0, 5.0, 0.0)])  # a player's feet in the image
 >>> [round(float(v), 3) for v in result.camera.image_to_pitch(feet)[0]]
 [10.0, 5.0]
 >>> pnlviz.calibrate({99: (1.0, 2.0)}, image_size=(1280, 720))

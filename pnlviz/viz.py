@@ -183,7 +183,7 @@ def _ground_picture(camera: Camera, picture: np.ndarray, size: tuple[int, int], 
     cx = (np.arange(gw) - 1) * step + (step - 1) / 2
     cy = (np.arange(gh) - 1) * step + (step - 1) / 2
     gx, gy = np.meshgrid((cx + 0.5) / px_per_m - 52.5 - margin, (cy + 0.5) / px_per_m - 34 - margin)
-    uv, _ = camera.project(np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1))
+    uv = camera.project(np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1))
     ph, pw = picture.shape[:2]
     uv = np.nan_to_num(uv * [pw / camera.width, ph / camera.height], nan=-1e4).clip(-1e4, 1e4).astype(np.float32)
     full = cv2.resize(uv.reshape(gh, gw, 2), (gw * step, gh * step), interpolation=cv2.INTER_LINEAR)

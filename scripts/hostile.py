@@ -782,7 +782,7 @@ def lost(m: Material):
         mention="damaged edit record")
     code = ("import pnlviz, numpy as np\n"
             "cam = pnlviz.Camera.from_look_at((0.0, 60.0, -18.0), (0.0, 0.0, 0.0), hfov_deg=40, width=1280, height=720)\n"
-            "far = cam.project(np.array([[0.0, -1e7, 0.0]]))[0][0]\n"
+            "far = cam.project(np.array([[0.0, -1e7, 0.0]]))[0]\n"
             "p = cam.image_to_pitch(far + [0.0, 0.25])\n"
             "print('a pitch point', p) if np.all(np.isfinite(p)) else print('no pitch point: nan')\n"
             "raise SystemExit(0 if np.all(np.isnan(p)) else 3)\n")

@@ -20,7 +20,7 @@ def cameras():
 def test_image_to_pitch_undoes_project_to_a_millimetre(cam):
     gx, gy = np.meshgrid(np.linspace(-52.5, 52.5, 43), np.linspace(-34, 34, 29))
     ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
-    uv, _ = cam.project(ground)
+    uv = cam.project(ground)
     xc = cam.to_camera(ground)
     r2 = np.sum((xc[:, :2] / xc[:, 2:]) ** 2, axis=1)
     # in the image, and where the lens is one-to-one (beyond r^2 = 1 / (3 |k1|) a strong barrel
@@ -32,7 +32,7 @@ def test_image_to_pitch_undoes_project_to_a_millimetre(cam):
     # the homography maps the ground to the pixels the lens would give without distortion
     H = cam.homography()
     h = np.c_[ground[seen, :2], np.ones(seen.sum())] @ H.T
-    np.testing.assert_allclose(h[:, :2] / h[:, 2:], cam.project(ground[seen], distort=False)[0], atol=1e-6)
+    np.testing.assert_allclose(h[:, :2] / h[:, 2:], cam.project(ground[seen], distort=False), atol=1e-6)
 
 
 def test_a_pixel_above_the_horizon_is_nowhere_on_the_pitch():
@@ -51,7 +51,7 @@ def test_image_to_pitch_takes_one_pixel_or_n_and_refuses_other_shapes():
 def test_calibrate_recovers_the_camera_the_keypoints_came_from():
     cam = cameras()[0]
     world = pnlviz.keypoints()
-    uv, _ = cam.project(np.array(list(world.values())))
+    uv = cam.project(np.array(list(world.values())))
     pixels = {k: p for k, p in zip(world, uv) if cam.in_image(np.nan_to_num(p[None], nan=-1.0))[0]}
     res = pnlviz.calibrate(pixels, image_size=(int(cam.width), int(cam.height)))
     assert res.ok and res.reason is None
@@ -66,7 +66,7 @@ def test_calibrate_from_lines_alone():
     from pnlviz.field.model import load_field_model
 
     for name, pts in load_field_model().sample_polylines(1.0, 0.5).items():
-        uv, _ = cam.project(pts)
+        uv = cam.project(pts)
         uv = uv[cam.in_image(np.nan_to_num(uv, nan=-1.0))]
         if len(uv) >= 2:
             model_lines[name] = uv
@@ -115,8 +115,8 @@ def test_the_top_view_shades_what_the_camera_sees():
 
     shaded, bare = at(centre)
     assert np.abs(shaded - bare).sum() > 60
-    outside = [-55.0, -36.0] if cam.project([[-55.0, -36.0, 0.0]])[0][0][0] < 0 else [55.0, -36.0]
-    assert not cam.in_image(np.nan_to_num(cam.project([[*outside, 0.0]])[0], nan=-1.0))[0]
+    outside = [-55.0, -36.0] if cam.project([[-55.0, -36.0, 0.0]])[0][0] < 0 else [55.0, -36.0]
+    assert not cam.in_image(np.nan_to_num(cam.project([[*outside, 0.0]]), nan=-1.0))[0]
     shaded, bare = at(outside)
     assert np.abs(shaded - bare).sum() == 0
     # the player's feet: a red disc where image_to_pitch puts them
@@ -137,7 +137,7 @@ def test_the_footprint_is_the_ground_the_camera_puts_in_its_image(cam):
     ppm = 4.0
     gx, gy = np.meshgrid((np.arange(int(117 * ppm)) + 0.5) / ppm - 58.5, (np.arange(int(80 * ppm)) + 0.5) / ppm - 40)
     ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
-    uv, _ = cam.project(ground)
+    uv = cam.project(ground)
     inside = cam.in_image(np.nan_to_num(uv, nan=-1.0))
     back = np.full_like(uv, np.nan)
     back[inside] = cam.image_to_pitch(uv[inside])
@@ -241,7 +241,7 @@ def test_calibrate_clip_fits_one_broadcast_camera_per_shot():
              for x in np.linspace(-20, 20, 10)]
     frames = []
     for cam in truth:
-        uv, _ = cam.project(np.array(list(world.values())))
+        uv = cam.project(np.array(list(world.values())))
         frames.append({"keypoints": {k: p for k, p in zip(world, uv)
                                      if cam.in_image(np.nan_to_num(p[None], nan=-1.0))[0]}})
     frames[4] = {}  # a frame where nothing was seen
@@ -273,7 +273,7 @@ def test_calibrate_takes_keypoints_with_scores_as_detect_gives_them():
     cam = cameras()[0]
     ids = [k for k in pnlviz.keypoints() if k <= 57]
     world = np.array([pnlviz.keypoints()[k] for k in ids])
-    uv, _ = cam.project(world)
+    uv = cam.project(world)
     seen = {k: (float(x), float(y)) for k, (x, y) in zip(ids, uv) if cam.in_image(np.array([[x, y]]))[0]}
     assert len(seen) >= 6
     plain = pnlviz.calibrate(seen, image_size=(1920, 1080))
@@ -284,7 +284,7 @@ def test_calibrate_takes_keypoints_with_scores_as_detect_gives_them():
     assert plain.camera is not None and with_scores.camera is not None
     assert wrong not in with_scores.point_residuals and wrong in plain.point_residuals
     probe = np.array([[0.0, 0.0, 0.0], [30.0, 20.0, 0.0]])
-    assert np.abs(with_scores.camera.project(probe)[0] - cam.project(probe)[0]).max() < 0.5
+    assert np.abs(with_scores.camera.project(probe) - cam.project(probe)).max() < 0.5
     with pytest.raises(ArgumentError, match=r"^keypoints\[\d+\]: a score is in \[0, 1\], got 1.5"):
         pnlviz.calibrate({wrong: (10.0, 10.0, 1.5)}, image_size=(1920, 1080))
 
@@ -296,7 +296,7 @@ def test_a_soccernet_camera_is_scaled_to_the_image_it_is_used_on():
     assert full.allclose(cam, atol=1e-6)
     assert pnlviz.Camera.from_soccernet(d, 1280, 720).allclose(cam, atol=1e-6)  # the positional form agrees
     ground = np.array([[0.0, 0.0, 0.0], [-20.0, 10.0, 0.0]])
-    assert np.abs(full.project(ground)[0] - cam.project(ground)[0]).max() < 1e-6
+    assert np.abs(full.project(ground) - cam.project(ground)).max() < 1e-6
     assert pnlviz.Camera.from_soccernet(d) == pnlviz.Camera.from_soccernet(d, image_size=(960, 540))
     with pytest.raises(ArgumentError, match=r"^image_size: 720x1280 is not the aspect"):
         pnlviz.Camera.from_soccernet(d, image_size=(720, 1280))  # (height, width) swapped
@@ -320,3 +320,24 @@ def test_cameras_compare_hash_and_compare_within_a_tolerance():
         a.allclose(a.to_soccernet())
     with pytest.raises(Exception):
         a.fx = 1.0  # immutable: what makes it hashable
+
+
+def test_project_gives_pixels_and_refuses_other_shapes_by_name():
+    cam = cameras()[1]
+    world = np.array([[0.0, 0.0, 0.0], [-20.0, 10.0, 0.0], [5.0, -30.0, -2.44]])
+    uv = cam.project(world)
+    assert uv.shape == (3, 2)
+    pixels, depth = cam.project_with_depth(world)
+    assert np.array_equal(pixels, uv) and depth.shape == (3,) and np.all(depth > 0)
+    assert np.array_equal(cam.project(world[1]), uv[1])  # one point: one pixel (2,)
+    assert np.allclose(cam.pitch_to_image(world[:2, :2]), uv[:2])
+    assert np.allclose(cam.image_to_pitch(cam.pitch_to_image(world[:2, :2])), world[:2, :2], atol=1e-6)
+    assert cam.pitch_to_image([-20.0, 10.0]).shape == (2,)
+    behind = cam.C + 5.0 * (cam.C - np.array([0.0, 0.0, 0.0])) / np.linalg.norm(cam.C)
+    assert np.all(np.isnan(cam.project(behind)))
+    with pytest.raises(ArgumentError, match=r"^world: expected points \(N, 3\) in metres, got an array of shape \(3, 2\)"):
+        cam.project(world[:, :2])  # (N, 2) pitch positions: refused, not read as fewer points
+    with pytest.raises(ArgumentError, match=r"^world: .*shape \(2, 3, 1\)"):
+        cam.project(world[:2, :, None])
+    with pytest.raises(ArgumentError, match=r"^xy: expected pitch positions \(N, 2\)"):
+        cam.pitch_to_image(world)

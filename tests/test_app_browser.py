@@ -292,7 +292,7 @@ def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(t
     truth = Camera.from_soccernet(frame["camera"]).scaled(960, 540)
     model = load_field_model()
     ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
-    uv, _ = truth.project(model.keypoint_xyz(ground))
+    uv = truth.project(model.keypoint_xyz(ground))
     inside = [(k, p) for k, p in zip(ground, uv) if 60 < p[0] < 900 and 60 < p[1] < 480]
     chosen = [min(inside, key=lambda t: t[1][0] + t[1][1])]  # four points spread over the frame
     while len(chosen) < 4:
@@ -313,7 +313,7 @@ def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(t
             assert not session.view().result or not session.view().result.ok
     wait_for_text(page, "focal")
     cam = session.view().result.camera
-    err = np.hypot(*(cam.project(model.keypoint_xyz(ground))[0] - uv).T)
+    err = np.hypot(*(cam.project(model.keypoint_xyz(ground)) - uv).T)
     assert np.nanmedian(err) < 3.0  # four clicks to the nearest pixel: the whole pitch within a few px
     kid, p = chosen[0]
     drag(page, on_screen(page, session, p), (12, 8))
@@ -595,7 +595,7 @@ def test_a_point_dragged_60_px_to_its_true_place_stays_there_and_the_pitch_follo
     data = _synthetic_frame(tmp_path / "set", truth)
     model = load_field_model()
     ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
-    uv, _ = truth.project(model.keypoint_xyz(ground))
+    uv = truth.project(model.keypoint_xyz(ground))
     seen = {k: p for k, p in zip(ground, uv) if np.isfinite(p).all() and 30 < p[0] < W - 30 and 30 < p[1] < H - 30}
     centre = np.array([W / 2, H / 2])
     kid = max(seen, key=lambda k: np.hypot(*(seen[k] - centre)))  # the farthest from the centre
@@ -606,7 +606,7 @@ def test_a_point_dragged_60_px_to_its_true_place_stays_there_and_the_pitch_follo
     app = serve(data, detections=tmp_path / "preds.zip", edits=tmp_path / "edits")
     page = open_page(browser, app, "focal")
     session = tab(app)
-    before = session.view().result.camera.project(model.keypoint_xyz([kid]))[0][0]
+    before = session.view().result.camera.project(model.keypoint_xyz([kid]))[0]
     assert np.hypot(*(before - seen[kid])) > 55  # the detections' camera puts it 60 px off
     start = on_screen(page, session, detected[kid])
     target = on_screen(page, session, seen[kid])
@@ -620,7 +620,7 @@ def test_a_point_dragged_60_px_to_its_true_place_stays_there_and_the_pitch_follo
     assert view.result.ok and view.result.pinned == [kid] and view.result.flagged == {}
     nodes = session.workspace.points["keypoints"]
     np.testing.assert_allclose(nodes.uv[nodes.keys.index(kid)], put)  # it stays where it was put...
-    after = view.result.camera.project(model.keypoint_xyz([kid]))[0][0]
+    after = view.result.camera.project(model.keypoint_xyz([kid]))[0]
     assert np.hypot(*(after - put)) < 5.0  # ...and the pitch follows it
     assert kid in session.workspace.pins[0] and not session.workspace.pins[0][kid]  # drawn pinned, not flagged
     page.close()
@@ -639,7 +639,7 @@ def test_four_hand_placed_points_calibrate_an_image_only_frame(tmp_path, browser
     data = _synthetic_frame(tmp_path / "bare", truth)
     model = load_field_model()
     chosen = [6, 7, 10, 22]
-    uv = dict(zip(chosen, truth.project(model.keypoint_xyz(chosen))[0]))
+    uv = dict(zip(chosen, truth.project(model.keypoint_xyz(chosen))))
     app = serve(data, edits=tmp_path / "edits")
     page = open_page(browser, app, "place four keypoints")
     session = tab(app)
@@ -658,8 +658,8 @@ def test_four_hand_placed_points_calibrate_an_image_only_frame(tmp_path, browser
     result = session.view().result
     assert result.ok and sorted(result.pinned) == chosen and result.flagged == {}
     ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
-    true_uv, _ = truth.project(model.keypoint_xyz(ground))
-    err = np.hypot(*(result.camera.project(model.keypoint_xyz(ground))[0] - true_uv).T)
+    true_uv = truth.project(model.keypoint_xyz(ground))
+    err = np.hypot(*(result.camera.project(model.keypoint_xyz(ground)) - true_uv).T)
     assert np.nanmedian(err) < 6.0  # four clicks: the pitch about the penalty area within a few px
     assert set(session.workspace.pins[0]) == set(chosen)
     page.close()

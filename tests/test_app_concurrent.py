@@ -127,7 +127,7 @@ def test_edits_while_a_shot_is_solved_again_and_cut_are_all_kept(tmp_path):
         ids = np.array(model.keypoint_ids)
         placed: dict[str, tuple[int, np.ndarray]] = {}
         for t, stem in enumerate(stems):
-            uv, z = plan.cameras[t].project(model.keypoint_xyz(ids))
+            uv, z = plan.cameras[t].project_with_depth(model.keypoint_xyz(ids))
             ok = np.flatnonzero((z > 0) & plan.cameras[t].in_image(uv))
             j = ok[t % len(ok)]
             placed[stem] = (int(ids[j]), uv[j] + 1.0)

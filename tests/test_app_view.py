@@ -194,7 +194,7 @@ def test_overlay_geometry_residuals_and_ghosts(data):
         geom = overlay_geometry(view, Layers(), st.model)
         assert geom.keypoints.keys == [int(k) for k in obs.kp_ids]
         # a residual is the distance from the keypoint to where the camera projects it
-        proj, _ = cam.project(obs.kp_xyz)
+        proj = cam.project(obs.kp_xyz)
         expected = np.hypot(*(proj - obs.kp_xy).T)
         np.testing.assert_allclose([geom.residuals[int(k)] for k in obs.kp_ids], expected, atol=1e-9)
         np.testing.assert_allclose(geom.segments["residuals"].points[:, 1], proj, atol=1e-9)
@@ -202,7 +202,7 @@ def test_overlay_geometry_residuals_and_ghosts(data):
         W, H = view.size
         assert geom.ghosts.keys and not set(geom.ghosts.keys) & set(geom.keypoints.keys)
         assert np.all((geom.ghosts.uv >= 0) & (geom.ghosts.uv <= [W - 1, H - 1]))
-        np.testing.assert_allclose(geom.ghosts.uv, cam.project(st.model.keypoint_xyz(geom.ghosts.keys))[0])
+        np.testing.assert_allclose(geom.ghosts.uv, cam.project(st.model.keypoint_xyz(geom.ghosts.keys)))
         hidden = {geom.ghosts.keys[0]}
         assert not hidden & set(overlay_geometry(view, Layers(), st.model, hidden=hidden).ghosts.keys)
         assert not overlay_geometry(view, Layers(ghosts=False, residuals=False), st.model).ghosts.keys
@@ -264,7 +264,7 @@ def test_a_bare_frame_takes_placements_calibrates_at_four_and_snaps_and_nudges(t
     app = serve(data, edits=tmp_path / "edits")
     model = app.state.model
     ground = [int(k) for k in model.keypoint_ids if abs(model.keypoints[int(k)].xyz[2]) < 1e-9]
-    uv, _ = truth.project(model.keypoint_xyz(ground))
+    uv = truth.project(model.keypoint_xyz(ground))
     inside = {k: p for k, p in zip(ground, uv) if 60 < p[0] < 900 and 60 < p[1] < 480}
     chosen = [min(inside, key=lambda k: inside[k].sum())]
     while len(chosen) < 4:  # spread over the frame
@@ -277,7 +277,7 @@ def test_a_bare_frame_takes_placements_calibrates_at_four_and_snaps_and_nudges(t
         tab.editor.place("bare", np.round(inside[kid]))
         assert (tab.view().result is not None and tab.view().result.ok) == (n == 3)
     cam = tab.view().result.camera
-    err = np.hypot(*(cam.project(model.keypoint_xyz(list(inside)))[0] - np.array(list(inside.values()))).T)
+    err = np.hypot(*(cam.project(model.keypoint_xyz(list(inside))) - np.array(list(inside.values()))).T)
     assert np.median(err) < 2.0
     # arrow keys: the selected point moves by whole pixels
     kid = chosen[0]

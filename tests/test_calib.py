@@ -28,7 +28,7 @@ def cameras(seed, n, kind=None):
 
 
 def keypoint_obs(cam, rng=None, noise=0.0, outliers=0.0, lines=False):
-    uv, z = cam.project(MODEL.keypoint_xyz())
+    uv, z = cam.project_with_depth(MODEL.keypoint_xyz())
     ok = (z > 0) & cam.in_image(uv)
     ids, uv = MODEL.keypoint_ids[ok], uv[ok]
     if rng is not None:
@@ -68,7 +68,7 @@ def test_voting_finds_the_camera_with_1px_noise_and_20_percent_outliers():
         focal_err.append(abs(res.camera.fx / cam.fx - 1))
         pos_err.append(np.linalg.norm(res.camera.C - cam.C) / np.linalg.norm(cam.C))
         # the outliers are not inliers of the winning candidate
-        uv, _ = cam.project(obs.kp_xyz)
+        uv = cam.project(obs.kp_xyz)
         true_out = obs.kp_ids[np.linalg.norm(uv - obs.kp_xy, axis=1) > 20]
         assert not set(true_out) & set(res.inliers.tolist())
     assert n >= 20
@@ -80,7 +80,7 @@ def test_goal_plane_alone_gives_a_camera():
     """Only the goal mouth: posts, crossbar corners and points on the goal line (plane x = -52.5)."""
     cam = Camera.from_look_at([-40, 30, -12], [-52.5, 0, -1], hfov_deg=30, width=960, height=540)
     ids = [12, 13, 16, 17, 8]  # crossbar corners, post feet, small-box corner on the goal line
-    uv, _ = cam.project(MODEL.keypoint_xyz(ids))
+    uv = cam.project(MODEL.keypoint_xyz(ids))
     assert cam.in_image(uv).all()
     obs = Observations.from_keypoints(960, 540, {i: p for i, p in zip(ids, uv)})
     assert obs.ground.sum() == 3  # too few for a ground homography: the goal plane must do
@@ -101,8 +101,8 @@ def test_pnl_uses_lines_to_correct_noisy_points():
         assert pnl.pnl_lines, "lines consistent with the initial camera join the PnL set"
 
         def err(c):
-            uv, _ = cam.project(MODEL.keypoint_xyz())
-            uv2, _ = c.project(MODEL.keypoint_xyz())
+            uv = cam.project(MODEL.keypoint_xyz())
+            uv2 = c.project(MODEL.keypoint_xyz())
             ok = cam.in_image(uv)
             return np.median(np.linalg.norm(uv[ok] - uv2[ok], axis=1))
 
@@ -116,7 +116,7 @@ def test_failures_come_back_with_a_reason():
     # four collinear keypoints on the halfway line: no homography
     ids = [2, 32, 35, 29]
     cam = Camera.from_look_at([0, 50, -15], [0, 0, 0], hfov_deg=40, width=960, height=540)
-    uv, _ = cam.project(MODEL.keypoint_xyz(ids))
+    uv = cam.project(MODEL.keypoint_xyz(ids))
     res = calibrate(Observations.from_keypoints(960, 540, {i: p for i, p in zip(ids, uv)}),
                     CalibParams(prior_search=False))
     assert not res.ok and "degenerate" in res.failure

@@ -32,7 +32,7 @@ def cameras(seed, n, kind="main"):
 
 
 def keypoint_obs(cam, rng=None, noise=0.0, outliers=0.0, lines=False, circles=False):
-    uv, z = cam.project(MODEL.keypoint_xyz())
+    uv, z = cam.project_with_depth(MODEL.keypoint_xyz())
     ok = (z > 0) & cam.in_image(uv)
     ids, uv = MODEL.keypoint_ids[ok], uv[ok]
     if rng is not None:
@@ -99,7 +99,7 @@ def test_voting_maps_the_pitch_within_a_few_pixels_with_noise_and_outliers():
         assert np.median(err) < 2.0 and np.percentile(err, 90) < 5.0
         medians.append(np.median(err))
         # the outliers are not inliers of the winning candidate
-        uv, _ = cam.project(obs.kp_xyz)
+        uv = cam.project(obs.kp_xyz)
         true_out = obs.kp_ids[np.linalg.norm(uv - obs.kp_xy, axis=1) > 20]
         assert not set(true_out.tolist()) & set(res.inliers.tolist())
     assert n >= 20 and np.median(medians) < 1.0
@@ -175,12 +175,12 @@ def test_failures_come_back_with_a_reason():
     # the goal mouth only: 5 keypoints, 3 of them on the ground
     cam_goal = Camera.from_look_at([-40, 30, -12], [-52.5, 0, -1], hfov_deg=30, width=960, height=540)
     ids = [12, 13, 16, 17, 8]
-    uv, _ = cam_goal.project(MODEL.keypoint_xyz(ids))
+    uv = cam_goal.project(MODEL.keypoint_xyz(ids))
     res = estimate_homography(Observations.from_keypoints(960, 540, {i: q for i, q in zip(ids, uv)}))
     assert not res.ok and "too few ground keypoints (3 < 4)" in res.failure
     # four collinear keypoints on the halfway line: no homography
     ids = [2, 32, 35, 29]
-    uv, _ = cam.project(MODEL.keypoint_xyz(ids))
+    uv = cam.project(MODEL.keypoint_xyz(ids))
     res = estimate_homography(Observations.from_keypoints(960, 540, {i: q for i, q in zip(ids, uv)}))
     assert not res.ok and "degenerate" in res.failure
 

@@ -26,7 +26,7 @@ MESSI = {"6": [40.2, 287.7], "7": [473.0, 260.6], "10": [446.6, 319.8], "22": [6
 
 
 def truth_uv() -> dict[int, np.ndarray]:
-    uv, _ = TRUTH.project(MODEL.keypoint_xyz(GROUND))
+    uv = TRUTH.project(MODEL.keypoint_xyz(GROUND))
     return {k: p for k, p in zip(GROUND, uv) if np.isfinite(p).all() and 0 < p[0] < W and 0 < p[1] < H}
 
 
@@ -35,7 +35,7 @@ def with_pin(detections: dict, kid: int, xy) -> Observations:
 
 
 def projected(cam: Camera, kid: int) -> np.ndarray:
-    return cam.project(MODEL.keypoint_xyz([kid]))[0][0]
+    return cam.project(MODEL.keypoint_xyz([kid]))[0]
 
 
 def test_a_pin_far_from_the_detections_camera_pulls_the_camera_and_is_never_dropped():
@@ -91,7 +91,7 @@ def test_four_hand_placed_ground_points_calibrate_a_frame():
     assert camera_from_ground_homography(Hc, 1073, 603) is None
     fc = calibrate_frame(FrameInputs((1073, 603), keypoint_edits=clicked))
     assert fc.ok and max(fc.result.point_residuals.values()) < 5.0
-    uv, _ = fc.result.camera.project(MODEL.keypoint_xyz([6, 7, 10, 22]))
+    uv = fc.result.camera.project(MODEL.keypoint_xyz([6, 7, 10, 22]))
     assert np.max(np.hypot(*(uv - np.array(list(MESSI.values()))).T)) < 8.0
 
 

@@ -22,8 +22,8 @@ GROUND = [k for k in MODEL.keypoint_ids if abs(MODEL.keypoint_xyz([k])[0, 2]) < 
 
 def _in_view(cam, ids):
     X = MODEL.keypoint_xyz(ids)
-    uv, z = cam.project(X)
-    flat, _ = cam.project(X, distort=False)
+    uv, z = cam.project_with_depth(X)
+    flat = cam.project(X, distort=False)
     ok = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
     ok &= (np.abs(flat[:, 0] - W / 2) < W) & (np.abs(flat[:, 1] - H / 2) < H)
     return {int(ids[i]): uv[i] for i in np.flatnonzero(ok)}
@@ -45,8 +45,8 @@ def _observe(cameras, seed, *, noise=0.7, keep=6, bias_px=0.0):
 
 
 def _grid_error(a, b) -> float:
-    pa, _ = a.project(GRID)
-    pb, _ = b.project(GRID)
+    pa = a.project(GRID)
+    pb = b.project(GRID)
     m = np.all(np.isfinite(pa), 1) & (pa[:, 0] >= 0) & (pa[:, 0] < W) & (pa[:, 1] >= 0) & (pa[:, 1] < H)
     return float(np.median(np.linalg.norm(pa[m] - pb[m], axis=1)))
 
@@ -69,7 +69,7 @@ def test_one_edit_moves_the_neighbouring_frames_toward_the_truth():
     truth = _in_view(plan.cameras[15], np.array([biased]))[biased]
 
     def pin_off() -> float:  # where frame 15's camera puts the point, from where the hand put it
-        return float(np.hypot(*(clip.camera(15).project(MODEL.keypoint_xyz([biased]))[0][0] - truth)))
+        return float(np.hypot(*(clip.camera(15).project(MODEL.keypoint_xyz([biased]))[0] - truth)))
 
     off = pin_off()
     clip.set_keypoint(15, biased, truth)

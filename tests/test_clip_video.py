@@ -22,8 +22,8 @@ W, H, T = 480, 270, 16
 
 def _grid_error(a: Camera, b: Camera) -> float:
     grid = np.array([[x, y, 0.0] for x in np.arange(-50, 51, 5) for y in np.arange(-30, 31, 5)])
-    pa, _ = a.project(grid)
-    pb, _ = b.project(grid)
+    pa = a.project(grid)
+    pb = b.project(grid)
     m = np.all(np.isfinite(pa), 1) & (pa[:, 0] >= 0) & (pa[:, 0] < W) & (pa[:, 1] >= 0) & (pa[:, 1] < H)
     return float(np.median(np.linalg.norm(pa[m] - pb[m], axis=1)))
 
@@ -99,7 +99,7 @@ def test_a_shot_of_a_video_is_corrected_once_and_exported_with_provenance(video,
         # a keypoint no detection has on frame 8, placed by hand where it truly is
         truth = plan.cameras[8]
         ids = np.array(model.keypoint_ids)
-        uv, z = truth.project(model.keypoint_xyz(ids))
+        uv, z = truth.project_with_depth(model.keypoint_xyz(ids))
         inside = (z > 0) & (uv[:, 0] > 20) & (uv[:, 0] < W - 20) & (uv[:, 1] > 20) & (uv[:, 1] < H - 20)
         own = set(solver.frame_observations(8).kp_ids.tolist())
         kid = next(int(i) for i, ok in zip(ids, inside) if ok and int(i) not in own)
@@ -167,7 +167,7 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     before = solver.camera(9)
     model = load_field_model()
     ids = np.array(model.keypoint_ids)
-    uv, z = plan.cameras[8].project(model.keypoint_xyz(ids))
+    uv, z = plan.cameras[8].project_with_depth(model.keypoint_xyz(ids))
     inside = (z > 0) & (uv[:, 0] > 20) & (uv[:, 0] < W - 20) & (uv[:, 1] > 20) & (uv[:, 1] < H - 20)
     detected = set(solver.frame_observations(8).kp_ids.tolist())
     j = next(j for j in np.flatnonzero(inside) if int(ids[j]) not in detected)
@@ -212,7 +212,7 @@ def test_an_edit_on_a_clip_frame_redraws_the_other_tabs_on_its_shot(video, tmp_p
     b.show = lambda: (drawn.append(b.stem), original())[1]
     model = load_field_model()
     ids = np.array(model.keypoint_ids)
-    uv, z = plan.cameras[8].project(model.keypoint_xyz(ids))
+    uv, z = plan.cameras[8].project_with_depth(model.keypoint_xyz(ids))
     inside = (z > 0) & (uv[:, 0] > 20) & (uv[:, 0] < W - 20) & (uv[:, 1] > 20) & (uv[:, 1] < H - 20)
     detected = set(solver.frame_observations(8).kp_ids.tolist())
     j = next(j for j in np.flatnonzero(inside) if int(ids[j]) not in detected)

@@ -28,7 +28,7 @@ def _true_detections(stem: str, moved: dict | None = None):
     W, H = ds.image_size(stem)
     cam = Camera.from_soccernet(ds.camera_dict(stem)).scaled(W, H)
     ids = [int(i) for i in model.keypoint_ids if model.keypoints[int(i)].group == "Kp"]
-    uv, _ = cam.project(model.keypoint_xyz(np.array(ids)))
+    uv = cam.project(model.keypoint_xyz(np.array(ids)))
     kps = {}
     for kid, (x, y) in zip(ids, uv):
         if np.isfinite(x) and 5 <= x < W - 5 and 5 <= y < H - 5:

@@ -40,7 +40,7 @@ def test_catalogue_projects_and_comes_back_through_the_ground_homography_exactly
     X = MODEL.keypoint_xyz(ground)
     for _ in range(50):
         cam = random_camera(rng)
-        uv, depth = cam.project(X)
+        uv, depth = cam.project_with_depth(X)
         front = depth > 1
         H = cam.ground_homography()
         np.testing.assert_allclose(apply_homography(H, X[front, :2]), uv[front], rtol=1e-10, atol=1e-7)
@@ -53,14 +53,14 @@ def test_catalogue_projects_and_comes_back_through_the_ground_homography_exactly
 def test_non_planar_keypoints_project_through_P():
     cam = random_camera(np.random.default_rng(2))
     X = MODEL.keypoint_xyz([12, 15, 16, 19])  # crossbar corners, z = -2.44
-    uv, _ = cam.project(X)
+    uv = cam.project(X)
     h = np.hstack([X, np.ones((4, 1))]) @ cam.P.T
     np.testing.assert_allclose(uv, h[:, :2] / h[:, 2:], rtol=1e-12)
 
 
 def test_points_behind_the_camera_do_not_project():
     cam = Camera.from_look_at([0, 50, -15], [0, 0, 0], hfov_deg=40, width=960, height=540)
-    uv, depth = cam.project(np.array([[0, 80, 0], [0, 0, 0]]))
+    uv, depth = cam.project_with_depth(np.array([[0, 80, 0], [0, 0, 0]]))
     assert depth[0] < 0 and np.all(np.isnan(uv[0]))
     assert np.all(np.isfinite(uv[1]))
     assert np.allclose(uv[1], [480, 270])  # look-at target lands on the principal point
@@ -83,7 +83,7 @@ def test_soccernet_json_round_trip_and_agreement_with_the_official_package(disto
         pan, tilt, roll = evaluator.rotation_matrix_to_pan_tilt_roll(cam.R)
         np.testing.assert_allclose([d["pan_degrees"], d["tilt_degrees"], d["roll_degrees"]],
                                    np.degrees([pan, tilt, roll]), atol=1e-9)
-        uv, depth = cam.project(X)
+        uv, depth = cam.project_with_depth(X)
         for x, p, z in zip(X, uv, depth):
             if z > 1:
                 ref = theirs.project_point(x)
@@ -94,8 +94,8 @@ def test_rescaling_scales_pixels():
     cam = random_camera(np.random.default_rng(5), width=1280, height=720)
     small = cam.scaled(960, 540)
     X = MODEL.keypoint_xyz()
-    uv, z = cam.project(X)
-    uv2, _ = small.project(X)
+    uv, z = cam.project_with_depth(X)
+    uv2 = small.project(X)
     ok = z > 1
     np.testing.assert_allclose(uv2[ok], uv[ok] * 0.75, rtol=1e-12, atol=1e-9)
     assert small.to_soccernet()["principal_point"] == [480.0, 270.0]
@@ -106,7 +106,7 @@ def test_distortion_is_inverted_by_pixel_rays():
     cam = random_camera(rng, distortion=True)
     uv = rng.uniform([0, 0], [960, 540], size=(200, 2))
     rays = cam.pixel_rays(uv)
-    uv2, _ = cam.project(cam.C + 30 * rays)
+    uv2 = cam.project(cam.C + 30 * rays)
     np.testing.assert_allclose(uv2, uv, atol=1e-6)
 
 

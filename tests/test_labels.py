@@ -77,7 +77,7 @@ def true_pixels(cam: Camera, ids, *, mirrored: bool = False) -> np.ndarray:
     xyz = MODEL.keypoint_xyz(list(ids))
     if mirrored:  # the evaluator's left/right mirror is the central symmetry of the pitch
         xyz = xyz * np.array([-1.0, -1.0, 1.0])
-    return cam.project(xyz, distort=False)[0]
+    return cam.project(xyz, distort=False)
 
 
 def label_errors(cam, labels, *, mirrored=False):
@@ -268,7 +268,7 @@ def test_orientation_convention_on_both_sides():
         for _ in range(10):
             pos = [rng.uniform(-20, 20), side * rng.uniform(40, 70), -rng.uniform(8, 25)]
             cam = Camera.from_look_at(pos, [-44.0, 0.0, 0.0], hfov_deg=50, width=W, height=H)
-            img = cam.project(np.c_[world, np.zeros(len(world))], distort=False)[0]
+            img = cam.project(np.c_[world, np.zeros(len(world))], distort=False)
             Hm = fit_homography(world, img)
             assert Hm is not None and orientation_ok(Hm, world)
             assert orientation_outliers(world, img) == []

@@ -507,7 +507,7 @@ def test_homography_from_camera_round_trips_through_the_decomposition():
         assert np.linalg.det(H) > 0
         # the 960x540 camera rescaled: template points land at 4/3 of their 960x540 pixels
         X = np.array([[10.0, 20.0], [60.0, 40.0], [100.0, 70.0]])
-        uv, depth = cam.project(np.hstack([MODEL.template_to_field(X), np.zeros((3, 1))]), distort=False)
+        uv, depth = cam.project_with_depth(np.hstack([MODEL.template_to_field(X), np.zeros((3, 1))]), distort=False)
         front = depth > 0
         np.testing.assert_allclose(apply_homography(H, X)[front], uv[front] * 4 / 3, rtol=1e-9)
         back = camera_from_ground_homography(field_to_image_from_template(H, T), 1280, 720)

@@ -349,15 +349,15 @@ def test_image_to_pitch_gives_no_point_past_the_horizon_nor_where_the_lens_does_
 
     cam = pnlviz.Camera.from_look_at((0.0, 60.0, -18.0), (0.0, 0.0, 0.0), hfov_deg=40, width=1280, height=720)
     # the horizon's row at the image centre column: the limit of the ground's image going away
-    far = cam.project(np.array([[0.0, -1e7, 0.0]]))[0][0]
+    far = cam.project(np.array([[0.0, -1e7, 0.0]]))[0]
     assert np.all(np.isnan(cam.image_to_pitch(far + [0.0, 0.25])))
     assert np.all(np.isnan(cam.image_to_pitch(np.array([[640.0, far[1] - 5]]))))  # above it
     ground = np.array([[x, y, 0.0] for x in (-40.0, 0.0, 30.0) for y in (-30.0, 0.0, 30.0)])
-    uv, _ = cam.project(ground)
+    uv = cam.project(ground)
     assert np.allclose(cam.image_to_pitch(uv), ground[:, :2], atol=1e-3)
     lens = replace(cam, radial=np.array([-0.4, 0.0, 0.0, 0.0, 0.0, 0.0]))  # folds back beyond r = 0.91
     grid = np.array([[x, y, 0.0] for x in range(-30, 31, 5) for y in range(-30, 31, 5)], float)
-    inside, _ = lens.project(grid)
+    inside = lens.project(grid)
     seen = lens.in_image(inside)
     ground = grid
     assert seen.sum() >= 4 and np.allclose(lens.image_to_pitch(inside[seen]), ground[seen, :2], atol=1e-3)

@@ -104,7 +104,7 @@ def test_a_marking_left_out_is_found_where_the_camera_puts_it(left):
     # the suggested points are on the marking
     from pnlviz.geometry.distance import closest_on_polyline
 
-    truth, _ = cam.project(load_field_model().sample_polylines(0.5)["Big rect. left bottom"])
+    truth = cam.project(load_field_model().sample_polylines(0.5)["Big rect. left bottom"])
     d = closest_on_polyline(np.asarray(f.fix["points"]) * SCALE, truth[np.isfinite(truth).all(axis=1)]).distance
     assert np.max(d) < 3
     restored(bad, f)
@@ -119,7 +119,7 @@ def test_each_finding_is_drawn_where_the_annotation_put_it_and_where_the_camera_
     model = load_field_model()
 
     def truth(cls):
-        uv, _ = cam.project(model.sample_polylines(0.5, 0.25)[cls])
+        uv = cam.project(model.sample_polylines(0.5, 0.25)[cls])
         return uv[np.isfinite(uv).all(axis=1)]
 
     cls = "Big rect. left top"
@@ -150,7 +150,7 @@ def _detections(cam, ids):
     from pnlviz.data import Predictions
 
     xyz = load_field_model().keypoint_xyz(ids, pnlcalib=True)
-    uv, _ = cam.project(xyz)
+    uv = cam.project(xyz)
     return Predictions(keypoints={int(i): (float(u / 960), float(v / 540), 0.9) for i, (u, v) in zip(ids, uv)})
 
 

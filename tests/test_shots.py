@@ -114,17 +114,17 @@ def test_the_shot_fits_circles_as_the_frame_does():
     obs, start = [], []
     for t, cam in enumerate(truth):
         arc = model.circles["Circle central"].point_at(np.linspace(0, 2 * np.pi, 40))
-        uv, z = cam.project(arc)
+        uv, z = cam.project_with_depth(arc)
         circle = uv[(z > 0) & cam.in_image(uv)]
         seg = model.lines["Middle line"]
-        mid, _ = cam.project(seg.start + np.linspace(0, 1, 20)[:, None] * (seg.end - seg.start))
+        mid = cam.project(seg.start + np.linspace(0, 1, 20)[:, None] * (seg.end - seg.start))
         mid = mid[cam.in_image(mid)]
         obs.append(Observations(W, H, lines={"Middle line": mid}, circles={"Circle central": circle}))
         start.append(_moved(cam, 6.0) if t == 0 else None)
     fit = fit_shot(obs, start, (W, H), TemporalParams(fit_k1=False))
     for t in range(8):
-        pa, _ = truth[t].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 30)))
-        pb, _ = fit.cameras[t].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 30)))
+        pa = truth[t].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 30)))
+        pb = fit.cameras[t].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 30)))
         assert np.median(np.linalg.norm(pa - pb, axis=1)) < 1.0
 
 

@@ -35,8 +35,8 @@ def _shot(T, centre, seed, *, noise=1.0, sparse_frame=None, start=-30.0, span=No
     xyz = model.keypoint_xyz(ids)
     obs = []
     for t, cam in enumerate(truth):
-        uv, z = cam.project(xyz)
-        flat, _ = cam.project(xyz, distort=False)  # far outside the view the lens model folds back in
+        uv, z = cam.project_with_depth(xyz)
+        flat = cam.project(xyz, distort=False)  # far outside the view the lens model folds back in
         inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
         inside &= (np.abs(flat[:, 0] - W / 2) < W) & (np.abs(flat[:, 1] - H / 2) < H)
         keep = np.flatnonzero(inside)
@@ -48,8 +48,8 @@ def _shot(T, centre, seed, *, noise=1.0, sparse_frame=None, start=-30.0, span=No
             if t == sparse_frame:
                 break
             P = seg.start + np.linspace(0, 1, 30)[:, None] * (seg.end - seg.start)
-            puv, pz = cam.project(P)
-            flat, _ = cam.project(P, distort=False)  # far outside the view the lens model folds back in
+            puv, pz = cam.project_with_depth(P)
+            flat = cam.project(P, distort=False)  # far outside the view the lens model folds back in
             m = (pz > 0) & (puv[:, 0] >= 0) & (puv[:, 0] < W) & (puv[:, 1] >= 0) & (puv[:, 1] < H)
             m &= (np.abs(flat[:, 0] - W / 2) < W) & (np.abs(flat[:, 1] - H / 2) < H)
             if m.sum() >= 2:
@@ -67,8 +67,8 @@ def _per_frame(obs):
 
 
 def _grid_error(a: Camera, b: Camera) -> float:
-    pa, _ = a.project(GRID)
-    pb, _ = b.project(GRID)
+    pa = a.project(GRID)
+    pb = b.project(GRID)
     m = np.all(np.isfinite(pa), 1) & (pa[:, 0] >= 0) & (pa[:, 0] < W) & (pa[:, 1] >= 0) & (pa[:, 1] < H)
     return float(np.median(np.linalg.norm(pa[m] - pb[m], axis=1)))
 
@@ -292,7 +292,7 @@ def test_the_shot_jacobian_is_the_frames_own_chained_to_the_shot_and_matches_pla
     model = load_field_model()
     _, obs = _shot(7, np.array([5.0, 58.0, -16.0]), seed=12)
     cams = _per_frame(obs)
-    obs[3].circles = {"Circle central": cams[3].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 9)))[0]}
+    obs[3].circles = {"Circle central": cams[3].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 9)))}
     obs[2].kp_pinned = np.zeros(obs[2].n_keypoints, bool)
     obs[2].kp_pinned[0] = True
     m = ShotProblem(frame_data(obs, model), (W, H), TemporalParams())

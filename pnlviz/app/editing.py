@@ -261,7 +261,7 @@ class Editor:
         view, overlay, view2d = self.tab.painter.shown, self.tab.painter.overlay, self.tab.view_control.view2d
         if not self.snap or view is None or view.camera is None or view2d is None:
             return uv
-        proj, _ = view.camera.project(self.tab.state.model.keypoint_xyz())
+        proj = view.camera.project(self.tab.state.model.keypoint_xyz())
         ok = np.all(np.isfinite(proj), axis=1)
         segments = overlay.segments.get("refined_pitch") if overlay is not None else None
         snapped, _ = snap(uv, proj[ok], segments.points if segments is not None else np.zeros((0, 2, 2)),

@@ -164,7 +164,7 @@ def _ghosts(view: FrameView, model: FieldModel, hidden: set[int]) -> Markers:
     ids = [int(k) for k in model.keypoint_ids if int(k) not in seen and int(k) not in hidden]
     if not ids:
         return Markers()
-    uv, _ = cam.project(model.keypoint_xyz(ids))  # NaN behind the camera: never inside
+    uv = cam.project(model.keypoint_xyz(ids))  # NaN behind the camera: never inside
     with np.errstate(invalid="ignore"):
         inside = (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
     keep = [i for i in range(len(ids)) if inside[i]]
@@ -223,7 +223,7 @@ def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldMod
         markers = Markers(ids, obs.kp_xy.copy(), kp_colours, [str(k) for k in ids])
         camera = res.camera if res is not None else None  # None unless res.ok
         if camera is not None:
-            proj, _ = camera.project(obs.kp_xyz)
+            proj = camera.project(obs.kp_xyz)
             good = np.all(np.isfinite(proj), axis=1)
             residuals = {k: float(np.hypot(*(proj[i] - obs.kp_xy[i]))) for i, k in enumerate(ids) if good[i]}
             if layers.residuals and good.any():

@@ -158,7 +158,7 @@ def _sane(cam: Camera, params: CalibParams) -> str | None:
 
 
 def _kp_errors(cam: Camera, obs: Observations) -> np.ndarray:
-    uv, z = cam.project(obs.kp_xyz)
+    uv, z = cam.project_with_depth(obs.kp_xyz)
     err = np.linalg.norm(uv - obs.kp_xy, axis=1)
     return np.where(z > 1e-3, err, np.inf)
 

@@ -74,8 +74,8 @@ class ClipLabel:
 def _in_view(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, bool]:
     """``X`` (3,) projected by ``cam``, and whether it is in the image (in front, inside, and not
     folded back in by the lens far outside the view)."""
-    uv, z = cam.project(X[None])
-    flat, _ = cam.project(X[None], distort=False)
+    uv, z = cam.project_with_depth(X[None])
+    flat = cam.project(X[None], distort=False)
     ok = bool(z[0] > 0 and 0 <= uv[0, 0] < cam.width and 0 <= uv[0, 1] < cam.height
               and abs(flat[0, 0] - cam.cx) < cam.width and abs(flat[0, 1] - cam.cy) < cam.height)
     return uv[0], ok
@@ -342,7 +342,7 @@ class ClipSolver:
         labels: dict[int, ClipLabel] = {}
         own = (self.origins[t] if self.origins is not None else None) or "detection"
         if obs is not None and obs.n_keypoints:
-            res = np.hypot(*(cam.project(obs.kp_xyz)[0] - obs.kp_xy).T) if cam is not None else None
+            res = np.hypot(*(cam.project(obs.kp_xyz) - obs.kp_xy).T) if cam is not None else None
             for i, kid in enumerate(obs.kp_ids.tolist()):
                 r = None if res is None or not np.isfinite(res[i]) else float(res[i])
                 labels[int(kid)] = ClipLabel(float(obs.kp_xy[i, 0]), float(obs.kp_xy[i, 1]),

@@ -33,8 +33,8 @@ _GRID = pitch_grid(5.0)
 def _view_change(a: Camera, b: Camera) -> float:
     """Median displacement (pixels of ``a``) of the pitch grid points both cameras see (inf when
     they see none in common)."""
-    pa, _ = a.project(_GRID)
-    pb, _ = b.scaled(a.width, a.height).project(_GRID)
+    pa = a.project(_GRID)
+    pb = b.scaled(a.width, a.height).project(_GRID)
     seen = a.in_image(pa) & np.all(np.isfinite(pb), 1)
     return float(np.median(np.linalg.norm(pa[seen] - pb[seen], axis=1))) if seen.any() else math.inf
 

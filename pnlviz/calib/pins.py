@@ -134,7 +134,7 @@ def pin_camera(obs: Observations, min_hfov: float, max_hfov: float, fit_px: floa
     W, Hh = obs.width, obs.height
 
     def rms(cam: Camera) -> float:
-        uv, z = cam.project(obs.kp_xyz[ground])
+        uv, z = cam.project_with_depth(obs.kp_xyz[ground])
         return float(np.sqrt(np.mean(np.sum((uv - xy) ** 2, axis=1)))) if np.all(z > 0) else np.inf
 
     cam = camera_from_ground_homography(H, W, Hh)

@@ -294,7 +294,7 @@ def finding_marks(qa: FrameQA, annotation: Mapping[str, np.ndarray], size: tuple
                 if cam is not None and name in polys:
                     expected += _visible_parts(*trusted_projection(cam, polys[name]), W, H, 0.1 * W)
         elif f.keypoint is not None and cam is not None and f.keypoint in model.keypoints:
-            uv, _ = cam.project(model.keypoint_xyz([f.keypoint]))
+            uv = cam.project(model.keypoint_xyz([f.keypoint]))
             if np.isfinite(uv).all():
                 points = uv.reshape(-1, 2)
         fix = f.fix or {}

@@ -222,8 +222,8 @@ def trusted_projection(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarr
     """Pixels of world points and which of them to trust: in front of the camera, near the image
     without the lens too, and not moved far by it (a strong lens model folds far-away markings
     back into the image: they are not there)."""
-    uv, _ = cam.project(X)
-    pin, _ = cam.project(X, distort=False)
+    uv = cam.project(X)
+    pin = cam.project(X, distort=False)
     W, H = cam.width, cam.height
     with np.errstate(invalid="ignore"):
         ok = (np.all(np.isfinite(uv), axis=1) & (pin[:, 0] > -0.25 * W) & (pin[:, 0] < 1.25 * W)
@@ -273,7 +273,7 @@ def detection_findings(ann_obs, det_obs, cam: Camera, annotation_px: dict[str, n
         d = float(np.linalg.norm(ann_xy[kid] - dxy))
         if d <= tol:
             continue
-        uv, _ = cam.project(xyz[None])
+        uv = cam.project(xyz[None])
         ann_cam, det_cam = float(np.linalg.norm(uv[0] - ann_xy[kid])), float(np.linalg.norm(uv[0] - dxy))
         backs = "the detection" if det_cam < ann_cam else "the annotation"
         out.append(Finding("detection_disagreement", f"keypoint {kid}: detected {d:.0f} px from where the "

@@ -142,13 +142,13 @@ class CameraSpread:
         if self.cov is None or not len(X):
             return np.full(len(X), np.inf)
         n = len(self.cov)
-        base = self.model.camera(self.state).project(X)[0]
+        base = self.model.camera(self.state).project(X)
         G = np.empty((len(X), 2, n))
         for k in range(n):  # d(pixels)/d(parameter) by central differences
             e = np.zeros(n)
             e[k] = 1e-6
-            plus = self.model.camera(self.model.retract(self.state, e)).project(X)[0]
-            minus = self.model.camera(self.model.retract(self.state, -e)).project(X)[0]
+            plus = self.model.camera(self.model.retract(self.state, e)).project(X)
+            minus = self.model.camera(self.model.retract(self.state, -e)).project(X)
             G[:, :, k] = (plus - minus) / 2e-6
         var = np.einsum("nij,jk,nik->n", G, self.cov, G)
         out = np.sqrt(np.maximum(var, 0.0))

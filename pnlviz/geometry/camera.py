@@ -351,10 +351,28 @@ class Camera:
             x = x - np.stack([dx, dy], axis=1)
         return x
 
-    def project(self, X: np.ndarray, *, distort: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """Project world points (N, 3). Returns pixels (N, 2) and depth (N,); points at depth
-        <= :data:`MIN_DEPTH` (behind or on the camera plane) get NaN pixels."""
-        Xc = self.to_camera(X)
+    def project(self, world: np.ndarray, *, distort: bool = True) -> np.ndarray:
+        """Pixels (N, 2) of world points ``world`` (N, 3) (metres, SoccerNet's frame); one point
+        (3,) gives one pixel (2,). A point behind the camera (depth <= :data:`MIN_DEPTH`) gets
+        NaN. ``distort``: through the lens (False: the pinhole only). Any other shape is refused
+        (ArgumentError naming ``world``); :meth:`project_with_depth` gives the depths too.
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> cam.project([0.0, 0.0, 0.0]).round(6).tolist()  # the point it looks at: the image centre
+        [480.0, 270.0]
+        """
+        arr = np.asarray(world, float)
+        if arr.shape == (3,):
+            return self.project_with_depth(arr[None], distort=distort)[0][0]
+        return self.project_with_depth(arr, distort=distort)[0]
+
+    def project_with_depth(self, world: np.ndarray, *, distort: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (N, 2) and depths (N,) (metres along the optical axis) of world points (N, 3);
+        points at depth <= :data:`MIN_DEPTH` (behind or on the camera plane) get NaN pixels."""
+        X = np.asarray(world, float)
+        if X.ndim != 2 or X.shape[1] != 3:
+            raise ArgumentError(f"world: expected points (N, 3) in metres, got an array of shape {X.shape}")
+        Xc = (X - self.C) @ self.R.T
         z = Xc[:, 2]
         ok = z > MIN_DEPTH
         with np.errstate(all="ignore"):  # the points behind are computed too, then set to NaN
@@ -364,6 +382,17 @@ class Camera:
             uv = xn * (self.fx, self.fy) + (self.cx, self.cy)
         uv[~ok] = np.nan
         return uv, z
+
+    def pitch_to_image(self, xy: np.ndarray) -> np.ndarray:
+        """Pixels (N, 2) of pitch positions ``xy`` (N, 2) in metres on the ground (z = 0): the
+        inverse of :meth:`image_to_pitch`; one position (2,) gives one pixel (2,). NaN behind the
+        camera; other shapes refused (ArgumentError naming ``xy``)."""
+        arr = np.asarray(xy, float)
+        if arr.shape == (2,):
+            return self.pitch_to_image(arr[None])[0]
+        if arr.ndim != 2 or arr.shape[1] != 2:
+            raise ArgumentError(f"xy: expected pitch positions (N, 2) or one (2,), got an array of shape {arr.shape}")
+        return self.project(np.column_stack([arr, np.zeros(len(arr))]))
 
     def pixel_rays(self, uv: np.ndarray) -> np.ndarray:
         """Unit world directions (N, 3) of the rays through pixels ``uv`` (N, 2), distortion removed."""

@@ -32,7 +32,7 @@ def jitter(cameras: Sequence[Camera | None], size: tuple[int, int] = EVAL_SIZE, 
             proj.append(None)
             continue
         cam = cam.scaled(W, H)
-        uv, _ = cam.project(grid)
+        uv = cam.project(grid)
         proj.append((uv, cam.in_image(uv)))  # NaN (behind the camera) is never inside
     out = np.full(len(cameras), np.nan)
     for t in range(1, len(cameras) - 1):

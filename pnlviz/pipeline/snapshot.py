@@ -90,7 +90,7 @@ def residuals(camera: Camera | None, obs: Observations) -> np.ndarray:
     without a camera)."""
     if camera is None or not obs.n_keypoints:
         return np.full(obs.n_keypoints, np.nan)
-    uv, _ = camera.project(obs.kp_xyz)
+    uv = camera.project(obs.kp_xyz)
     return np.hypot(*(uv - obs.kp_xy).T)
 
 

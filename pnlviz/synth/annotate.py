@@ -138,7 +138,7 @@ def _allocate(total: int, share: np.ndarray) -> list[int]:
 def _second_click(cam: Camera, name: str, p: np.ndarray) -> np.ndarray:
     """A point ``SECOND_CLICK_PX`` from ``p`` along the projected model curve of ``name``."""
     samples = load_field_model().sample_polylines(LINE_SPACING, CIRCLE_SPACING)[name]
-    uv, depth = cam.project(samples)
+    uv, depth = cam.project_with_depth(samples)
     ok = np.flatnonzero(depth > 1e-3)
     direction = np.array([1.0, 0.0])
     if len(ok) >= 2:

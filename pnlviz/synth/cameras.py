@@ -112,7 +112,7 @@ def distortion_folds(camera: Camera, width: float, height: float) -> bool:
             continue
         xn = Xc[front, :2] / Xc[front, 2:3]
         r = np.hypot(xn[:, 0], xn[:, 1])
-        uv, _ = camera.project(X[front])
+        uv = camera.project(X[front])
         inside = (uv[:, 0] >= 0) & (uv[:, 0] < width) & (uv[:, 1] >= 0) & (uv[:, 1] < height)
         near = inside.copy()
         near[1:] |= inside[:-1]

@@ -118,7 +118,7 @@ def pixel_windows(camera: Camera, points: np.ndarray, margin_m: float, extra_px:
     ok = (lo <= hi) & ~np.any((f0 < 0) & (f1 < 0), axis=-1)
     ends = np.stack([P0 + lo[..., None] * (P1 - P0), P0 + hi[..., None] * (P1 - P0)], axis=2)  # (G, K-1, 2, 3)
     Xw = ends.reshape(-1, 3) @ camera.R + camera.C  # back to world for Camera.project
-    uv, depth = camera.project(Xw)
+    uv, depth = camera.project_with_depth(Xw)
     uv = uv.reshape(G, -1, 2, 2)
     depth = depth.reshape(G, -1, 2)
     f = max(camera.fx, camera.fy)
