@@ -350,3 +350,14 @@ def test_synthetic_clip_is_a_pan_tilt_zoom_video_with_cuts(tmp_path):
 
     again = clip_frame(plan, 7)
     assert again["stem"] == "clip4-IMG_0008" and again["camera"] == cams[7]
+
+
+def test_a_previous_output_of_another_seed_or_size_is_refused_unless_forced(small_run, tmp_path):
+    before = folder_bytes(small_run)
+    with pytest.raises(OutputFolderError, match=r"holds synthetic frames of seed 5 at .*this run makes seed 6"):
+        generate(small_run, 1, seed=6, size=SMALL, start_index=3, progress=False)
+    with pytest.raises(OutputFolderError, match=r"this run makes seed 5 at 64x48"):
+        generate(small_run, 1, seed=5, size=(64, 48), start_index=3, progress=False)
+    assert folder_bytes(small_run) == before  # refused before anything was written
+    generate(small_run, 1, seed=6, size=SMALL, start_index=3, progress=False, force=True)
+    assert json.loads((small_run / "cameras" / "camera_00003.json").read_text())["synth"]["seed"] == 6

@@ -5,6 +5,8 @@ no viser unless a command needs them)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
 
 from pnlviz.commands.calibrate import add_calibrate_parser
@@ -90,8 +92,12 @@ def _main(argv: list[str] | None) -> int:
     from pnlviz.data.errors import DataError
     from pnlviz.data.outputs import OutputError
 
+    if args.quiet or not _is_terminal(sys.stderr):
+        args.no_progress = True
+    quiet = open(os.devnull, "w") if args.quiet else None
     try:
-        return int(args.func(args) or 0)
+        with contextlib.redirect_stdout(quiet) if quiet is not None else contextlib.nullcontext():
+            return int(args.func(args) or 0)
     except (OutputError, EditsFolderError) as exc:  # an output over an input, another dataset's edits: usage errors
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -104,4 +110,14 @@ def _main(argv: list[str] | None) -> int:
     except OSError as exc:  # a write failure (read-only, full disk, permission) or an unreadable path
         print(f"error: {os_error_line(exc)}", file=sys.stderr)
         return 1
+    finally:
+        if quiet is not None:
+            quiet.close()
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):
+        return False
 

@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pnlviz.commands.common import int_at_least
+
 __all__ = ["BatchJob", "BatchRun", "add_cluster_args", "cluster_client", "interrupted", "journaled_zip",
            "map_on_cluster", "on_cluster", "pool_size", "previous_run", "resume_zip", "run_batch", "worker_state"]
 
@@ -110,13 +112,13 @@ def _chunks(items: Sequence, size: int) -> Iterator[list]:
 
 # ----------------------------------------------------------------------------- the cluster
 def add_cluster_args(p) -> None:
-    g = p.add_argument_group("cluster (pip install -e \".[dask]\")")
+    g = p.add_argument_group("cluster (pip install 'pnlviz[dask]')")
     where = g.add_mutually_exclusive_group()
-    where.add_argument("--dask", type=int, default=None, metavar="N",
+    where.add_argument("--dask", type=int_at_least(1, 1024), default=None, metavar="N",
                        help="run on a local dask cluster of N worker processes (1 thread each)")
     where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                        help="run on an existing dask cluster (its workers must read the data where it is)")
-    g.add_argument("--chunk", type=int, default=32, metavar="K", help="frames per cluster task (default 32)")
+    g.add_argument("--chunk", type=int_at_least(1), default=32, metavar="K", help="frames per cluster task (default 32)")
 
 
 def on_cluster(args) -> bool:
@@ -134,7 +136,7 @@ def cluster_client(args) -> Iterator[Any]:
     try:
         from distributed import Client, LocalCluster
     except ImportError:
-        raise SystemExit('error: --dask / --scheduler need dask: pip install -e ".[dask]"') from None
+        raise SystemExit("error: --dask / --scheduler need dask: pip install 'pnlviz[dask]'") from None
     if args.chunk < 1:
         raise SystemExit("error: --chunk must be >= 1")
     if args.dask is not None:
@@ -228,7 +230,7 @@ def run_batch(job: BatchJob, items: Sequence, handle: Callable[[Any], None], arg
     from tqdm import tqdm
 
     run = BatchRun()
-    bar = tqdm(total=len(items), desc=desc, unit="frame", disable=not progress or None)
+    bar = tqdm(total=len(items), desc=desc, unit="frame", disable=not progress or getattr(args, "no_progress", False) or None)
     t0 = time.perf_counter()
     try:
         with contextlib.ExitStack() as stack:

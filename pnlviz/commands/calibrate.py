@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from pnlviz.commands.batch import BatchJob
 from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
+from pnlviz.commands.common import add_output_options, float_in, workers_arg
 
 if TYPE_CHECKING:
     from pnlviz.calib.frame import FrameInputs
@@ -59,7 +60,7 @@ def add_calibrate_parser(sub) -> None:
     add_force_edits(p)
     p.add_argument("--out", required=True, type=Path, help="output camera zip")
     p.add_argument("--no-pnl", action="store_true", help="skip the PnL refinement (and the focal/k1 refinement)")
-    p.add_argument("--alpha", type=float, default=DEFAULT_ALPHA,
+    p.add_argument("--alpha", type=float_in(0.0, 1.0), default=DEFAULT_ALPHA,
                    help=f"PnL weight of lines vs points (default {DEFAULT_ALPHA})")
     p.add_argument("--no-k1", action="store_true", help="do not refine radial distortion k1")
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE,
@@ -72,12 +73,12 @@ def add_calibrate_parser(sub) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run: frames already in --out (or in the progress a killed run "
                         "left beside it) are kept, only the missing ones are calibrated")
-    p.add_argument("--workers", type=int, default=1, help="worker processes (0: all cores)")
+    p.add_argument("--workers", type=workers_arg, default=1, help="worker processes (0: all cores)")
     p.add_argument("--report", type=Path, help="also write one JSON line per frame with the evidence")
     from pnlviz.commands.batch import add_cluster_args
 
     add_cluster_args(p)
-    p.add_argument("--no-progress", action="store_true")
+    add_output_options(p)
     p.set_defaults(func=run_calibrate)
 
 

@@ -4,6 +4,7 @@ how batch commands open their dataset and report the files they skip (one line e
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import sys
@@ -18,6 +19,51 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (16 <= w <= 16384 and 16 <= h <= 16384):
         raise argparse.ArgumentTypeError(f"image size {w}x{h} out of range (16..16384 per side)")
     return w, h
+
+
+def int_at_least(minimum: int, maximum: int | None = None):
+    """An argparse type: a whole number >= ``minimum`` (and <= ``maximum``)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if value < minimum or (maximum is not None and value > maximum):
+            span = f">= {minimum}" if maximum is None else f"in {minimum}..{maximum}"
+            raise argparse.ArgumentTypeError(f"expected a whole number {span}, got {value}")
+        return value
+
+    return parse
+
+
+def float_in(low: float, high: float | None = None, *, open_low: bool = False):
+    """An argparse type: a finite number in [``low``, ``high``] (``open_low``: above ``low``)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        below = value <= low if open_low else value < low
+        if not math.isfinite(value) or below or (high is not None and value > high):
+            span = (f"> {low:g}" if open_low else f">= {low:g}") if high is None else \
+                f"in {'(' if open_low else '['}{low:g}, {high:g}]"
+            raise argparse.ArgumentTypeError(f"expected a number {span}, got {text}")
+        return value
+
+    return parse
+
+
+#: --workers: 0 for every core, else that many processes
+workers_arg = int_at_least(0)
+
+
+def add_output_options(p: argparse.ArgumentParser) -> None:
+    """What every command takes: ``--quiet`` and ``--no-progress`` (a progress bar shows only on
+    a terminal anyway: a log redirected to a file gets none)."""
+    g = p.add_argument_group("output")
+    g.add_argument("-q", "--quiet", action="store_true",
+                   help="print nothing but warnings and errors (on stderr); no progress bar")
+    g.add_argument("--no-progress", action="store_true", help="no progress bar (the default when stderr is not a terminal)")
 
 
 def add_app_data_args(p) -> None:

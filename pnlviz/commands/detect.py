@@ -10,6 +10,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from pnlviz.commands.batch import BatchJob, on_cluster
+from pnlviz.commands.common import add_output_options, float_in, int_at_least
 
 
 def add_detect_parser(sub) -> None:
@@ -33,11 +34,11 @@ def add_detect_parser(sub) -> None:
     p.add_argument("--input-size", type=parse_size, default=None,
                    help="network input size (default: the network's own, 960x540 for PnLCalib's networks, "
                         "480x272 for the light default model, as its sidecar says)")
-    p.add_argument("--kp-threshold", type=float, default=None,
+    p.add_argument("--kp-threshold", type=float_in(0.0, 1.0), default=None,
                    help="keypoint heatmap threshold (default 0.1; the light default model: its sidecar's)")
-    p.add_argument("--line-threshold", type=float, default=None,
+    p.add_argument("--line-threshold", type=float_in(0.0, 1.0), default=None,
                    help="line heatmap threshold (default 0.1; the light default model: its sidecar's)")
-    p.add_argument("--batch", type=int, default=1,
+    p.add_argument("--batch", type=int_at_least(1, 256), default=1,
                    help="frames per forward pass (default 1, the fastest on a CPU: batches of 8 are 1.05-1.13x slower "
                         "there; on a GPU larger batches pay). Detections do not depend on it")
     p.add_argument("--device", default="cpu", help="where the networks run: cpu (default), cuda, cuda:N, or auto "
@@ -51,10 +52,10 @@ def add_detect_parser(sub) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run: frames already in --out (or in the progress a killed run "
                         "left beside it) are kept, only the missing ones are detected")
-    p.add_argument("--no-progress", action="store_true")
     from pnlviz.commands.batch import add_cluster_args
 
     add_cluster_args(p)
+    add_output_options(p)
     p.set_defaults(func=run_detect)
 
 

@@ -9,6 +9,7 @@ import io
 import os
 import sys
 from pathlib import Path
+from pnlviz.commands.common import add_output_options, float_in, workers_arg
 
 DESCRIPTION = """\
 Score predicted cameras against SoccerNet-format line annotations exactly as the official
@@ -34,12 +35,12 @@ def add_eval_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--gt", type=Path, help="ground-truth annotations: folder or zip of <stem>.json")
     p.add_argument("--pred", type=Path, help="predicted cameras: zip (or folder) of camera_<stem>.json")
     p.add_argument("--csv", type=Path, help="write per-frame results to this CSV file")
-    p.add_argument("--thresholds", type=float, nargs="+", default=[5.0, 10.0, 20.0], metavar="PX",
+    p.add_argument("--thresholds", type=float_in(0.0, 1000.0, open_low=True), nargs="+", default=[5.0, 10.0, 20.0], metavar="PX",
                    help="distance thresholds in pixels at 960x540 (default: 5 10 20)")
     p.add_argument("--ignore-unknown", action="store_true",
                    help="drop 'Goal unknown'/'Line unknown' from the annotations (the official score counts "
                         "them as false negatives)")
-    p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--workers", type=workers_arg, default=1, help="worker processes (default 1)")
     p.add_argument("--homographies", type=Path, metavar="GT.json",
                    help="ground-truth template->image homographies (WC14/TSWC, 1280x720): also print the "
                         "homography metrics of --pred-homographies, or of the --pred cameras")
@@ -47,7 +48,7 @@ def add_eval_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--camera-size", type=_size, metavar="WxH",
                    help="image size the --pred cameras were made for (default: twice their principal point); "
                         "used only to turn cameras into homographies")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_output_options(p)
     p.set_defaults(func=run_eval)
     return p
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pnlviz.commands.batch import BatchJob
+from pnlviz.commands.common import add_output_options, float_in
 
 if TYPE_CHECKING:
     from pnlviz.pipeline.reader import Settings
@@ -27,12 +28,12 @@ def add_export_parser(sub) -> None:
     add_app_data_args(p)  # as pnlviz serve takes them
     p.add_argument("--out", required=True, type=Path, help="output folder, or a .zip")
     p.add_argument("--all", action="store_true", help="export every frame, reviewed or not (unreviewed ones marked so)")
-    p.add_argument("--gate-px", type=float, default=10.0,
+    p.add_argument("--gate-px", type=float_in(0.0, 1000.0, open_low=True), default=10.0,
                    help="outlier gate: a visible point farther than this from its frame's camera (pixels at "
                         "960x540, scaled to the frame) is exported flagged, not as ground truth, unless a hand "
                         "placed it (default 10)")
-    p.add_argument("--no-progress", action="store_true")
     add_cluster_args(p)
+    add_output_options(p)
     p.set_defaults(func=run_export)
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pnlviz.commands.batch import BatchJob
-from pnlviz.commands.common import parse_size
+from pnlviz.commands.common import add_output_options, parse_size, workers_arg
 from pnlviz.conventions import EVAL_SIZE
 
 DEFAULT_SIZE = EVAL_SIZE
@@ -127,12 +127,13 @@ def add_labels_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--lr", action="store_true",
                    help="left-right disambiguation: mirror views along the long axis looking towards -x "
                         "(for training labels; off by default)")
-    p.add_argument("--workers", type=int, default=1, help="worker processes (default 1; 0 = all cores)")
+    p.add_argument("--workers", type=workers_arg, default=1, help="worker processes (default 1; 0 = all cores)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run: frames whose label file is already in --out are kept")
     from pnlviz.commands.batch import add_cluster_args
 
     add_cluster_args(p)
+    add_output_options(p)
     p.set_defaults(func=run_labels)
     return p
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from pnlviz.commands.batch import BatchJob
 from pnlviz.conventions import EVAL_SIZE
+from pnlviz.commands.common import add_output_options, float_in, int_at_least, workers_arg
 
 
 def add_qa_parser(sub) -> None:
@@ -37,18 +38,18 @@ def add_qa_parser(sub) -> None:
     p.add_argument("--out", required=True, type=Path, help="output JSON lines file (e.g. qa.jsonl)")
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE,
                    help="image size for frames without an image (default 960x540)")
-    p.add_argument("--tol", type=float, default=None, metavar="PX",
+    p.add_argument("--tol", type=float_in(0.0, 1000.0, open_low=True), default=None, metavar="PX",
                    help="a point this close to its marking sits on it (px at 960 wide; default 8)")
     p.add_argument("--no-priors", action="store_true",
                    help="faster: a frame with fewer than 4 keypoints is not calibrated from broadcast priors "
                         "(it is listed as without a camera)")
-    p.add_argument("--top", type=int, default=10, metavar="N", help="frames listed at the end (default 10)")
-    p.add_argument("--workers", type=int, default=1, help="worker processes (0: all cores)")
+    p.add_argument("--top", type=int_at_least(0), default=10, metavar="N", help="frames listed at the end (default 10)")
+    p.add_argument("--workers", type=workers_arg, default=1, help="worker processes (0: all cores)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run: frames already in --out (or in what a killed run left "
                         "beside it) are kept")
     add_cluster_args(p)
-    p.add_argument("--no-progress", action="store_true")
+    add_output_options(p)
     p.set_defaults(func=run_qa)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from pnlviz.commands.common import add_output_options, float_in
 
 
 def add_render_parser(sub) -> None:
@@ -24,10 +25,10 @@ def add_render_parser(sub) -> None:
     src.add_argument("--data", type=Path, help="the clip as a folder (or zip) of frames")
     p.add_argument("--cameras", required=True, type=Path, help="camera zip or folder (camera_<stem>.json)")
     p.add_argument("--out", required=True, type=Path, help="output video (.mp4)")
-    p.add_argument("--fps", type=float, default=None, help="frames per second (default: the video's, else 25)")
+    p.add_argument("--fps", type=float_in(0.0, 1000.0, open_low=True), default=None, help="frames per second (default: the video's, else 25)")
     p.add_argument("--no-top-view", action="store_true",
                    help="no bird's-eye inset (the camera's footprint on the pitch, bottom right)")
-    p.add_argument("--no-progress", action="store_true")
+    add_output_options(p)
     p.set_defaults(func=run_render)
 
 

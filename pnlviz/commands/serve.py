@@ -6,6 +6,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from pnlviz.commands.common import add_output_options, int_at_least
 
 
 def add_serve_parser(sub) -> None:
@@ -27,13 +28,14 @@ def add_serve_parser(sub) -> None:
                    help="do not run the light default detector (assets/models/light.pt) on frames without detections")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default 127.0.0.1: this machine only; any other address needs a token)")
-    p.add_argument("--port", type=int, default=8080)
+    p.add_argument("--port", type=int_at_least(0, 65535), default=8080)
     p.add_argument("--token", help="access token for a non-loopback --host (default: a new random one, printed in "
                                    "the URL)")
     p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
                    help="another host name the browser may use for this server (e.g. behind a proxy); repeatable")
-    p.add_argument("--detector-threads", type=int, default=1,
+    p.add_argument("--detector-threads", type=int_at_least(1, 256), default=1,
                    help="torch threads of the background detector process (default 1: the app keeps a core)")
+    add_output_options(p)
     p.set_defaults(func=run_serve)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from pnlviz.commands.common import open_input_dataset, print_skipped
+from pnlviz.commands.common import add_output_options, int_at_least, open_input_dataset, print_skipped
 
 
 def add_sheet_parser(sub) -> None:
@@ -16,10 +16,11 @@ def add_sheet_parser(sub) -> None:
     p.add_argument("--data", required=True, type=Path, help="dataset folder or zip")
     p.add_argument("--out", required=True, type=Path, help="output image (.png or .jpg)")
     p.add_argument("--cameras", type=Path, help="camera zip (default: the dataset's cameras/ folder)")
-    p.add_argument("-n", type=int, default=12, help="number of frames (default 12)")
-    p.add_argument("--columns", type=int, default=4)
-    p.add_argument("--tile-width", type=int, default=480)
+    p.add_argument("-n", type=int_at_least(1), default=12, help="number of frames (default 12)")
+    p.add_argument("--columns", type=int_at_least(1, 64), default=4)
+    p.add_argument("--tile-width", type=int_at_least(16, 4096), default=480)
     p.add_argument("--no-annotation", action="store_true", help="draw only the camera's pitch")
+    add_output_options(p)
     p.set_defaults(func=_run_sheet)
 
 

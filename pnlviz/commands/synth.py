@@ -5,27 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pnlviz.commands.common import parse_size  # one WxH parser for every command
+from pnlviz.commands.common import add_output_options, int_at_least, parse_size  # one WxH parser for every command
 from pnlviz.conventions import EVAL_SIZE
 
 __all__ = ["add_synth_parser", "run_synth"]
 
 
-def _int_at_least(minimum: int):
-    """An argparse type: a whole number >= ``minimum``."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected a number >= {minimum}, got {value}")
-        return value
-
-    return parse
-
-
-_positive_int, _non_negative_int = _int_at_least(1), _int_at_least(0)
+_positive_int, _non_negative_int = int_at_least(1), int_at_least(0)
 
 
 def add_synth_parser(subparsers) -> argparse.ArgumentParser:
@@ -48,7 +34,7 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_positive_int, default=1, metavar="K", help="worker processes (default 1)")
     p.add_argument("--force", action="store_true",
                    help="write into a non-empty folder that is not a previous synthetic output")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_output_options(p)
     p.set_defaults(func=run_synth)
     return p
 

@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from pnlviz.detect.default import DEFAULT_MODEL  # where pnlviz detect and the app look
+from pnlviz.commands.common import add_output_options
 
 DEFAULT_OUT = Path("light.pt")
 
@@ -52,7 +53,7 @@ def add_train_parser(subparsers) -> None:
     p.add_argument("--batch-size", type=int, default=None, help="override the batch size")
     p.add_argument("--cache", type=Path, default=None, help="folder caching the rendered frames between runs")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default from the config)")
-    p.add_argument("--no-progress", action="store_true")
+    add_output_options(p)
     p.set_defaults(func=run_train)
 
 

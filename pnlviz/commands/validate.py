@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from pnlviz.commands.common import print_skipped
+from pnlviz.commands.common import add_output_options, print_skipped
 
 
 def add_validate_parser(sub) -> None:
@@ -15,6 +15,7 @@ def add_validate_parser(sub) -> None:
                                    "the problems file by file, and summarise what is there.")
     p.add_argument("--data", required=True, type=Path, help="dataset folder or zip")
     p.add_argument("--images", action="store_true", help="also decode every image")
+    add_output_options(p)
     p.set_defaults(func=_run_validate)
 
 
@@ -29,7 +30,7 @@ def _run_validate(args) -> int:
     classes: Counter[str] = Counter()
     problems: list[str] = []
     n_ann = n_img = 0
-    for stem in tqdm(ds.stems, desc="validate", unit="frame", disable=None):
+    for stem in tqdm(ds.stems, desc="validate", unit="frame", disable=args.no_progress or None):
         frame = ds.frame(stem)
         if frame.has_annotation:
             try:

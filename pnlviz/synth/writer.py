@@ -87,9 +87,12 @@ def foreign_entries(out_dir: str | os.PathLike) -> list[str]:
     return foreign
 
 
-def check_output_folder(out_dir: str | os.PathLike, force: bool = False) -> None:
+def check_output_folder(out_dir: str | os.PathLike, force: bool = False, *, seed: int | None = None,
+                        size: tuple[int, int] | None = None) -> None:
     """Refuse (``OutputFolderError``) a non-empty folder that is not a previous synthetic output,
-    unless ``force``. A file in the way of the folder itself is always refused."""
+    and a previous output of frames of another ``seed`` or ``size`` (extending it would mix two
+    sets under one numbering), unless ``force``. A file in the way of the folder itself is
+    always refused."""
     root = Path(out_dir)
     if root.exists() and not root.is_dir():
         raise OutputFolderError(f"{root} exists and is not a folder")
@@ -100,6 +103,32 @@ def check_output_folder(out_dir: str | os.PathLike, force: bool = False) -> None
         listed = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
         raise OutputFolderError(f"{root} is not empty and is not a synthetic output (it holds {listed}); "
                                 "choose an empty folder or pass --force")
+    if seed is None or size is None:
+        return
+    for made in _frames_made(root):
+        if made != (int(seed), (int(size[0]), int(size[1]))):
+            what = "an unknown seed" if made[0] is None else f"seed {made[0]} at {made[1][0]}x{made[1][1]}"
+            raise OutputFolderError(f"{root} holds synthetic frames of {what}; this run makes seed {seed} at "
+                                    f"{size[0]}x{size[1]}: the folder would mix two sets under one numbering; "
+                                    "choose another folder or pass --force")
+
+
+def _frames_made(root: Path) -> set[tuple]:
+    """(seed, (width, height)) of the plain frames already in ``root`` (their first and last
+    camera files; seed None when a file does not record it), not of clip frames."""
+    folder = root / CAMERA_DIR
+    if not folder.is_dir():
+        return set()
+    names = sorted(e.name for e in folder.iterdir() if re.fullmatch(r"camera_\d{5,}\.json", e.name))
+    made = set()
+    for name in {names[0], names[-1]} if names else set():
+        try:
+            synth = json.loads((folder / name).read_text()).get("synth") or {}
+            w, h = synth.get("image_size") or (None, None)
+            made.add((synth.get("seed"), (w, h)))
+        except (OSError, ValueError, TypeError, AttributeError):
+            made.add((None, (None, None)))
+    return made
 
 
 def _remove_stale_temporaries(root: Path) -> None:
@@ -124,7 +153,7 @@ def make_frame(index: int, seed: int, size: tuple[int, int] = EVAL_SIZE) -> dict
     annotation = annotate(camera, rng)
     quality = int(rng.integers(60, 96))
     cam_json = camera.scaled(EVAL_W, EVAL_H).to_soccernet()
-    cam_json["synth"] = {"kind": kind, "image_size": [int(width), int(height)]}
+    cam_json["synth"] = {"kind": kind, "seed": int(seed), "image_size": [int(width), int(height)]}
     return {"image": image, "annotation": annotation_to_json(annotation), "camera": cam_json,
             "kind": kind, "jpeg_quality": quality}
 
@@ -180,7 +209,8 @@ def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int
     cuts, stems ``clip<seed>-IMG_<nnnn>``).
 
     ``workers > 1`` renders in that many processes (same output). Refuses a non-empty folder
-    that is not a previous synthetic output unless ``force`` (see :func:`check_output_folder`).
+    that is not a previous synthetic output of the same seed and size unless ``force`` (see
+    :func:`check_output_folder`).
     """
     if n < 0:
         raise ValueError("n must be >= 0")
@@ -190,7 +220,7 @@ def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int
     if width < 2 or height < 2:
         raise ValueError(f"image size must be at least 2 x 2, got {width} x {height}")
     root = Path(out_dir)
-    check_output_folder(root, force)
+    check_output_folder(root, force, seed=None if clip else int(seed), size=(width, height))
     (root / CAMERA_DIR).mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(root)
     jobs: list[tuple]  # write_frame's arguments
