@@ -1,4 +1,6 @@
 import contextlib
+import signal
+import threading
 from pathlib import Path
 
 import pytest
@@ -58,3 +60,27 @@ def serve():
     ``PnlvizApp`` on a free port; every app started is stopped at the end of the test."""
     with contextlib.ExitStack() as stack:
         yield lambda data, **options: stack.enter_context(running_app(data, **options))
+
+
+# ----------------------------------------------------------------------------- Ctrl+C
+# The command line's main() turns a KeyboardInterrupt into exit code 130 (and tests hold that), so
+# a Ctrl+C that lands while a test runs a command in-process would be taken for the command's and
+# the session would go on to the next test. A Ctrl+C is noted here as it arrives; the test it
+# lands in ends the session.
+_CTRL_C = {"pressed": False}
+
+
+def _note_ctrl_c(signum, frame):
+    _CTRL_C["pressed"] = True
+    signal.default_int_handler(signum, frame)
+
+
+def pytest_sessionstart(session):
+    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _note_ctrl_c)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_runtest_logreport(report):
+    if _CTRL_C["pressed"] and report.when == "teardown":
+        pytest.exit("Ctrl+C: the session stops (a command run in-process had taken it for its own)", returncode=130)

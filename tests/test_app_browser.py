@@ -32,12 +32,25 @@ def data(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def browser():
+def chromium():
     sync_playwright = pytest.importorskip("playwright.sync_api").sync_playwright
     with sync_playwright() as pw:
         b = pw.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
         yield b
         b.close()
+
+
+@pytest.fixture()
+def browser(chromium):
+    """The module's browser, for one test: every page the test opens (each in a context of its
+    own) is closed when the test ends, passed or failed (a page left open by a failed test
+    would keep drawing and slow every later test down until they time out too)."""
+    yield chromium
+    for context in list(chromium.contexts):
+        try:
+            context.close()
+        except Exception:  # noqa: BLE001 - a context that is already gone
+            pass
 
 
 def wait_for_text(page, text, timeout=20.0):

@@ -10,7 +10,7 @@ import numpy as np
 import test_app_browser as base
 from test_app_browser import open_page, settle, tab, to_screen, wait_until
 
-browser, data = base.browser, base.data  # the fixtures of the browser tests
+chromium, browser, data = base.chromium, base.browser, base.data  # the fixtures of the browser tests
 pytestmark = base.pytestmark
 
 #: the bridge's state in the page

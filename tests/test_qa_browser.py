@@ -4,7 +4,7 @@ takes it back."""
 
 import json
 
-from test_app_browser import browser, data, open_page, tab, wait_for_text, wait_until  # noqa: F401
+from test_app_browser import browser, chromium, data, open_page, tab, wait_for_text, wait_until  # noqa: F401
 
 
 def test_suspects_filter_then_f_fixes_the_frame_and_ctrl_z_undoes_it(data, browser, serve):  # noqa: F811

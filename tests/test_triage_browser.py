@@ -1,7 +1,7 @@
 """Triage in a browser, with real events: choosing a sort goes to its first frame and the title
 shows that frame's sort key."""
 
-from test_app_browser import browser, data, open_page, tab, wait_for_text, wait_until  # noqa: F401
+from test_app_browser import browser, chromium, data, open_page, tab, wait_for_text, wait_until  # noqa: F401
 
 from pnlviz.app.frameorder import worst_residual
 
