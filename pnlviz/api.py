@@ -32,11 +32,16 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pnlviz.data.errors import ArgumentError
 from pnlviz.geometry.camera import Camera
+
+if TYPE_CHECKING:
+    from pnlviz.data.dataset import Dataset
 
 __all__ = ["ArgumentError", "Calibration", "Camera", "ClipCalibration", "calibrate", "calibrate_clip", "detect",
            "keypoint_names", "keypoints", "open_dataset", "qa", "top_view"]
@@ -248,7 +253,7 @@ def calibrate_clip(frames: Sequence[Mapping], *, image_size: Sequence[int], pnl:
     return ClipCalibration(tuple(result.cameras), tuple(tuple(int(t) for t in shot) for shot in result.shots))
 
 
-def open_dataset(path: str | Path):
+def open_dataset(path: str | Path) -> Dataset:
     """A dataset folder or zip (SoccerNet layout: ``<stem>.jpg`` with ``<stem>.json``), indexed
     lazily: ``len(ds)``, ``ds.stems``, ``ds.image(stem)`` (BGR), ``ds.annotation(stem)``. Split
     folders or split zips (``sn23/train/``, ``sn23/valid.zip``, ...) are one dataset whose stems
@@ -306,17 +311,20 @@ def _qa_dataset(ds, detections, image_size, model) -> list[dict]:
     return sorted(out, key=lambda r: (-r["score"], r["stem"]))
 
 
-def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: float = 0.1) -> dict:
+def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: float = 0.1) -> dict[str, Any]:
     """Keypoints and lines of one BGR image (H, W, 3) uint8: ``{"keypoints": {id: (x, y, score)},
     "lines": {class name: [(x1, y1), (x2, y2)]}}`` in its pixels (what :func:`calibrate` takes);
-    the same as ``pnlviz.detect(image)``. Needs ``pip install 'pnlviz[detect]'`` (PyTorch)."""
+    the same as ``pnlviz.detect(image)`` (type checkers see ``pnlviz.detect`` as the package: typed
+    code imports this one, ``from pnlviz.api import detect``). Needs ``pip install 'pnlviz[detect]'``
+    (PyTorch)."""
     from pnlviz.detect.image import detect_image
 
     return detect_image(image, weights, threshold=threshold)
 
 
-def top_view(camera: Camera | None = None, image: np.ndarray | None = None, points_pitch=None,
-             points_image=None, *, keypoints=None, points=None, px_per_m: float = 8.0) -> np.ndarray:
+def top_view(camera: Camera | None = None, image: np.ndarray | None = None, points_pitch: ArrayLike | None = None,
+             points_image: ArrayLike | None = None, *, keypoints: Mapping[int, Sequence[float]] | None = None,
+             points: ArrayLike | None = None, px_per_m: float = 8.0) -> np.ndarray:
     """A bird's-eye view of the pitch (BGR uint8, (int(117 px_per_m), int(80 px_per_m), 3): the
     pitch and 6 m around it, the far touchline at the top): the camera's footprint and position;
     ``image``, the camera's picture (BGR, any size of its aspect), drawn on the ground it sees;

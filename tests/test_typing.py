@@ -23,3 +23,49 @@ def test_mypy_reports_no_error_on_the_package(request):
                          capture_output=True, text=True)
     assert run.returncode == 0, f"mypy pnlviz:\n{run.stdout}{run.stderr}"
     assert "Success: no issues found" in run.stdout
+
+
+#: a downstream script: what a tracker's code does with the API, typed as its users type it
+DOWNSTREAM = '''
+import numpy as np
+import pnlviz
+from pnlviz.api import detect
+
+cam = pnlviz.Camera.from_look_at((0.0, 50.0, -20.0), (0.0, 0.0, 0.0), hfov_deg=40, width=960, height=540)
+pixels: np.ndarray = cam.project([[0.0, 0.0, 0.0], [10.0, 5.0, 0.0]])
+ground: np.ndarray = cam.image_to_pitch([[480.0, 300.0]])
+again: np.ndarray = cam.pitch_to_image(ground)
+same: bool = cam.allclose(pnlviz.Camera.from_soccernet(cam.to_soccernet(), image_size=(960, 540)))
+view: np.ndarray = pnlviz.top_view(cam, points_pitch=[[1.0, 2.0]], points_image=pixels)
+ds = pnlviz.open_dataset(pnlviz.SAMPLE_DIR)
+stems: list[str] = list(ds.stems)
+found = detect(np.zeros((540, 960, 3), np.uint8))
+result = pnlviz.calibrate(**found, image_size=(960, 540))
+'''
+
+
+def _mypy_strict(code: str, tmp_path: Path, request) -> subprocess.CompletedProcess:
+    """``mypy --strict`` on ``code`` as a user's script, against this checkout's package (its own
+    errors are its test's business: imports followed silently)."""
+    import os
+
+    script = tmp_path / "downstream.py"
+    script.write_text(code)
+    store = getattr(request.config, "cache", None)
+    cache = store.mkdir("mypy-downstream") if store is not None else tmp_path / "cache"
+    return subprocess.run([sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent", "--cache-dir",
+                           str(cache), str(script)], cwd=tmp_path, capture_output=True, text=True,
+                          env={**os.environ, "MYPYPATH": str(REPO)})
+
+
+def test_a_downstream_script_and_the_readme_example_type_check_strictly(tmp_path, request):
+    import re
+
+    readme = (REPO / "README.md").read_text()
+    example = re.search(r"## Python API\s+```python\n(.*?)```", readme, re.S).group(1)
+    for code in (example, DOWNSTREAM):
+        run = _mypy_strict(code, tmp_path, request)
+        assert run.returncode == 0, f"{run.stdout}{run.stderr}\n{code}"
+    # and the API's types are real ones, not Any: a wrong use is caught
+    run = _mypy_strict("import pnlviz\nn: int = pnlviz.open_dataset('x')\nm: str = pnlviz.keypoints()\n", tmp_path, request)
+    assert run.returncode == 1 and run.stdout.count("error: Incompatible types in assignment") == 2, run.stdout

@@ -19,7 +19,7 @@ from pnlviz.conventions import DEFAULT_ALPHA, EVAL_SIZE
 from pnlviz.commands.common import add_output_options, float_in, workers_arg
 
 if TYPE_CHECKING:
-    from pnlviz.calib.frame import FrameInputs
+    from pnlviz.calib.frame import FrameInputs, FrameSettings
 
 #: how the summary names the engine's failure codes, in the order of
 #: :data:`pnlviz.calib.calibrate.FAILURE_CODES` (see :func:`failure_words`)
@@ -259,7 +259,7 @@ class CalibrateJob(BatchJob):
     ds: object
     predictions: object
     size: tuple[int, int]
-    settings: object
+    settings: FrameSettings
     edits: Path | None = None
 
     def open_state(self):
@@ -345,6 +345,7 @@ def _open_inputs(args):
     from pnlviz.commands.common import open_input_dataset, print_skipped, read_edits_folder
     from pnlviz.data import read_predictions
 
+    ds: object
     if args.video is not None:
         from pnlviz.data.video import VideoDataset
 

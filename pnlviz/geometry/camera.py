@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pnlviz.errors import ArgumentError
 
@@ -351,7 +352,7 @@ class Camera:
             x = x - np.stack([dx, dy], axis=1)
         return x
 
-    def project(self, world: np.ndarray, *, distort: bool = True) -> np.ndarray:
+    def project(self, world: ArrayLike, *, distort: bool = True) -> np.ndarray:
         """Pixels (N, 2) of world points ``world`` (N, 3) (metres, SoccerNet's frame); one point
         (3,) gives one pixel (2,). A point behind the camera (depth <= :data:`MIN_DEPTH`) gets
         NaN. ``distort``: through the lens (False: the pinhole only). Any other shape is refused
@@ -366,7 +367,7 @@ class Camera:
             return self.project_with_depth(arr[None], distort=distort)[0][0]
         return self.project_with_depth(arr, distort=distort)[0]
 
-    def project_with_depth(self, world: np.ndarray, *, distort: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def project_with_depth(self, world: ArrayLike, *, distort: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (N, 2) and depths (N,) (metres along the optical axis) of world points (N, 3);
         points at depth <= :data:`MIN_DEPTH` (behind or on the camera plane) get NaN pixels."""
         X = np.asarray(world, float)
@@ -383,7 +384,7 @@ class Camera:
         uv[~ok] = np.nan
         return uv, z
 
-    def pitch_to_image(self, xy: np.ndarray) -> np.ndarray:
+    def pitch_to_image(self, xy: ArrayLike) -> np.ndarray:
         """Pixels (N, 2) of pitch positions ``xy`` (N, 2) in metres on the ground (z = 0): the
         inverse of :meth:`image_to_pitch`; one position (2,) gives one pixel (2,). NaN behind the
         camera; other shapes refused (ArgumentError naming ``xy``)."""
@@ -394,7 +395,7 @@ class Camera:
             raise ArgumentError(f"xy: expected pitch positions (N, 2) or one (2,), got an array of shape {arr.shape}")
         return self.project(np.column_stack([arr, np.zeros(len(arr))]))
 
-    def pixel_rays(self, uv: np.ndarray) -> np.ndarray:
+    def pixel_rays(self, uv: ArrayLike) -> np.ndarray:
         """Unit world directions (N, 3) of the rays through pixels ``uv`` (N, 2), distortion removed."""
         uv = np.asarray(uv, float).reshape(-1, 2)
         xd = np.stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy], axis=1)
@@ -402,7 +403,7 @@ class Camera:
         d = np.hstack([xn, np.ones((len(xn), 1))]) @ self.R  # R^T applied to row vectors
         return d / np.linalg.norm(d, axis=1, keepdims=True)
 
-    def back_project_to_ground(self, uv: np.ndarray, z: float = 0.0) -> np.ndarray:
+    def back_project_to_ground(self, uv: ArrayLike, z: float = 0.0) -> np.ndarray:
         """World points (N, 3) where the rays through ``uv`` meet the plane z = ``z``; NaN where the
         ray does not reach it in front of the camera."""
         d = self.pixel_rays(uv)
@@ -411,7 +412,7 @@ class Camera:
         s = np.where(s > 0, s, np.nan)
         return self.C + s[:, None] * d
 
-    def image_to_pitch(self, uv: np.ndarray) -> np.ndarray:
+    def image_to_pitch(self, uv: ArrayLike) -> np.ndarray:
         """Where on the pitch (the ground plane z = 0, metres, SoccerNet's centre-origin frame) the
         pixels ``uv`` (N, 2) of this image are: (N, 2), lens distortion undone. NaN for a pixel
         whose ray does not meet the ground in front of the camera (above the horizon), meets it
