@@ -293,6 +293,14 @@ def test_zip_stream_keeps_what_was_written_on_an_exception_or_discards_it(tmp_pa
         zs.add("b.json", "{}")
         raise RuntimeError("boom")
     assert zipfile.ZipFile(out).namelist() == ["a.json"] and os.listdir(tmp_path) == ["o.zip"]
+    # a run that fails before its first result leaves the path as it was: no empty zip, no journal
+    fresh = tmp_path / "fresh.zip"
+    with pytest.raises(SystemExit), ZipStream(fresh, journal=True):
+        raise SystemExit("error: cannot connect")
+    assert not fresh.exists() and os.listdir(tmp_path) == ["o.zip"]
+    with pytest.raises(SystemExit), ZipStream(out, journal=True):
+        raise SystemExit("error: cannot connect")
+    assert zipfile.ZipFile(out).namelist() == ["a.json"] and os.listdir(tmp_path) == ["o.zip"]  # the old one kept
     with pytest.raises(DataError, match="is a folder"):
         ZipStream(tmp_path)
 

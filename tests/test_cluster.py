@@ -76,8 +76,12 @@ def test_cluster_options_fail_clearly(tmp_path, shared_dir, capsys):
     gt = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
     with pytest.raises(SystemExit, match="cannot connect"):
         main(["calibrate", "--data", str(gt), "--out", str(tmp_path / "c.zip"), "--scheduler", "tcp://127.0.0.1:1"])
-    with pytest.raises(SystemExit, match="--chunk must be"):
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as refused:  # refused as the options are read, before any cluster starts
         main(["calibrate", "--data", str(gt), "--out", str(tmp_path / "c.zip"), "--dask", "1", "--chunk", "0"])
+    assert refused.value.code == 2
+    assert "argument --chunk: expected a whole number >= 1, got 0" in capsys.readouterr().err
+    assert not (tmp_path / "c.zip").exists()
 
 
 def test_labels_on_the_cluster_write_the_local_files_and_resume(tmp_path, shared_dir, cluster, capsys):

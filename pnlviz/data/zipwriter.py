@@ -122,14 +122,19 @@ class _TempOutput:
     def discard(self) -> None:
         raise NotImplementedError
 
+    def __len__(self) -> int:
+        raise NotImplementedError
+
     def __enter__(self):
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        """Close (keep) on success; on an exception close too when ``keep_partial``, else discard."""
+        """Close (keep) on success; on an exception close too when ``keep_partial`` and something
+        was written, else discard (a run that failed before its first result leaves ``path`` as
+        it was, not an empty output that looks like a finished one)."""
         if self.closed:
             return
-        if exc_type is not None and not self.keep_partial:
+        if exc_type is not None and (not self.keep_partial or len(self) == 0):
             self.discard()
             return
         try:
@@ -214,12 +219,16 @@ class ZipStream(_TempOutput):
             raise
 
     def discard(self) -> None:
-        """Drop everything written; ``path`` is left as it was (and the journal, if any, kept)."""
+        """Drop everything written; ``path`` is left as it was (and the journal, if any, kept
+        for ``--resume`` when it records something)."""
         with contextlib.suppress(Exception):
             self._zip.close()
         if self._journal is not None:
             self._journal.close()
             self._journal = None
+            if not self.names:
+                with contextlib.suppress(OSError):
+                    os.unlink(journal_path(self.path))
         self._remove_temp()
         self.closed = True
 
