@@ -250,7 +250,7 @@ def test_the_background_pass_sees_every_frame_and_resumes(images_only, tmp_path)
         failed = [st.stems[i] for i in visible_order(st.stems, summaries, st.edits.review, Filter.FAILED, Sort.INDEX)]
         no_camera = [s for s in st.stems if not st.view(s).result or not st.view(s).result.ok]
         assert failed == no_camera == ["00004"] and progress.failed == 1
-        assert lines[-1].startswith("triage done: 5/5 frames calibrated, 1 without a camera, 5 detected")
+        assert lines[-1].startswith("triage done: 5/5 frames, 4 with a camera, 1 without, 5 detected")
     assert (edits / "cache" / "summaries.jsonl").is_file() and (edits / "cache" / "detections.jsonl").is_file()
     with AppState(data, edits=edits, detector=detector) as st:
         calls = []

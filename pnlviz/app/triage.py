@@ -251,8 +251,9 @@ class PassProgress:
     def text(self) -> str:
         dt = time.perf_counter() - self.started
         head = "triage done" if self.finished else "triage (background)"
-        return (f"{head}: {self.done}/{self.total} frames calibrated, {self.failed} without a camera"
-                + (f", {self.detected} detected" if self.detected else "") + f" · {dt:.0f} s")
+        # "calibrated" would count the frames that failed too ("4/4 calibrated, 4 without a camera")
+        return (f"{head}: {self.done}/{self.total} frames, {self.done - self.failed} with a camera, "
+                f"{self.failed} without" + (f", {self.detected} detected" if self.detected else "") + f" · {dt:.0f} s")
 
 
 def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None], every: int = 10) -> PassProgress:
