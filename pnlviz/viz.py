@@ -210,9 +210,10 @@ def _top_canvas(model: FieldModel, px_per_m: float, margin: float = 6.0):
 
 @functools.lru_cache(maxsize=8)
 def _cached_top_canvas(px_per_m: float):
-    image, _ = _top_canvas(load_field_model(), px_per_m)
+    """:func:`_top_canvas` of the default pitch model, drawn once per scale (read-only: copy it)."""
+    image, px = _top_canvas(load_field_model(), px_per_m)
     image.setflags(write=False)
-    return image
+    return image, px
 
 
 def top_view(camera: Camera | None = None, *, image: np.ndarray | None = None, points=None, keypoints=None,
@@ -229,14 +230,11 @@ def top_view(camera: Camera | None = None, *, image: np.ndarray | None = None, p
     picture = image
     margin = 6.0
     if model is None:
-        image = _cached_top_canvas(float(px_per_m)).copy()
+        canvas, px = _cached_top_canvas(float(px_per_m))
+        image = canvas.copy()
     else:
-        image, _ = _top_canvas(model, px_per_m, margin)
+        image, px = _top_canvas(model, px_per_m, margin)
     H, W = image.shape[:2]
-
-    def px(xy) -> np.ndarray:
-        return (np.asarray(xy, float) + [52.5 + margin, 34 + margin]) * px_per_m
-
     if camera is not None:
         polygon = ground_footprint(camera)
         if len(polygon) >= 3:

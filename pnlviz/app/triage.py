@@ -260,20 +260,26 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
     """Detect (when the state has a detector) and calibrate every frame of the triage's state
     under its default settings, keeping summaries only; frames whose summary is up to date are
     skipped. ``say``: the progress line, every ``every`` frames and at the end. Before each frame
-    it waits for a pause in the tabs' actions (the state's :class:`pnlviz.app.activity.UserActivity`)."""
+    it has work for (a detection, a calibration) it waits for a pause in the tabs' actions (the
+    state's :class:`pnlviz.app.activity.UserActivity`); a resumed pass reads its stored summaries
+    without waiting."""
     state = triage.state
     progress = PassProgress(len(state.stems), started=time.perf_counter())
     for i, stem in enumerate(state.stems):
-        state.activity.wait_quiet(stop)  # the tab the user is on goes first
+        detect, fresh = state.needs_detection(stem), triage.up_to_date(stem)
+        if detect or not fresh:
+            state.activity.wait_quiet(stop)  # work to do: the tab the user is on goes first
+            detect = detect and state.needs_detection(stem)  # a tab may have had it detected meanwhile
         if stop.is_set():
             return progress
-        if state.needs_detection(stem):
+        if detect:
             try:
                 state.run_detector(stem)
                 progress.detected += 1
             except Exception:  # noqa: BLE001 - a frame the detector fails on is calibrated without
                 pass
-        stored = triage.store.get(stem) if triage.up_to_date(stem) else None  # up to date: stored
+            fresh = triage.up_to_date(stem)  # its token holds whether it has detections
+        stored = triage.store.get(stem) if fresh else None  # up to date: stored
         summary = stored if stored is not None else triage.calibrate(stem)
         progress.done += 1
         progress.failed += not summary.ok

@@ -230,7 +230,7 @@ def run_batch(job: BatchJob, items: Sequence, handle: Callable[[Any], None], arg
     from tqdm import tqdm
 
     run = BatchRun()
-    bar = tqdm(total=len(items), desc=desc, unit="frame", disable=not progress or getattr(args, "no_progress", False) or None)
+    bar = tqdm(total=len(items), desc=desc, unit="frame", disable=not progress or None)
     t0 = time.perf_counter()
     try:
         with contextlib.ExitStack() as stack:

@@ -175,7 +175,7 @@ def run_labels(args) -> int:
     tally = _Tally()
     job = LabelsJob(ds, os.fspath(out_dir.resolve()), size, params)
     run = run_batch(job, stems, tally.add, args, desc="labels", processes=pool_size(getattr(args, "workers", 1)),
-                    failed=lambda s, m: (s, "failed", f"{s}: {m}"))
+                    failed=lambda s, m: (s, "failed", f"{s}: {m}"), progress=not args.no_progress)
     if run.interrupted:
         return interrupted(kept + tally.n_ok, kept + len(stems), out_dir)
     tally.print(args.data, len(stems), out_dir)

@@ -373,7 +373,7 @@ class Camera:
         X = np.asarray(world, float)
         if X.ndim != 2 or X.shape[1] != 3:
             raise ArgumentError(f"world: expected points (N, 3) in metres, got an array of shape {X.shape}")
-        Xc = (X - self.C) @ self.R.T
+        Xc = self.to_camera(X)
         z = Xc[:, 2]
         ok = z > MIN_DEPTH
         with np.errstate(all="ignore"):  # the points behind are computed too, then set to NaN

@@ -46,6 +46,7 @@ _STEM = r"(?:\d{5,}|clip\d+-IMG_\d{4,})"  # a frame, or a frame of a clip (pnlvi
 _IMAGE_RE = re.compile(rf"^{_STEM}\.jpg$")
 _ANNOTATION_RE = re.compile(rf"^{_STEM}\.json$")
 _CAMERA_RE = re.compile(rf"^camera_{_STEM}\.json$")
+_FRAME_CAMERA_RE = re.compile(rf"^camera_\d{{{STEM_DIGITS},}}\.json$")  # a plain frame's (not a clip's)
 # Temporaries of pnlviz.data.atomic: ".<name>.<random>.tmp" next to the target.
 _TEMP_RE = re.compile(rf"^\.({_STEM}\.(jpg|json)|camera_{_STEM}\.json)\..+\.tmp$")
 OPTIONAL_FILES = ("match_info.json",)
@@ -119,7 +120,7 @@ def _frames_made(root: Path) -> set[tuple]:
     folder = root / CAMERA_DIR
     if not folder.is_dir():
         return set()
-    names = sorted(e.name for e in folder.iterdir() if re.fullmatch(r"camera_\d{5,}\.json", e.name))
+    names = sorted(e.name for e in folder.iterdir() if _FRAME_CAMERA_RE.match(e.name))
     made = set()
     for name in {names[0], names[-1]} if names else set():
         try:
