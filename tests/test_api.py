@@ -295,6 +295,7 @@ def test_a_soccernet_camera_is_scaled_to_the_image_it_is_used_on():
     full = pnlviz.Camera.from_soccernet(d, image_size=(1280, 720))
     assert full.allclose(cam, atol=1e-6)
     assert pnlviz.Camera.from_soccernet(d, 1280, 720).allclose(cam, atol=1e-6)  # the positional form agrees
+    assert pnlviz.Camera.from_soccernet(d, (1280, 720)) == full  # the size as one positional argument
     ground = np.array([[0.0, 0.0, 0.0], [-20.0, 10.0, 0.0]])
     assert np.abs(full.project(ground) - cam.project(ground)).max() < 1e-6
     assert pnlviz.Camera.from_soccernet(d) == pnlviz.Camera.from_soccernet(d, image_size=(960, 540))

@@ -134,7 +134,8 @@ def _image_size_arg(width, height, image_size) -> tuple[float, float] | None:
     if image_size is None and width is None and height is None:
         return None
     if image_size is None:
-        image_size = (width, height)
+        # from_soccernet(d, (w, h)): the size as one argument, as the issue's contract writes it
+        image_size = width if height is None and isinstance(width, (tuple, list, np.ndarray)) else (width, height)
     try:
         w, h = (float(v) for v in image_size)
     except (TypeError, ValueError):
@@ -213,13 +214,15 @@ class Camera:
                    np.asarray(position, float), width, height, radial)
 
     @classmethod
-    def from_soccernet(cls, d: Mapping[str, Any], width: float | None = None, height: float | None = None, *,
+    def from_soccernet(cls, d: Mapping[str, Any], width: float | tuple[float, float] | None = None,
+                       height: float | None = None, *,
                        image_size: tuple[float, float] | None = None) -> "Camera":
         """From a SoccerNet camera dict, made for an image of twice its principal point (as the
         official evaluator takes it). ``image_size`` (width, height), or ``width`` and ``height``:
         the size of the image it is used on; the camera is scaled to it when it differs (a camera
         written at 960x540 used on the 1920x1080 frame), and a size of another aspect is refused
-        (a swapped (height, width), or a camera of another picture). Every field is checked
+        (a swapped (height, width), or a camera of another picture); ``from_soccernet(d, (w, h))``
+        takes the size as one argument too. Every field is checked
         (:class:`pnlviz.ArgumentError` naming the key): the angles finite, the focal lengths and
         principal point finite and positive, the position finite and within
         :data:`MAX_CAMERA_DISTANCE_M` of the pitch's centre, the distortion terms (optional) of
