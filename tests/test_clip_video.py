@@ -218,5 +218,7 @@ def test_an_edit_on_a_clip_frame_redraws_the_other_tabs_on_its_shot(video, tmp_p
     j = next(j for j in np.flatnonzero(inside) if int(ids[j]) not in detected)
     st.move_keypoint(stems[8], int(ids[j]), float(uv[j, 0]), float(uv[j, 1]), a.settings)
     b.flush()
-    assert drawn == [stems[10]]  # redrawn without navigating
+    # redrawn without navigating (once for the edit; under load a second redraw can come from the
+    # background pass finishing meanwhile: the frame drawn is the same)
+    assert drawn and set(drawn) == {stems[10]}
     assert b.view().camera is solver.camera(10) and solver.camera(10) is not before
