@@ -24,9 +24,17 @@ def add_export_parser(sub) -> None:
     p = sub.add_parser("export", help="export corrected training labels (as the app's export button)",
                        description="Write the corrected labels of a dataset and its edits: SoccerNet annotations, "
                                    "keypoint labels, cameras, COCO keypoints and a manifest of what changed. "
-                                   "Only accepted and corrected frames unless --all.")
+                                   "Only accepted and corrected frames unless --all. --format gsr writes the cameras "
+                                   "(and a tracker's boxes placed on the pitch) as one sn-gamestate JSON file instead.")
     add_app_data_args(p)  # as pnlviz serve takes them
-    p.add_argument("--out", required=True, type=Path, help="output folder, or a .zip")
+    p.add_argument("--out", required=True, type=Path, help="output folder, or a .zip (--format gsr: a .json file)")
+    p.add_argument("--format", choices=("labels", "gsr"), default="labels",
+                   help="labels: the training labels (default); gsr: SoccerNet Game State Reconstruction's "
+                        "Labels-GameState.json layout, one camera per frame (SoccerNet camera dict at the frame's size) "
+                        "and, with --boxes, each box's bbox_pitch")
+    p.add_argument("--boxes", type=Path, default=None,
+                   help="--format gsr: a tracker's boxes to place on the pitch, MOT text (frame, id, left, top, width, "
+                        "height, ...; frame 1 is the dataset's first) or COCO JSON (images matched by file name)")
     p.add_argument("--all", action="store_true", help="export every frame, reviewed or not (unreviewed ones marked so)")
     p.add_argument("--gate-px", type=float_in(0.0, 1000.0, open_low=True), default=10.0,
                    help="outlier gate: a visible point farther than this from its frame's camera (pixels at "
@@ -106,12 +114,27 @@ def run_export(args) -> int:
     if not (args.gate_px > 0 and args.gate_px < float("inf")):
         print(f"error: --gate-px must be a positive number of pixels, got {args.gate_px}", file=sys.stderr)
         return 2
+    gsr = args.format == "gsr"
     try:
-        check_output(args.out, inputs=(args.detections,), datasets=(data, args.edits),
-                     folder=Path(args.out).suffix.lower() != ".zip")
+        if args.boxes is not None and not gsr:
+            raise OutputError("--boxes", "places a tracker's boxes on the pitch in a GSR file: give --format gsr")
+        if gsr and Path(args.out).suffix.lower() != ".json":
+            raise OutputError(f"--out {args.out}", "must end in .json with --format gsr (one Labels-GameState file)")
+        check_output(args.out, inputs=(args.detections, args.boxes), datasets=(data, args.edits),
+                     folder=not gsr and Path(args.out).suffix.lower() != ".zip")
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    boxes = None
+    if args.boxes is not None:
+        from pnlviz.data import DataError
+        from pnlviz.data.boxes import read_boxes
+
+        try:
+            boxes = read_boxes(args.boxes)
+        except DataError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     if given_edits:
         require_edits_folder(args.edits)  # a typo, a file or a FIFO is not "no edits"
     # read-only: export never creates, locks or changes the edits folder
@@ -125,6 +148,8 @@ def run_export(args) -> int:
         job = ExportJob(str(Path(data).resolve()), None if args.detections is None else str(args.detections.resolve()),
                         str(reader.edits_folder.root.resolve()), tuple(args.size), reader.default_settings(),
                         args.gate_px)
+        if gsr:
+            return _export_gsr(args, reader, job, stems, boxes)
         with ExportWriter(reader, args.out, include_all=args.all, gate_px=args.gate_px) as writer:
             run = run_batch(job, stems, writer.add, args, desc="export", local_state=reader,
                             failed=lambda stem, message: failed_frame(reader, stem, message),
@@ -133,4 +158,38 @@ def run_export(args) -> int:
                 return _interrupted(args, writer, run.done, len(stems))
             writer.close()
         _say_done(args, writer.manifest["frames"], len(reader.stems), run.cluster)
+    return 0
+
+
+def _export_gsr(args, reader, job: ExportJob, stems: list[str], boxes) -> int:
+    """``--format gsr``: the same frames and cameras as the label export, one GSR file
+    (:mod:`pnlviz.pipeline.gsr`); nothing is written when interrupted."""
+    from pnlviz.commands.batch import run_batch
+    from pnlviz.pipeline.export import failed_frame
+    from pnlviz.pipeline.gsr import GsrWriter
+
+    writer = GsrWriter(reader, Path(args.out), boxes, include_all=args.all)
+    run = run_batch(job, stems, writer.add, args, desc="export", local_state=reader,
+                    failed=lambda stem, message: failed_frame(reader, stem, message), progress=not args.no_progress)
+    if run.interrupted:
+        print(f"interrupted: {args.out} not written ({run.done} of {len(stems)} frames were done)", file=sys.stderr)
+        return 130
+    counts = writer.close()
+    which = "frames" if args.all else "accepted/corrected frames"
+    line = (f"exported {counts['frames']} {which} of {len(reader.stems)} to {args.out} (GSR): "
+            f"{counts['cameras']} with a camera")
+    if boxes is not None:
+        line += f"; {counts['boxes'] - counts['boxes_without_camera']} of {counts['boxes']} boxes placed on the pitch"
+    print(line)
+    if boxes is not None:
+        if counts["boxes_without_camera"]:
+            print(f"warning: {counts['boxes_without_camera']} box(es) have no bbox_pitch (their frame has no camera, "
+                  f"or a bottom corner is above the horizon)", file=sys.stderr)
+        if counts["boxes_not_exported"]:
+            print(f"warning: {counts['boxes_not_exported']} box(es) on frames not exported (not accepted or corrected: "
+                  f"--all exports every frame)", file=sys.stderr)
+        if counts["boxes_unmatched"]:
+            print(f"warning: {counts['boxes_unmatched']} box(es) on images that are no frame of {reader.data.name} "
+                  f"(MOT frame numbers count the dataset's frames from 1; COCO images match by file name)",
+                  file=sys.stderr)
     return 0

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pnlviz.errors import ArgumentError
 from pnlviz.geometry.camera import Camera
 
 #: how far (metres) a footprint reaches towards the horizon
@@ -53,3 +54,18 @@ def ground_footprint(camera: Camera, samples: int = 64, reach: float = FOOTPRINT
 
 
 __all__ = ["FOOTPRINT_REACH_M", "ground_footprint", "image_border"]
+
+
+def boxes_on_pitch(camera: Camera, boxes: np.ndarray) -> np.ndarray:
+    """Where boxes ``boxes`` (N, 4: left, top, width, height, in this camera's image pixels)
+    stand on the pitch: (N, 3, 2), the ground points (metres) under the bottom-left,
+    bottom-middle and bottom-right corners of each box, lens distortion undone (NaN where the
+    pixel has no ground point, :meth:`Camera.image_to_pitch`). A player's position is the bottom
+    middle."""
+    b = np.asarray(boxes, float)
+    if b.ndim != 2 or b.shape[1] != 4:
+        raise ArgumentError(f"boxes: expected (N, 4) left, top, width, height, got an array of shape {b.shape}")
+    bottom = b[:, 1] + b[:, 3]
+    uv = np.stack([np.stack([b[:, 0], bottom], 1), np.stack([b[:, 0] + b[:, 2] / 2, bottom], 1),
+                   np.stack([b[:, 0] + b[:, 2], bottom], 1)], 1)
+    return camera.image_to_pitch(uv.reshape(-1, 2)).reshape(-1, 3, 2)

@@ -70,6 +70,7 @@ class FrameExport:
     coco_image: dict | None = None
     coco_annotation: dict | None = None
     homography: list[list[float]] | None = None
+    camera: dict | None = None  # the exported camera (SoccerNet dict at 960x540), None without one
 
 
 def export_stems(reader: FrameReader, include_all: bool = False) -> list[str]:
@@ -157,7 +158,7 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
              "stem": stem, "width": W, "height": H, "reviewed": reviewed}
     annotation = {"id": image_id, "image_id": image_id, "category_id": 1, "keypoints": flat,
                   "num_keypoints": sum(1 for i in range(N_KEYPOINTS) if flat[3 * i + 2] == 2)}
-    return FrameExport(stem, entry, files, image, annotation, homography)
+    return FrameExport(stem, entry, files, image, annotation, homography, fl.camera)
 
 
 def frame_homography(camera: dict | None, size: tuple[int, int]) -> list[list[float]] | None:
