@@ -246,8 +246,8 @@ def bad_input_section(tmp: Path) -> list[str]:
     empty = tmp / "empty"
     empty.mkdir()
     misuse = {
-        "detect --out D/00001.zip (sidecar over an annotation)": ["detect", "--data", str(d), "--out", str(d / "00001.zip")],
-        "detect --out preds.json (sidecar over the zip)": ["detect", "--data", str(d), "--out", str(tmp / "preds.json")],
+        "detect --out D/00001.zip (over an annotation)": ["detect", "--data", str(d), "--out", str(d / "00001.zip")],
+        "detect --out preds.json (not a zip)": ["detect", "--data", str(d), "--out", str(tmp / "preds.json")],
         "detect --out D/preds.zip (inside the dataset)": ["detect", "--data", str(d), "--out", str(d / "preds.zip")],
         "calibrate --out D/cams.zip": ["calibrate", "--data", str(d), "--out", str(d / "cams.zip")],
         "labels --out D": ["labels", "--data", str(d), "--out", str(d)],

@@ -601,7 +601,8 @@ def test_detect_streams_and_keeps_frames_when_interrupted(tmp_path, monkeypatch,
 
     monkeypatch.setattr(Detector, "detect", interrupt_third)
     out = tmp_path / "preds.zip"
-    assert main(["detect", "--data", str(d), "--out", str(out), "--no-progress", "--threads", "1"]) == 130
+    assert main(["detect", "--data", str(d), "--out", str(out), "--no-progress", "--threads", "1", "--settings",
+                 str(tmp_path / "preds.json")]) == 130
     err = capsys.readouterr().err
     assert one_line(err, "interrupted") == f"interrupted: kept 2 of 3 frames in {out}"
     one_line(err, "not valid UTF-8")

@@ -29,7 +29,7 @@ def test_round_trip_save_detect_same_predictions(frames, tmp_path):
     out = tmp_path / "preds.zip"
     assert main(["detect", "--data", str(frames), "--out", str(out), "--weights-kp", str(tmp_path / "kp.pt"),
                  "--weights-lines", str(tmp_path / "lines.pt"), "--input-size", "224x128", "--kp-threshold", "0",
-                 "--threads", "2", "--no-progress"]) == 0
+                 "--threads", "2", "--no-progress", "--settings", str(predictions_info_path(out))]) == 0
     got = read_predictions(out)
     det = Detector(kp, lines, input_size=(224, 128), kp_threshold=0.0)
     ds = open_dataset(frames)
@@ -79,18 +79,36 @@ def test_the_app_runs_the_detector_on_demand(frames, tmp_path):
 
 
 def test_detections_carry_the_detectors_calibration_settings(frames, tmp_path, capsys):
-    """`pnlviz detect` with the light model records its calibration settings beside the zip
-    (preds.json); `pnlviz calibrate --detections` applies them and says so; a bad file is a
-    one-line error."""
+    """`pnlviz detect` with the light model names its calibration settings and writes them only
+    when asked (--settings FILE); `pnlviz calibrate --detections` applies them when named
+    (--detector-settings) or beside the zip (preds.json), and says so; a bad file is a one-line
+    error."""
     from pnlviz.detect.light import read_sidecar
     from pnlviz.detect.run import DEFAULT_MODEL
 
     out = tmp_path / "preds.zip"
     assert main(["detect", "--data", str(frames), "--out", str(out), "--no-progress"]) == 0
-    info = read_predictions_info(out)
     settings = read_sidecar(DEFAULT_MODEL)["calibration"]
+    # nothing written that was not asked: the settings are named, and kept only with --settings
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames", "preds.zip"]
+    said = capsys.readouterr().out
+    assert "--settings FILE keeps them" in said and all(f"{k} {v}" in said for k, v in settings.items())
+    elsewhere = tmp_path / "detector.json"
+    assert main(["detect", "--data", str(frames), "--out", str(out), "--no-progress", "--settings",
+                 str(elsewhere)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["detector.json", "frames", "preds.zip"]
+    info = read_predictions_info(out, elsewhere)
     assert info["detector"] == "light default model" and info["calibration"] == settings and settings
+    assert read_predictions_info(out) == {}  # not beside the zip: applied only when named
     capsys.readouterr()
+    assert main(["calibrate", "--data", str(frames), "--detections", str(out), "--detector-settings", str(elsewhere),
+                 "--out", str(tmp_path / "c0.zip"), "--no-progress"]) == 0
+    said = capsys.readouterr().out
+    assert "detector.json" in said and all(f"{k}={v}" in said for k, v in settings.items())
+    assert main(["calibrate", "--data", str(frames), "--detections", str(out), "--detector-settings",
+                 str(tmp_path / "none.json"), "--out", str(tmp_path / "c1.zip"), "--no-progress"]) == 2
+    assert "none.json: no such file" in capsys.readouterr().err and not (tmp_path / "c1.zip").exists()
+    elsewhere.rename(predictions_info_path(out))  # beside the zip, with its name: applied by itself
     calibrate = ["calibrate", "--data", str(frames), "--detections", str(out), "--out", str(tmp_path / "c.zip"),
                  "--no-progress"]
     assert main(calibrate) == 0
@@ -129,7 +147,8 @@ def test_a_light_model_from_train_is_taken_with_weights(frames, tmp_path, capsys
     side["kp_threshold"] = 0.5  # its own threshold, not the default model's
     write_sidecar(weights, side)
     out = tmp_path / "preds.zip"
-    assert main(["detect", "--data", str(frames), "--out", str(out), "--weights", str(weights), "--no-progress"]) == 0
+    assert main(["detect", "--data", str(frames), "--out", str(out), "--weights", str(weights), "--no-progress",
+                 "--settings", str(predictions_info_path(out))]) == 0
     info = read_predictions_info(out)
     assert info["detector"] == "light model" and info["weights"] == str(weights) and info["kp_threshold"] == 0.5
     det = light_detector(weights)
@@ -150,7 +169,7 @@ def test_device_is_chosen_or_clearly_refused(frames, tmp_path, capsys):
     one-line error naming why; an unknown device too."""
     out = tmp_path / "preds.zip"
     assert main(["detect", "--data", str(frames), "--out", str(out), "--device", "auto", "--no-progress",
-                 "--threads", "1"]) == 0
+                 "--threads", "1", "--settings", str(predictions_info_path(out))]) == 0
     expected = "cuda" if torch.cuda.is_available() else "cpu"
     assert read_predictions_info(out)["device"] == expected
     if not torch.cuda.is_available():
@@ -173,8 +192,8 @@ def test_batches_and_half_precision_keep_the_detections(tmp_path):
     outs = {}
     for name, extra in (("one", []), ("batch", ["--batch", "3"]), ("half", ["--half", "--batch", "2"])):
         outs[name] = tmp_path / f"{name}.zip"
-        assert main(["detect", "--data", str(frames), "--out", str(outs[name]), "--threads", "1", "--no-progress"]
-                    + extra) == 0
+        assert main(["detect", "--data", str(frames), "--out", str(outs[name]), "--threads", "1", "--no-progress",
+                     "--settings", str(predictions_info_path(outs[name]))] + extra) == 0
     ref, batch, half = (read_predictions(outs[n]) for n in ("one", "batch", "half"))
     assert set(ref) == set(batch) == set(half) and len(ref) == 5
     moved, unshared, total = [], 0, 0

@@ -16,9 +16,11 @@ from pnlviz.pipeline.export import export_files
 def export_zip_bytes(state: AppState, include_all: bool = False) -> bytes:
     """The export of the state's dataset and edits folder as a zip (members in name order, as
     every zip pnlviz writes: the same labels give the same bytes), as ``pnlviz export`` with the
-    server's ``--data``, ``--detections``, ``--edits`` and ``--size`` writes it."""
+    server's ``--data``, ``--detections``, ``--detector-settings``, ``--edits`` and ``--size``
+    writes it."""
     with FrameReader.open(state.data, detections=state.detections_path, edits=state.edits.root,
-                          size=state.size, force_edits=state.force_edits) as reader:
+                          size=state.size, force_edits=state.force_edits,
+                          settings_file=state.detector_settings_path) as reader:
         files = export_files(reader, include_all)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:

@@ -91,15 +91,17 @@ class AppState:
 
     def __init__(self, data: Path, *, detections: Path | None = None, edits: Path | None = None,
                  size: tuple[int, int] = EVAL_SIZE, detector=None, source: str | None = None, writable: bool = True,
-                 force_edits: bool = False):
+                 force_edits: bool = False, detector_settings: Path | None = None):
         self.data = Path(data)
         self.detections_path = None if detections is None else Path(detections)
+        #: the detector's settings file (``--detector-settings``; None: the one beside the detections)
+        self.detector_settings_path = detector_settings
         self.model = load_field_model()
         #: the edits folder was adopted although it was made for other pictures (--force-edits)
         self.force_edits = force_edits
         self.reader = FrameReader.open(self.data, detections=detections, edits=edits, size=size, writable=writable,
                                        detector_settings=getattr(detector, "calibration", None),
-                                       force_edits=force_edits)
+                                       force_edits=force_edits, settings_file=detector_settings)
         #: a detector (pnlviz.detect.worker.DetectorProcess) run on demand, in the background, for
         #: frames without detections in the zip; its results join ``detected``
         self.detector = detector

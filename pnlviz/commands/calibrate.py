@@ -38,7 +38,7 @@ def failure_words() -> dict[str, str]:
 
 
 def add_calibrate_parser(sub) -> None:
-    from pnlviz.commands.common import add_force_edits, parse_size
+    from pnlviz.commands.common import add_detector_settings, add_force_edits, parse_size
 
     p = sub.add_parser("calibrate", help="calibrate every frame (from annotations or PnLCalib detections)",
                        description="Calibrate every frame of a dataset and write camera_<stem>.json files "
@@ -49,8 +49,9 @@ def add_calibrate_parser(sub) -> None:
     p.add_argument("--video", type=Path, help="the video the --detections were made on (pnlviz detect --video): "
                                               "its frame size, and its images to find cuts with --temporal")
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip (default: use the annotations); "
-                                                   "the calibration settings recorded beside it by pnlviz detect "
-                                                   "(preds.json) apply")
+                                                   "the detector's settings file beside it (preds.json, from pnlviz "
+                                                   "detect --settings) applies")
+    add_detector_settings(p)
     p.add_argument("--source", choices=("annotation", "detections", "both"), default=None,
                    help="what the frames are calibrated from: their annotations, their --detections, or both merged "
                         "(default: detections when --detections is given, else annotation); a frame without the "
@@ -273,11 +274,18 @@ def _failed_on_cluster(stem: str, message: str) -> tuple:
     return stem, None, {"stem": stem, "failure": message, "failure_code": "internal"}
 
 
+def _settings_path(args) -> Path:
+    """The detector's settings file: ``--detector-settings``, else the one beside ``--detections``."""
+    from pnlviz.data import predictions_info_path
+
+    return args.detector_settings if args.detector_settings is not None else predictions_info_path(args.detections)
+
+
 def _check_outputs(args) -> None:
     """--out and --report: not over an input (nor over each other), not inside the dataset."""
-    from pnlviz.data import check_output, predictions_info_path
+    from pnlviz.data import check_output
 
-    inputs = [args.detections, predictions_info_path(args.detections)] if args.detections else []
+    inputs = [args.detections, _settings_path(args)] if args.detections else []
     inputs += [args.video] if getattr(args, "video", None) is not None else []
     datasets = [d for d in (args.data, args.edits) if d is not None]
     check_output(args.out, inputs=inputs, datasets=datasets)
@@ -310,12 +318,16 @@ def _detection_settings(args):
     """(settings recorded beside the detections, the engine's settings); DataError/ValueError
     (an unknown setting) for a bad file."""
     from pnlviz.calib.calibrate import CalibParams
-    from pnlviz.data import predictions_info_path, read_predictions_info
+    from pnlviz.data import read_predictions_info
     from pnlviz.pipeline.settings import check_settings
 
-    recorded = (read_predictions_info(args.detections).get("calibration") or {}) if args.detections else {}
+    settings_file = args.detector_settings
+    if settings_file is None and args.detections is None:
+        recorded: dict = {}
+    else:
+        recorded = read_predictions_info(args.detections, settings_file).get("calibration") or {}
     if recorded:  # unknown names, wrong types and values out of range fail here, not on every frame
-        recorded = check_settings(recorded, str(predictions_info_path(args.detections)))
+        recorded = check_settings(recorded, str(_settings_path(args)))
     CalibParams().updated(recorded)
     return recorded, frame_settings(args, recorded)
 
@@ -326,6 +338,8 @@ def _args_problem(args) -> str | None:
         return "give --data (a dataset), --detections (a prediction zip), or both"
     if args.video is not None and (args.data is not None or args.detections is None):
         return "--video goes with --detections (made by pnlviz detect --video), instead of --data"
+    if args.detector_settings is not None and args.detections is None:
+        return "--detector-settings goes with --detections (the settings of the detector that made them)"
     if args.source == "detections" and args.detections is None:
         return "--source detections needs --detections"
     if args.edits is not None:
@@ -359,7 +373,7 @@ def _open_inputs(args):
 
 
 def run_calibrate(args) -> int:
-    from pnlviz.data import DataError, predictions_info_path
+    from pnlviz.data import DataError
     from pnlviz.data.cameras import camera_member_name
 
     problem = _args_problem(args)
@@ -377,14 +391,14 @@ def run_calibrate(args) -> int:
         print(f"{len(stems)} frames of {args.detections.name}, video {args.video.name} at {ds.width}x{ds.height}")
     elif args.data is None:
         print(f"{len(stems)} frames of {args.detections.name}, calibrated at {args.size[0]}x{args.size[1]} (--size)")
-    try:  # the detector's settings, recorded beside its prediction zip by pnlviz detect
+    try:  # the detector's settings (pnlviz detect --settings), given or beside its prediction zip
         recorded, settings = _detection_settings(args)
     except (DataError, ValueError) as exc:
-        shown = exc if isinstance(exc, DataError) else f"{predictions_info_path(args.detections)}: {exc}"
+        shown = exc if isinstance(exc, DataError) else f"{_settings_path(args)}: {exc}"
         print(f"error: {shown}", file=sys.stderr)
         return 2
     if recorded:
-        print(f"calibration settings of the detector ({predictions_info_path(args.detections).name}): "
+        print(f"calibration settings of the detector ({_settings_path(args).name}): "
               + ", ".join(f"{k}={v}" for k, v in recorded.items()))
     if args.resume and args.temporal:
         print("error: --resume does not go with --temporal (a shot is fitted from all its frames at once)",
@@ -461,8 +475,10 @@ def _summary(args, run, n_cams: int, n_stems: int, n_todo: int, failures: list[t
           + (" on the dask cluster" if run.cluster else "") + f") -> {args.out}")
     words = failure_words()
     for code, n in Counter(code for code, _ in failures).most_common():
-        example = next(message for c, message in failures if c == code)
-        print(f"  {n:5d} not calibrated: {words.get(code, code)}" + (f" (e.g. {example})" if n > 1 else f" ({example})"))
+        example, word = next(message for c, message in failures if c == code), words.get(code, code)
+        if example.startswith(word):  # "residual above the limit (inlier RMS ...)": the detail only
+            example = example[len(word):].strip(" ()") or example
+        print(f"  {n:5d} not calibrated: {word}" + (f" (e.g. {example})" if n > 1 else f" ({example})"))
     print_skipped([m for c, m in failures if c in ("bad_input", "bad_output")], prefix="  ")
     if not n_cams:
         print(f"error: no frame calibrated: {args.out} holds no camera", file=sys.stderr)

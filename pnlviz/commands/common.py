@@ -75,9 +75,18 @@ def add_app_data_args(p) -> None:
 
     p.add_argument("--data", type=Path, help="dataset folder or zip (default: the bundled sample)")
     p.add_argument("--detections", type=Path, help="PnLCalib 2D prediction zip")
+    add_detector_settings(p)
     p.add_argument("--edits", type=Path, help="edits folder (default: <data>.edits beside the data)")
     add_force_edits(p)
     p.add_argument("--size", type=parse_size, default=EVAL_SIZE, help="image size for frames without an image")
+
+
+def add_detector_settings(p) -> None:
+    from pathlib import Path
+
+    p.add_argument("--detector-settings", type=Path, default=None, metavar="FILE",
+                   help="the detector's settings (pnlviz detect --settings FILE): the calibration settings its "
+                        "detections calibrate best with apply (default: the .json beside --detections, when there is one)")
 
 
 def add_force_edits(p) -> None:

@@ -26,6 +26,11 @@ def add_detect_parser(sub) -> None:
     src.add_argument("--video", type=Path, help="a video file (mp4, ...): every frame, decoded one at a time; "
                                                "frames are named <video>-IMG_<n> (one clip for --temporal)")
     p.add_argument("--out", required=True, type=Path, help="output prediction zip")
+    p.add_argument("--settings", type=Path, default=None, metavar="FILE",
+                   help="also write the detector's settings to FILE (JSON: the networks, thresholds, input size and the "
+                        "calibration settings its detections calibrate best with); calibrate, serve and export "
+                        "apply them with --detector-settings FILE, or by themselves when FILE sits beside the zip "
+                        "with its name (preds.zip -> preds.json). Default: nothing but --out is written")
     p.add_argument("--weights-kp", type=Path, help="keypoint network checkpoint (e.g. PnLCalib's SV_kp)")
     p.add_argument("--weights-lines", type=Path, help="line network checkpoint (e.g. PnLCalib's SV_lines)")
     p.add_argument("--weights", type=Path, default=None,
@@ -60,18 +65,22 @@ def add_detect_parser(sub) -> None:
 
 
 def _check_outputs(args) -> None:
-    """--out must be a .zip; neither it nor its sidecar (preds.json) may overwrite an input or land
-    inside the dataset."""
-    from pnlviz.data import OutputError, check_output, predictions_info_path
+    """--out must be a .zip; neither it nor the settings file (``--settings``) may overwrite an
+    input or land inside the dataset."""
+    import os
+
+    from pnlviz.data import OutputError, check_output
 
     if args.out.suffix.lower() != ".zip":
-        raise OutputError(f"--out {args.out}", "must end in .zip (its sidecar, the .json of the same name, "
-                                               "records the detector)")
+        raise OutputError(f"--out {args.out}", "must end in .zip (PnLCalib's prediction zip)")
     inputs = [args.weights_kp, args.weights_lines, args.weights]
     datasets = [args.data] if args.data is not None else []
     inputs = inputs + ([args.video] if args.video is not None else [])
     check_output(args.out, inputs=inputs, datasets=datasets)
-    check_output(predictions_info_path(args.out), inputs=inputs, datasets=datasets, what="the sidecar of --out")
+    if args.settings is not None:
+        if Path(os.path.abspath(args.settings)) == Path(os.path.abspath(args.out)):
+            raise OutputError(f"--settings {args.settings}", "is --out itself")
+        check_output(args.settings, inputs=inputs, datasets=datasets, what="--settings")
 
 
 def _detector_kwargs(args) -> dict:
@@ -247,7 +256,7 @@ def _detect_all(args, job: DetectJob, det, stems: list[str], kept: dict, todo: l
     the sidecar, then the summary; ``kept``: the frames an interrupted run finished."""
     from pnlviz.commands.batch import interrupted, journaled_zip, run_batch
     from pnlviz.commands.common import print_skipped
-    from pnlviz.data import DataError, write_predictions_info
+    from pnlviz.data import DataError, predictions_info_path, write_predictions_info
     from pnlviz.data.predictions import prediction_member, prediction_zip_order
 
     skipped: list[str] = []
@@ -266,11 +275,18 @@ def _detect_all(args, job: DetectJob, det, stems: list[str], kept: dict, todo: l
 
         run = run_batch(job, todo, write, args, desc="detect", local_state=det, chunk=job.batch,
                         failed=lambda s, m: (s, None, m), progress=not args.no_progress)
-    write_predictions_info(args.out, _sidecar(args, det, len(preds)))
+    if args.settings is not None:
+        write_predictions_info(args.out, _sidecar(args, det, len(preds)), to=args.settings)
     if run.interrupted:
         return interrupted(len(preds), len(stems), args.out)
     print(f"detected {len(preds)}/{len(stems)} frames in {run.elapsed:.1f} s "
           f"({1e3 * run.elapsed / max(1, len(todo)):.0f} ms/frame) -> {args.out}")
+    if args.settings is not None:
+        print(f"detector settings -> {args.settings}")
+    elif det.calibration:
+        shown = ", ".join(f"{k} {v}" for k, v in sorted(det.calibration.items()))
+        print(f"note: this detector calibrates best with {shown}; --settings FILE keeps them for calibrate, serve "
+              f"and export (FILE beside the zip, {predictions_info_path(args.out).name}, is applied by itself)")
     print_skipped(skipped, prefix="  skipped: ")
     if not len(preds):
         print(f"error: no frame detected: {args.out} holds no detection", file=sys.stderr)

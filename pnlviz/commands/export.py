@@ -57,12 +57,14 @@ class ExportJob(BatchJob):
     size: tuple[int, int]
     settings: Settings
     gate_px: float = 10.0
+    settings_file: str | None = None
 
     def open_state(self):
         from pnlviz.pipeline import FrameReader
 
         return FrameReader.open(Path(self.data), detections=None if self.detections is None else Path(self.detections),
-                                edits=Path(self.edits), size=self.size)
+                                edits=Path(self.edits), size=self.size,
+                                settings_file=None if self.settings_file is None else Path(self.settings_file))
 
     def run_chunk(self, reader, stems: list[str]) -> list:
         from pnlviz.pipeline.export import export_frame
@@ -120,7 +122,7 @@ def run_export(args) -> int:
             raise OutputError("--boxes", "places a tracker's boxes on the pitch in a GSR file: give --format gsr")
         if gsr and Path(args.out).suffix.lower() != ".json":
             raise OutputError(f"--out {args.out}", "must end in .json with --format gsr (one Labels-GameState file)")
-        check_output(args.out, inputs=(args.detections, args.boxes), datasets=(data, args.edits),
+        check_output(args.out, inputs=(args.detections, args.boxes, args.detector_settings), datasets=(data, args.edits),
                      folder=not gsr and Path(args.out).suffix.lower() != ".zip")
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -139,7 +141,7 @@ def run_export(args) -> int:
         require_edits_folder(args.edits)  # a typo, a file or a FIFO is not "no edits"
     # read-only: export never creates, locks or changes the edits folder
     with FrameReader.open(data, detections=args.detections, edits=args.edits, size=args.size,
-                          force_edits=args.force_edits) as reader:
+                          force_edits=args.force_edits, settings_file=args.detector_settings) as reader:
         stems = export_stems(reader, args.all)
         # every record exported is of this dataset's picture (the folder's were checked in part when opened)
         check_identity(reader.edits_folder, reader.ds, force=args.force_edits, stems=stems, limit=None)
@@ -147,7 +149,8 @@ def run_export(args) -> int:
             print(f"warning: {warning}", file=sys.stderr)
         job = ExportJob(str(Path(data).resolve()), None if args.detections is None else str(args.detections.resolve()),
                         str(reader.edits_folder.root.resolve()), tuple(args.size), reader.default_settings(),
-                        args.gate_px)
+                        args.gate_px,
+                        None if args.detector_settings is None else str(args.detector_settings.resolve()))
         if gsr:
             return _export_gsr(args, reader, job, stems, boxes)
         with ExportWriter(reader, args.out, include_all=args.all, gate_px=args.gate_px) as writer:

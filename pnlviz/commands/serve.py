@@ -101,7 +101,7 @@ def run_serve(args) -> int:
     source = "annotation" if detector is not None and detector.light else None
     try:
         state = AppState(data, detections=args.detections, edits=args.edits, size=args.size, detector=detector,
-                         source=source, force_edits=args.force_edits)
+                         source=source, force_edits=args.force_edits, detector_settings=args.detector_settings)
     except EditsFolderError as exc:
         if detector is not None:
             detector.close()

@@ -245,25 +245,36 @@ def write_predictions(path: str | os.PathLike, predictions: Mapping[str, Predict
 
 # -- provenance next to a prediction zip ---------------------------------------------------------
 def predictions_info_path(path: str | os.PathLike) -> Path:
-    """``preds.zip`` -> ``preds.json``: what ``pnlviz detect`` records about the detections (the
-    detector, its thresholds, the calibration settings they calibrate best with). Kept beside the
-    zip, not in it, so the zip stays exactly PnLCalib's format."""
+    """``preds.zip`` -> ``preds.json``: where the detector's settings (what ``pnlviz detect
+    --settings`` records: the detector, its thresholds, the calibration settings its detections
+    calibrate best with) are found by themselves. Kept beside the zip, not in it, so the zip stays
+    exactly PnLCalib's format."""
     return Path(path).with_suffix(".json")
 
 
-def write_predictions_info(path: str | os.PathLike, info: Mapping[str, Any]) -> Path:
-    out = predictions_info_path(path)
+def write_predictions_info(path: str | os.PathLike, info: Mapping[str, Any],
+                           to: str | os.PathLike | None = None) -> Path:
+    """Write the detector's settings ``info`` beside prediction zip ``path`` (or to ``to``)."""
+    out = predictions_info_path(path) if to is None else Path(to)
     with atomic_open(out, "w") as f:
         f.write(dumps(dict(info), indent=2) + "\n")
     return out
 
 
-def read_predictions_info(path: str | os.PathLike) -> dict:
-    """The info written next to prediction zip ``path`` ({} when there is none: a zip from
-    PnLCalib or elsewhere). A file that is there but unreadable is a DataError."""
-    info = predictions_info_path(path)
-    if not os.path.lexists(info) or (info.is_symlink() and not info.exists()):
-        return {}  # a FIFO, a device or a loop there is refused by the read below, never ignored
+def read_predictions_info(path: str | os.PathLike | None, settings: str | os.PathLike | None = None) -> dict:
+    """The detector's settings of prediction zip ``path``: the file ``settings`` when given
+    (it must be there), else the one beside the zip ({} when there is none: a zip from PnLCalib
+    or elsewhere). A file that is there but unreadable is a DataError."""
+    if settings is not None:
+        info = Path(settings)
+        if not os.path.lexists(info):
+            raise DataError(str(info), "no such file (the detector's settings, written by pnlviz detect --settings)")
+    elif path is None:
+        return {}
+    else:
+        info = predictions_info_path(path)
+        if not os.path.lexists(info) or (info.is_symlink() and not info.exists()):
+            return {}  # a FIFO, a device or a loop there is refused by the read below, never ignored
     obj = parse_json_bytes(read_file_bytes(info), str(info))
     if not isinstance(obj, dict):
         raise DataError(str(info), f"expected a JSON object, got {describe(obj)}")

@@ -93,9 +93,11 @@ class FrameReader:
     @classmethod
     def open(cls, data: Path, *, detections: Path | None = None, edits: Path | None = None,
              size: tuple[int, int] = EVAL_SIZE, writable: bool = False,
-             detector_settings: Mapping | None = None, force_edits: bool = False) -> FrameReader:
-        """The frames of the dataset at ``data`` with the prediction zip ``detections`` (its
-        settings recorded beside it, else ``detector_settings``) and the edits folder ``edits``
+             detector_settings: Mapping | None = None, force_edits: bool = False,
+             settings_file: Path | None = None) -> FrameReader:
+        """The frames of the dataset at ``data`` with the prediction zip ``detections`` (the
+        calibration settings of the detector's settings file ``settings_file``, else of the one
+        beside the zip, else ``detector_settings``) and the edits folder ``edits``
         (default: :func:`pnlviz.data.edits.default_edits_dir`), opened read-only unless
         ``writable``. The edits folder's records must be of this dataset's pictures
         (:func:`pnlviz.data.edits_folder.check_identity`: an EditsFolderError lists the mismatches)
@@ -109,8 +111,9 @@ class FrameReader:
         if not len(ds):
             ds.require_frames()
         predictions = read_predictions(detections, splits=ds.splits) if detections else None
-        recorded = (read_predictions_info(detections).get("calibration") if detections else None)
-        source = str(predictions_info_path(detections)) if recorded and detections else "detector settings"
+        recorded = read_predictions_info(detections, settings_file).get("calibration")
+        source = (str(settings_file) if settings_file is not None else str(predictions_info_path(detections))
+                  if recorded and detections else "detector settings")
         settings = check_settings(recorded or detector_settings or {}, source)  # fails here, not on a frame
         CalibParams().updated(settings)
         root = edits or default_edits_dir(data)
