@@ -32,7 +32,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -42,6 +42,7 @@ from pnlviz.geometry.camera import Camera
 
 if TYPE_CHECKING:
     from pnlviz.data.dataset import Dataset
+    from pnlviz.data.predictions import Predictions
 
 __all__ = ["ArgumentError", "Calibration", "Camera", "ClipCalibration", "calibrate", "calibrate_clip", "detect",
            "keypoint_names", "keypoints", "open_dataset", "qa", "top_view"]
@@ -49,7 +50,13 @@ __all__ = ["ArgumentError", "Calibration", "Camera", "ClipCalibration", "calibra
 
 def keypoints() -> dict[int, tuple[float, float, float]]:
     """Every keypoint of PnLCalib's catalogue: ``{id: (x, y, z)}`` in the world frame (metres);
-    ids 1-73 (their names: ``pnlviz.keypoint_names()``, their picture: ``docs/keypoint_map.png``)."""
+    ids 1-73 (their names: ``pnlviz.keypoint_names()``, their picture: ``docs/keypoint_map.png``).
+
+    >>> import pnlviz
+    >>> world = pnlviz.keypoints()
+    >>> len(world), world[1], world[45]  # a corner, the left penalty mark
+    (73, (-52.5, -34.0, 0.0), (-41.5, 0.0, 0.0))
+    """
     from pnlviz.field.model import load_field_model
 
     model = load_field_model()
@@ -61,7 +68,13 @@ def keypoints() -> dict[int, tuple[float, float, float]]:
 
 
 def keypoint_names() -> dict[int, str]:
-    """``{id: name}``: a distinct name in words for every keypoint id."""
+    """``{id: name}``: a distinct name in words for every keypoint id.
+
+    >>> import pnlviz
+    >>> names = pnlviz.keypoint_names()
+    >>> len(names), names[45]
+    (73, 'penalty mark left')
+    """
     from pnlviz.field.model import load_field_model
 
     return dict(load_field_model().keypoint_names())
@@ -73,7 +86,14 @@ class Calibration:
     failed, and then ``reason`` says why (``reason_code``: a short code); ``point_residuals``
     ``{id: px}`` and ``line_residuals`` ``{class: px}`` (its farthest point) under the camera;
     ``inliers``: the keypoint ids the voted camera agreed with; ``pnl_lines``: the lines and circles
-    the PnL refinement used."""
+    the PnL refinement used.
+
+    >>> import pnlviz
+    >>> lines = {"Side line top": [(0, 100), (960, 120)], "Middle line": [(470, 100), (440, 540)]}
+    >>> result = pnlviz.calibrate(lines=lines, image_size=(960, 540))  # two lines: too little
+    >>> result.ok, result.camera, result.reason_code
+    (False, None, 'too_few_keypoints')
+    """
 
     camera: Camera | None
     reason: str | None = None
@@ -176,7 +196,19 @@ def calibrate(keypoints: Mapping[int, Sequence[float]] | None = None,
     meet are derived from them, as PnLCalib does. ``image_size``: (width, height) of the image
     the pixels are in. ``pnl``: the point-and-line refinement; ``alpha``: its weight of lines
     against points (default the paper's). Never raises on geometry: a frame that cannot be
-    calibrated comes back with ``camera`` None and the reason."""
+    calibrated comes back with ``camera`` None and the reason.
+
+    >>> import pnlviz
+    >>> cam = pnlviz.Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+    >>> seen = {k: tuple(uv) for k, uv in zip(pnlviz.keypoints(), cam.project(list(pnlviz.keypoints().values())))}
+    >>> seen = {k: uv for k, uv in seen.items() if cam.in_image([uv])[0]}
+    >>> result = pnlviz.calibrate(seen, image_size=(960, 540))
+    >>> assert result.camera is not None  # None when it failed (result.reason says why)
+    >>> round(result.camera.hfov_deg, 3), sorted(seen) == sorted(result.inliers)
+    (40.0, True)
+    >>> pnlviz.calibrate({1: (10.0, 10.0)}, image_size=(960, 540)).reason_code  # one point: no camera
+    'too_few_keypoints'
+    """
     from pnlviz.calib.calibrate import calibrate as calibrate_frame
     from pnlviz.field.model import load_field_model
 
@@ -222,7 +254,13 @@ def _observations(keypoints, lines, w: int, h: int, model, where: str = ""):
 class ClipCalibration:
     """A clip's cameras, one per frame (None: no camera), each from its shot's broadcast camera
     (one position and lens per shot, pan, tilt and zoom per frame), and the shots (lists of frame
-    indices)."""
+    indices), as :func:`calibrate_clip` returns them.
+
+    >>> import pnlviz
+    >>> clip = pnlviz.calibrate_clip([{}, {}], image_size=(960, 540))  # nothing seen
+    >>> clip.cameras
+    (None, None)
+    """
 
     cameras: tuple[Camera | None, ...]
     shots: tuple[tuple[int, ...], ...]
@@ -232,7 +270,24 @@ def calibrate_clip(frames: Sequence[Mapping], *, image_size: Sequence[int], pnl:
     """Calibrate the frames of a video clip in time order, as ``pnlviz calibrate --temporal``
     does: each frame on its own, then the clip cut into shots and one broadcast camera fitted per
     shot. ``frames``: one mapping per frame with ``"keypoints"`` and/or ``"lines"`` as
-    :func:`calibrate` takes them (an empty mapping: nothing seen)."""
+    :func:`calibrate` takes them (an empty mapping: nothing seen).
+
+    >>> import pnlviz
+    >>> world = pnlviz.keypoints()
+    >>> frames = []
+    >>> for i in range(5):  # a camera panning 2 m a frame
+    ...     cam = pnlviz.Camera.from_look_at((0, 50, -20), (2.0 * i, 0, 0), hfov_deg=40, width=960, height=540)
+    ...     uv = dict(zip(world, cam.project(list(world.values()))))
+    ...     frames.append({"keypoints": {k: tuple(p) for k, p in uv.items() if cam.in_image([p])[0]}})
+    >>> frames.append({})  # a frame where nothing was seen: no camera is made up for it
+    >>> clip = pnlviz.calibrate_clip(frames, image_size=(960, 540))
+    >>> clip.shots, [c is not None for c in clip.cameras]
+    (((0, 1, 2, 3, 4, 5),), [True, True, True, True, True, False])
+    >>> middle = clip.cameras[2]
+    >>> assert middle is not None
+    >>> [round(float(v)) for v in middle.C]  # the shot's one position
+    [0, 50, -20]
+    """
     from pnlviz.calib.calibrate import calibrate as calibrate_frame
     from pnlviz.calib.temporal import calibrate_clip as solve_clip
     from pnlviz.field.model import load_field_model
@@ -257,7 +312,15 @@ def open_dataset(path: str | Path) -> Dataset:
     """A dataset folder or zip (SoccerNet layout: ``<stem>.jpg`` with ``<stem>.json``), indexed
     lazily: ``len(ds)``, ``ds.stems``, ``ds.image(stem)`` (BGR), ``ds.annotation(stem)``. Split
     folders or split zips (``sn23/train/``, ``sn23/valid.zip``, ...) are one dataset whose stems
-    are ``<split>/<stem>`` (``ds.splits`` names them)."""
+    are ``<split>/<stem>`` (``ds.splits`` names them).
+
+    >>> import pnlviz
+    >>> ds = pnlviz.open_dataset(pnlviz.SAMPLE_DIR)  # the bundled sample
+    >>> image = ds.image("00000")  # None for a frame without an image
+    >>> assert image is not None
+    >>> len(ds), ds.stems[0], image.shape
+    (33, 'sn22_00004', (540, 960, 3))
+    """
     from pnlviz.data import open_dataset as open_data
 
     p = Path(path)
@@ -266,7 +329,18 @@ def open_dataset(path: str | Path) -> Dataset:
     return open_data(p)
 
 
-def qa(data, *, detections=None, image_size: Sequence[int] | None = None) -> list[dict] | dict:
+@overload
+def qa(data: str | Path, *, detections: str | Path | None = None,
+       image_size: Sequence[int] | None = None) -> list[dict[str, Any]]: ...
+
+
+@overload
+def qa(data: Mapping[str, ArrayLike], *, detections: Predictions | None = None,
+       image_size: Sequence[int] | None = None) -> dict[str, Any]: ...
+
+
+def qa(data: str | Path | Mapping[str, ArrayLike], *, detections: str | Path | Predictions | None = None,
+       image_size: Sequence[int] | None = None) -> list[dict[str, Any]] | dict[str, Any]:
     """Find the label errors, as ``pnlviz qa`` does. ``data``: a dataset folder or zip -> one
     ``{"stem", "score", "findings"}`` per annotated frame, most suspect first (higher score: more
     likely wrong; a frame scores 1 or more when something is found); or one frame's lines
@@ -277,7 +351,19 @@ def qa(data, *, detections=None, image_size: Sequence[int] | None = None) -> lis
     ``severity``, ``evidence`` and a suggested ``fix`` (``{"op": "rename" | "drop_points" |
     "move_points" | "add_class", ...}``, points normalised as in SoccerNet files).
     ``detections``: a PnLCalib prediction zip for a dataset, or one frame's
-    ``pnlviz.data.Predictions``, compared with the annotation."""
+    ``pnlviz.data.Predictions``, compared with the annotation.
+
+    >>> import pnlviz
+    >>> ds = pnlviz.open_dataset(pnlviz.SAMPLE_DIR)
+    >>> annotation = ds.annotation("sn22_00004")  # normalised points; None for a frame without one
+    >>> assert annotation is not None
+    >>> lines = {name: points * (960, 540) for name, points in annotation.items()}
+    >>> pnlviz.qa(lines, image_size=(960, 540))["findings"]  # nothing wrong
+    []
+    >>> lines["Side line left"] = lines.pop("Side line right")  # a class mixed up
+    >>> [(f["kind"], f["class"], f["fix"]["op"]) for f in pnlviz.qa(lines, image_size=(960, 540))["findings"]]
+    [('wrong_class', 'Side line left', 'rename')]
+    """
     from pnlviz.calib.qa import check_frame
     from pnlviz.field.model import load_field_model
 
@@ -316,7 +402,19 @@ def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: f
     "lines": {class name: [(x1, y1), (x2, y2)]}}`` in its pixels (what :func:`calibrate` takes);
     the same as ``pnlviz.detect(image)`` (type checkers see ``pnlviz.detect`` as the package: typed
     code imports this one, ``from pnlviz.api import detect``). Needs ``pip install 'pnlviz[detect]'``
-    (PyTorch)."""
+    (PyTorch). ``weights``: a light model (default: the shipped one); ``threshold``: the
+    keypoint score below which a detection is left out.
+
+    >>> import pnlviz
+    >>> from pnlviz.api import detect  # pnlviz.detect, as type checkers see it
+    >>> image = pnlviz.open_dataset(pnlviz.SAMPLE_DIR).image("00000")
+    >>> assert image is not None
+    >>> found = detect(image)
+    >>> len(found["keypoints"]) > 10, sorted(found) == ["keypoints", "lines"]
+    (True, True)
+    >>> pnlviz.calibrate(**found, image_size=(960, 540)).ok
+    True
+    """
     from pnlviz.detect.image import detect_image
 
     return detect_image(image, weights, threshold=threshold)
@@ -325,14 +423,21 @@ def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: f
 def top_view(camera: Camera | None = None, image: np.ndarray | None = None, points_pitch: ArrayLike | None = None,
              points_image: ArrayLike | None = None, *, keypoints: Mapping[int, Sequence[float]] | None = None,
              points: ArrayLike | None = None, px_per_m: float = 8.0) -> np.ndarray:
-    """A bird's-eye view of the pitch (BGR uint8, (int(117 px_per_m), int(80 px_per_m), 3): the
+    """A bird's-eye view of the pitch (BGR uint8, (int(80 px_per_m), int(117 px_per_m), 3): the
     pitch and 6 m around it, the far touchline at the top): the camera's footprint and position;
     ``image``, the camera's picture (BGR, any size of its aspect), drawn on the ground it sees;
     ``points_pitch`` (N, 2) pitch positions in metres (a tracker's players) and ``points_image``
     (N, 2) pixels of the image put on the ground (players' feet, the bottom middle of their
     boxes) as red discs; ``keypoints`` ``{id: (x, y)}`` image keypoints put on the ground with
     their ids. ``points`` is the older name of ``points_image``. About 2 ms at 3 px/m, 12 ms at
-    8 px/m, 35 ms with an image at 8 px/m (one core)."""
+    8 px/m, 35 ms with an image at 8 px/m (one core).
+
+    >>> import pnlviz
+    >>> cam = pnlviz.Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+    >>> view = pnlviz.top_view(cam, points_pitch=[[0.0, 0.0], [-41.5, 0.0]], px_per_m=3)
+    >>> view.shape, view.dtype.name
+    ((240, 351, 3), 'uint8')
+    """
     from pnlviz.viz import top_view as draw
 
     if camera is not None and not isinstance(camera, Camera):

@@ -11,8 +11,8 @@ import sys
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "api.md"
-CAMERA_METHODS = ("from_look_at", "from_soccernet", "to_soccernet", "project", "image_to_pitch", "homography",
-                  "scaled", "in_image")
+CAMERA_METHODS = ("from_look_at", "from_soccernet", "to_soccernet", "project", "project_with_depth", "pitch_to_image",
+                  "image_to_pitch", "homography", "scaled", "in_image", "allclose")
 
 
 def _entry(name: str, obj, level: str = "###") -> list[str]:
@@ -29,7 +29,9 @@ def reference() -> str:
 
     lines = ["# The Python API", "",
              "Written by `python scripts/api_reference.py` from the docstrings (do not edit by hand). "
-             "Everything here is imported by `import pnlviz`; the rest of the package is private.", ""]
+             "Everything here is imported by `import pnlviz`; the rest of the package is private. "
+             "Every entry has an example; the tests run them all, as they are written here, after "
+             "`import numpy as np`, `import pnlviz` and `from pnlviz import Camera`.", ""]
     lines += [inspect.cleandoc(pnlviz.api.__doc__).split(">>>")[0].strip(), ""]
     for name in sorted(n for n in pnlviz.__all__ if not n.isupper()):
         obj = getattr(pnlviz, name)

@@ -58,12 +58,32 @@ def _mypy_strict(code: str, tmp_path: Path, request) -> subprocess.CompletedProc
                           env={**os.environ, "MYPYPATH": str(REPO)})
 
 
+def api_page_script() -> str:
+    """Every example of docs/api.md as one script a user could write: each entry's examples in a
+    function of their own (names are reused from one entry to the next), after the imports the
+    page names."""
+    import doctest
+    import re
+    import textwrap
+
+    page = (REPO / "docs" / "api.md").read_text()
+    sections = re.split(r"^(#{2,3} `[^`]+`)$", page, flags=re.M)[1:]
+    lines = ["import numpy as np", "import pnlviz", "from pnlviz import Camera", ""]
+    for i, body in enumerate(sections[1::2]):
+        lines.append(f"def entry_{i}() -> None:")
+        lines += [textwrap.indent(e.source.rstrip("\n"), "    ") for e in doctest.DocTestParser().get_examples(body)]
+        lines += ["    pass", ""]
+    return "\n".join(lines) + "\n"
+
+
 def test_a_downstream_script_and_the_readme_example_type_check_strictly(tmp_path, request):
     import re
 
     readme = (REPO / "README.md").read_text()
-    example = re.search(r"## Python API\s+```python\n(.*?)```", readme, re.S).group(1)
-    for code in (example, DOWNSTREAM):
+    example = re.search(r"```python\n(.*?)```", readme, re.S).group(1)
+    page = api_page_script()
+    assert page.count("def entry_") >= 20
+    for code in (example, DOWNSTREAM, page):
         run = _mypy_strict(code, tmp_path, request)
         assert run.returncode == 0, f"{run.stdout}{run.stderr}\n{code}"
     # and the API's types are real ones, not Any: a wrong use is caught

@@ -147,7 +147,15 @@ def _image_size_arg(width, height, image_size) -> tuple[float, float] | None:
 
 @dataclass(frozen=True)
 class Camera:
-    """A calibrated camera for an image of ``width`` x ``height`` pixels."""
+    """A calibrated camera for an image of ``width`` x ``height`` pixels: focal lengths ``fx``,
+    ``fy`` and principal point ``cx``, ``cy`` in pixels, rotation ``R`` (3, 3) world -> camera,
+    centre ``C`` (3,) in metres (SoccerNet's world frame), and SoccerNet's lens terms. Immutable:
+    equal cameras compare and hash alike (:meth:`allclose` for a tolerance).
+
+    >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+    >>> cam.width, cam.height, round(cam.fx, 1), cam.C.tolist()
+    (960, 540, 1318.8, [0.0, 50.0, -20.0])
+    """
 
     fx: float
     fy: float
@@ -197,7 +205,13 @@ class Camera:
 
     def allclose(self, other: "Camera", *, rtol: float = 1e-9, atol: float = 1e-9) -> bool:
         """Every parameter of ``other`` within ``atol + rtol * |value|`` of this camera's (as
-        :func:`numpy.allclose`; pixels, metres and the rotation's entries alike)."""
+        :func:`numpy.allclose`; pixels, metres and the rotation's entries alike).
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> back = Camera.from_soccernet(cam.to_soccernet())  # through SoccerNet's angles and back
+        >>> cam == back, cam.allclose(back, atol=1e-6)
+        (False, True)
+        """
         if not isinstance(other, Camera):
             raise ArgumentError(f"other: expected a Camera, got {type(other).__name__}")
         return all(np.allclose(a, b, rtol=rtol, atol=atol) for a, b in zip(self._values(), other._values()))
@@ -206,7 +220,14 @@ class Camera:
     @classmethod
     def from_look_at(cls, position, target, *, hfov_deg: float, width: float, height: float,
                      roll_deg: float = 0.0, k1: float = 0.0) -> "Camera":
-        """Square-pixel camera with centred principal point and horizontal field of view ``hfov_deg``."""
+        """Square-pixel camera at ``position`` (metres) looking at ``target``, with centred
+        principal point, horizontal field of view ``hfov_deg``, ``roll_deg`` about its axis and
+        radial distortion ``k1``.
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> round(cam.hfov_deg, 6), cam.project([0.0, 0.0, 0.0]).round(6).tolist()
+        (40.0, [480.0, 270.0])
+        """
         f = (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
         radial = np.zeros(6)
         radial[0] = k1
@@ -255,7 +276,14 @@ class Camera:
         return cam.scaled(*size)
 
     def to_soccernet(self) -> dict:
-        """SoccerNet camera dict (plus ``rotation_matrix``, as PnLCalib writes it)."""
+        """SoccerNet camera dict (plus ``rotation_matrix``, as PnLCalib writes it), for an image
+        of twice its principal point.
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> d = cam.to_soccernet()
+        >>> d["position_meters"], d["principal_point"], round(d["tilt_degrees"], 2)
+        ([0.0, 50.0, -20.0], [480.0, 270.0], 68.2)
+        """
         pan, tilt, roll = pan_tilt_roll_from_rotation(self.R)
         return {
             "pan_degrees": math.degrees(pan),
@@ -305,7 +333,12 @@ class Camera:
         return self._lens != "none"
 
     def scaled(self, width: float, height: float) -> "Camera":
-        """The same camera for the image resized to ``width`` x ``height``."""
+        """The same camera for the image resized to ``width`` x ``height``.
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> cam.scaled(1920, 1080).project([0.0, 0.0, 0.0]).round(6).tolist()
+        [960.0, 540.0]
+        """
         sx, sy = width / self.width, height / self.height
         return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy,
                        width=float(width), height=float(height))
@@ -372,7 +405,13 @@ class Camera:
 
     def project_with_depth(self, world: ArrayLike, *, distort: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (N, 2) and depths (N,) (metres along the optical axis) of world points (N, 3);
-        points at depth <= :data:`MIN_DEPTH` (behind or on the camera plane) get NaN pixels."""
+        points at depth <= :data:`MIN_DEPTH` (behind or on the camera plane) get NaN pixels.
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> uv, depth = cam.project_with_depth([[0, 0, 0], [0, 100, 0]])  # the second is behind it
+        >>> uv.round(3).tolist(), depth.round(3).tolist()
+        ([[480.0, 270.0], [nan, nan]], [53.852, -38.996])
+        """
         X = np.asarray(world, float)
         if X.ndim != 2 or X.shape[1] != 3:
             raise ArgumentError(f"world: expected points (N, 3) in metres, got an array of shape {X.shape}")
@@ -390,7 +429,12 @@ class Camera:
     def pitch_to_image(self, xy: ArrayLike) -> np.ndarray:
         """Pixels (N, 2) of pitch positions ``xy`` (N, 2) in metres on the ground (z = 0): the
         inverse of :meth:`image_to_pitch`; one position (2,) gives one pixel (2,). NaN behind the
-        camera; other shapes refused (ArgumentError naming ``xy``)."""
+        camera; other shapes refused (ArgumentError naming ``xy``).
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> cam.pitch_to_image([[0, 0], [11, 0]]).round(1).tolist()  # the centre spot, 11 m to the right
+        [[480.0, 270.0], [749.4, 270.0]]
+        """
         arr = np.asarray(xy, float)
         if arr.shape == (2,):
             return self.pitch_to_image(arr[None])[0]
@@ -423,7 +467,12 @@ class Camera:
         pitch point), or where the lens model does not invert (far outside the image a distortion
         folds back, and a pixel there has no ray). The point a player stands on is the bottom
         middle of the player's box. One pixel (2,) gives one point (2,); any other shape than
-        (N, 2) or (2,) is refused (ArgumentError naming ``uv``)."""
+        (N, 2) or (2,) is refused (ArgumentError naming ``uv``).
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> cam.image_to_pitch([[480, 270], [480, 0]]).round(3).tolist()  # image centre, top middle
+        [[0.0, 0.0], [0.0, -60.812]]
+        """
         arr = np.asarray(uv, float)
         if arr.shape == (2,):
             return self.image_to_pitch(arr[None])[0]
@@ -458,9 +507,24 @@ class Camera:
     def homography(self) -> np.ndarray:
         """3x3 homography from the ground plane (X, Y, 1) in metres to pixels, without lens
         distortion (:meth:`image_to_pitch` undoes the lens too). Its inverse maps pixels to the
-        pitch."""
+        pitch.
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> p = cam.homography() @ [0.0, 0.0, 1.0]  # the centre spot
+        >>> (p[:2] / p[2]).round(6).tolist()
+        [480.0, 270.0]
+        """
         return self.ground_homography()
 
-    def in_image(self, uv: np.ndarray) -> np.ndarray:
-        uv = np.asarray(uv)
+    def in_image(self, uv: ArrayLike) -> np.ndarray:
+        """(N,) whether each pixel of ``uv`` (N, 2) is inside the image: 0 <= x < width and
+        0 <= y < height (NaN is outside). Other shapes refused (ArgumentError naming ``uv``).
+
+        >>> cam = Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=960, height=540)
+        >>> cam.in_image([[10, 10], [960, 0]]).tolist()
+        [True, False]
+        """
+        uv = np.asarray(uv, float)
+        if uv.ndim != 2 or uv.shape[1] != 2:
+            raise ArgumentError(f"uv: expected pixels (N, 2), got an array of shape {uv.shape}")
         return (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)
