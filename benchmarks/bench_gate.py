@@ -111,7 +111,8 @@ def main() -> None:
     try:
         frames, preds, export = tmp / "frames", tmp / "preds.zip", tmp / "export"
         n = resized(IMAGES, frames)
-        t_det, m_det, _ = run(["detect", "--data", str(frames), "--out", str(preds), "--no-progress"])
+        t_det, m_det, _ = run(["detect", "--data", str(frames), "--out", str(preds), "--no-progress", "--settings",
+                               str(preds.with_suffix(".json"))])  # its settings beside the zip: export applies them
         shutil.rmtree(export, ignore_errors=True)
         t_exp, m_exp, said = run(["export", "--data", str(frames), "--detections", str(preds), "--edits",
                                   str(tmp / "edits"), "--out", str(export), "--all", "--no-progress",

@@ -184,7 +184,7 @@ def _lines_arg(lines, model) -> dict[str, np.ndarray]:
 
 
 def calibrate(keypoints: Mapping[int, Sequence[float]] | None = None,
-              lines: Mapping[str, Sequence[Sequence[float]]] | None = None, *, image_size: Sequence[int],
+              lines: Mapping[str, ArrayLike] | None = None, *, image_size: Sequence[int],
               pnl: bool = True, alpha: float | None = None) -> Calibration:
     """Calibrate one frame from what is seen in it.
 
@@ -357,7 +357,7 @@ def qa(data: str | Path | Mapping[str, ArrayLike], *, detections: str | Path | P
     >>> ds = pnlviz.open_dataset(pnlviz.SAMPLE_DIR)
     >>> annotation = ds.annotation("sn22_00004")  # normalised points; None for a frame without one
     >>> assert annotation is not None
-    >>> lines = {name: points * (960, 540) for name, points in annotation.items()}
+    >>> lines = {name: points * (959, 539) for name, points in annotation.items()}  # normalised -> pixels
     >>> pnlviz.qa(lines, image_size=(960, 540))["findings"]  # nothing wrong
     []
     >>> lines["Side line left"] = lines.pop("Side line right")  # a class mixed up

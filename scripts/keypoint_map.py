@@ -1,6 +1,6 @@
 """Draw the keypoint map (docs/keypoint_map.png): PnLCalib's 73 keypoint ids on a top view of the
 pitch, coloured by set, from the pitch model (`pnlviz.viz.keypoint_map`); and print the id -> name
-table the README shows under it.
+table docs/formats.md shows under it.
 
     python scripts/keypoint_map.py [--out docs/keypoint_map.png] [--table]
 """
@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parents[1]
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "keypoint_map.png")
-    ap.add_argument("--table", action="store_true", help="print the README's id -> name table (markdown)")
+    ap.add_argument("--table", action="store_true", help="print docs/formats.md's id -> name table (markdown)")
     args = ap.parse_args()
     model = load_field_model()
     image = keypoint_map(model)

@@ -1,4 +1,4 @@
-"""Screenshots of the app for the README, taken in headless Chromium (Debian's `chromium`).
+"""Screenshots of the app for the README and docs/app.md, taken in headless Chromium (Debian's `chromium`).
 
     python scripts/screenshots.py        # writes docs/screenshots/*.jpg
 

@@ -1,4 +1,4 @@
-"""The README figure of temporal calibration on a real TS-WorldCup clip (no images in the data:
+"""The figure of temporal calibration in docs/video.md on a real TS-WorldCup clip (no images in the data:
 the frames are drawn on a dark canvas at 960x540 with the published PnLCalib detections).
 
     python scripts/temporal_figure.py [--clip left-2014_Match_Highlights6_clip_00013-1] [--out docs/temporal_real.jpg]

@@ -22,7 +22,7 @@ Refinement Module", plus what the data asked for):
    joins when all its observed points are within ``line_gate_px`` of its projection by the voted
    camera, a keypoint when within ``point_gate_px``. The paper refines the pose with K fixed
    (``refine_focal=False, refine_k1=False``); by default the focal length and radial k1 are
-   refined with the pose, which the data supports (+5.5 JaC@5 on WC14, +4 on SN22; see README).
+   refined with the pose, which the data supports (+5.5 JaC@5 on WC14, +4 on SN22; see docs/benchmarks.md).
 
 Every threshold is a :class:`CalibParams` field, given at 960 px image width and scaled with the
 image width.
