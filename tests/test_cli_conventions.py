@@ -66,3 +66,15 @@ def test_a_log_redirected_to_a_file_gets_no_progress_bar(tmp_path):
     assert run.returncode == 0 and "wrote 3 frames" in run.stdout
     text = log.read_text()
     assert "\r" not in text and "%|" not in text and "it/s" not in text
+
+
+def test_the_help_names_no_path_of_a_checkout():
+    """Installed from the wheel there is no assets/, benchmarks/ or scripts/ folder and no clone
+    to `pip install -e`: the help of every command says what to do without them."""
+    import re
+
+    from pnlviz.detect.default import DEFAULT_MODEL
+
+    for name, command in commands().items():
+        text = command.format_help().replace(str(DEFAULT_MODEL), "<the shipped model>")  # where it is installed
+        assert not re.search(r"assets/|benchmarks/|scripts/|examples/|pip install -e", text), (name, text)

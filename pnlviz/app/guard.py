@@ -13,7 +13,9 @@ another site (or another local port) could read the app's state and change label
 viser (1.1) has no hook for this, so :func:`guarded_viser_server` hands viser's websocket server
 a ``process_request`` that runs these checks before viser's own (static files and the upgrade),
 through the public ``websockets`` function viser binds it with. It checks that it did: a viser that
-binds its server another way is refused with a clear error, never served unguarded.
+binds its server another way is refused with a clear error, never served unguarded. The upstream
+feature that would remove this shim (a request hook on ``ViserServer``) is written out in
+docs/development.md.
 """
 
 from __future__ import annotations

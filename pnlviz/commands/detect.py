@@ -20,7 +20,7 @@ def add_detect_parser(sub) -> None:
                        description="Run PnLCalib-compatible networks on every image of a dataset and write a "
                                    "PnLCalib 2D prediction zip. The published architecture takes 6-7 s per frame "
                                    "per network at 960x540 on a 2-core CPU; without weights, the light default model "
-                                   "(assets/models/light.pt) takes about 50 ms.")
+                                   "shipped with pnlviz takes about 50 ms.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--data", type=Path, help="dataset folder or zip with images")
     src.add_argument("--video", type=Path, help="a video file (mp4, ...): every frame, decoded one at a time; "
@@ -50,7 +50,7 @@ def add_detect_parser(sub) -> None:
                                                    "(a GPU if torch sees one)")
     p.add_argument("--half", action="store_true",
                    help="run the networks in float16 (for GPUs: half the memory; 1.4-1.5x slower on a CPU). With the light "
-                        "model on real frames, points move 0.11 px at p99 (benchmarks/bench_precision.py)")
+                        "model on real frames, points move 0.11 px at p99)")
     p.add_argument("--threads", type=int, default=0,
                    help="torch CPU threads (default: the idle cores less one, at least 1; more threads than "
                         "free cores makes torch wait for itself: 5-9x slower)")

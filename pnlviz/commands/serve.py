@@ -14,7 +14,7 @@ def add_serve_parser(sub) -> None:
 
     p = sub.add_parser("serve", help="the web app: inspect calibrations, review frames",
                        description="Serve the pnlviz app (viser) on a dataset; without --data, the bundled "
-                                   "sample in examples/sample. Edits and review statuses are saved at once "
+                                   "sample. Edits and review statuses are saved at once "
                                    "in an edits folder beside the data (never over it).")
     add_app_data_args(p)
     p.add_argument("--video", type=Path, help="a video file (mp4, ...) instead of --data: its frames are decoded when "
@@ -25,7 +25,7 @@ def add_serve_parser(sub) -> None:
     p.add_argument("--weights", type=Path, default=None,
                    help="a light model from pnlviz train (LightNet checkpoint + sidecar) instead of the shipped one")
     p.add_argument("--no-detect", action="store_true",
-                   help="do not run the light default detector (assets/models/light.pt) on frames without detections")
+                   help="do not run the light default detector (shipped with pnlviz) on frames without detections")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default 127.0.0.1: this machine only; any other address needs a token)")
     p.add_argument("--port", type=int_at_least(0, 65535), default=8080)

@@ -1,6 +1,6 @@
 """``pnlviz train``: train the light default detector (LightNet) on synthetic and real frames.
 
-    pnlviz train [--config assets/models/light_config.json] [--out light.pt] [--init weights.pt]
+    pnlviz train [--config F] [--out light.pt] [--init weights.pt | --init default]
                  [--data DIR ... | --data DIR --labels EXPORT] [--frames N] [--epochs E] [--minutes M] [--cache DIR] [--no-progress]
                  [--replace-default]
 
@@ -32,11 +32,12 @@ def add_train_parser(subparsers) -> None:
                                           "or SoccerNet-Calibration folders); writes a plain state dict and a "
                                           "JSON provenance sidecar next to it.")
     p.add_argument("--config", type=Path, default=None,
-                   help="training config JSON (default assets/models/light_config.json)")
+                   help="training config JSON (default: the config the shipped light model was trained with)")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT,
                    help=f"output checkpoint (default ./{DEFAULT_OUT}; the shipped model only with --replace-default)")
     p.add_argument("--init", type=Path, default=None,
-                   help="start from these LightNet weights (e.g. assets/models/light.pt to fine-tune the default)")
+                   help="start from these LightNet weights, to fine-tune them: a model from an earlier pnlviz train, or "
+                        "'default' for the shipped light model")
     p.add_argument("--data", type=Path, action="append", default=None, metavar="DIR",
                    help="a real training dataset replacing the config's (repeatable): a SoccerNet-Calibration "
                         "folder or zip with images and annotations, or an image folder with homographies.json")
@@ -88,6 +89,8 @@ def run_train(args) -> int:
         print(f"error: --out {args.out} is the shipped default model; add --replace-default to overwrite it "
               f"(or choose another --out)", file=sys.stderr)
         return 2
+    if args.init is not None and str(args.init) == "default" and not args.init.exists():
+        args.init = DEFAULT_MODEL  # the shipped model, wherever the package is installed
     if args.init is not None and not args.init.is_file():
         print(f"error: --init {args.init}: no such file", file=sys.stderr)
         return 2
