@@ -67,7 +67,6 @@ def main() -> None:
     from playwright.sync_api import sync_playwright
 
     from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.shots import clip_shots
     from pnlviz.app.state import AppState
 
     tmp = Path(tempfile.mkdtemp(prefix="pnlviz-bench-"))
@@ -75,9 +74,9 @@ def main() -> None:
         make_clip(tmp / "clip", args.frames)
         app = PnlvizApp(AppState(tmp / "clip", edits=tmp / "edits"), port=free_port())
         st = app.state
-        clip = next(iter(clip_shots(st).clips))
+        clip = next(iter(st.shots.clips))
         t0 = time.perf_counter()
-        solver = clip_shots(st).build(clip, st.default_settings)
+        solver = st.shots.build(clip, st.default_settings)
         print(f"clip of {args.frames} frames, {len(solver.shots)} shot(s); its model built in "
               f"{time.perf_counter() - t0:.1f} s")
         with sync_playwright() as pw:

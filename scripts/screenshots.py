@@ -121,11 +121,10 @@ def clip_calibrated(page, tab) -> None:
 def shot_model(page, tab) -> None:
     """The clip under its shot model: every frame calibrated, the shots solved, a point moved by
     hand on a frame before this one (a keyframe on the strip), the panel redrawn."""
-    from pnlviz.app.shots import clip_shots
 
     clip_calibrated(page, tab)
     st = tab.state
-    shots = clip_shots(st)
+    shots = st.shots
     place = shots.place(tab.stem, tab.settings, build=False)
     shots.build(place.clip, tab.settings)
     other = place.stems[max(0, place.t - 6)]  # a keyframe six frames before this one

@@ -103,8 +103,6 @@ def test_edits_while_a_shot_is_solved_again_and_cut_are_all_kept(tmp_path):
     cuts the clip and removes the cut again; every edit is in the edits folder and in the shot
     model, which carries each one's pin."""
     import json
-
-    from pnlviz.app.shots import clip_shots
     from pnlviz.app.state import AppState
     from pnlviz.field import load_field_model
     from pnlviz.synth.annotate import annotate, annotation_to_json
@@ -119,7 +117,7 @@ def test_edits_while_a_shot_is_solved_again_and_cut_are_all_kept(tmp_path):
     st = AppState(data, edits=tmp_path / "edits")
     try:
         settings = st.default_settings
-        shots = clip_shots(st)
+        shots = st.shots
         clip = next(iter(shots.clips))
         stems = shots.clips[clip]
         solver = shots.build(clip, settings)

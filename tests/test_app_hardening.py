@@ -56,7 +56,7 @@ def test_concurrent_edits_from_threads_all_land_on_their_frames(data):
         on_disk = json.loads((st.edits.frames / f"{stem}.json").read_text())["keypoints"]
         want = {str(kid): [x, y] for s, kid, x, y in jobs if s == stem}
         assert on_disk == want
-    assert st.history("00001") == (12, 0) and st.history("00002") == (12, 0)
+    assert st.edits.history("00001") == (12, 0) and st.edits.history("00002") == (12, 0)
     st.close()
 
 
@@ -118,7 +118,7 @@ def test_a_failed_write_is_shown_and_changes_nothing(data, monkeypatch, serve):
     monkeypatch.setattr(edits_module, "atomic_write_text", full_disk)
     tab.guard(lambda: st.set_review(tab.stem, "accepted"))
     assert said and said[-1][0] == "not saved" and "No space left" in said[-1][1]
-    assert st.edits.review(tab.stem) is None and st.history(tab.stem) == (0, 0)  # nothing half-done
+    assert st.edits.review(tab.stem) is None and st.edits.history(tab.stem) == (0, 0)  # nothing half-done
 
 
 # ------------------------------------------------------------------------------ damaged records

@@ -21,6 +21,7 @@ from pnlviz.app.frameorder import FrameOrder, visible_order
 from pnlviz.app.modes import DragMode, DragPhase, Filter, Mode, PointKind, Selection, Sort, labels
 from pnlviz.app.overlay import Markers, Overlay
 from pnlviz.app.playback import ClipPlayer
+from pnlviz.app.shots import ClipShots
 from pnlviz.app.state import REVIEW_STATES, AppState, EditError
 from pnlviz.app.tabqueue import ActionGuard, TabQueue
 from pnlviz.app.view2d import MAX_ZOOM, MIN_ZOOM_OF_FIT, PLANE_Z, ImagePlane, View2D
@@ -321,8 +322,8 @@ def clip_tab(errors):
     stems = [f"f{i}" for i in range(8)]
     views = {f"f{i}": fake_view(residuals=(e,)) for i, e in zip(range(2, 7), errors) if e is not None}
     tab = SimpleNamespace(index=2, settings=None, notes=[], panels=SimpleNamespace(clip_text=None),
-                          state=SimpleNamespace(stems=stems, subscribe=lambda callback, first=False: None, triage=SimpleNamespace(
-                              lookup=lambda stem, settings: views.get(stem))))
+                          state=SimpleNamespace(stems=stems, shots=ClipShots(SimpleNamespace(stems=stems)),
+                                                triage=SimpleNamespace(lookup=lambda stem, settings: views.get(stem))))
     tab.goto = lambda i: setattr(tab, "index", i)
     tab.notify = lambda title, body, error=True: tab.notes.append(title)
     tab.queue = SimpleNamespace(closed=False, enqueue=lambda action: action())

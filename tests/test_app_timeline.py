@@ -45,7 +45,6 @@ def clip_data(tmp_path):
 
 def test_the_app_shows_the_clip_timeline_jumps_to_the_worst_and_plays(clip_data, serve):
     from pnlviz.app.playback import PLAY_INTERVAL
-    from pnlviz.app.shots import clip_shots
 
     app = serve(clip_data)
     st = app.state
@@ -56,7 +55,7 @@ def test_the_app_shows_the_clip_timeline_jumps_to_the_worst_and_plays(clip_data,
     for i in tab.clip.members():  # calibrate the clip (the background worker would, in time)
         st.view(st.stems[i], tab.settings)
     # its shot model too (built in the background otherwise: the errors change when it lands)
-    clip_shots(st).build(tab.clip.clip_of[first], tab.settings)
+    st.shots.build(tab.clip.clip_of[first], tab.settings)
     tab.show()
     p = tab.panels
     assert "frame 1 of 8" in p.clip_text.content and "error" in p.clip_text.content

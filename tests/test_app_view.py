@@ -218,18 +218,18 @@ def test_undo_history_is_saved_with_the_edits_and_outlives_a_restart(data):
         st.set_review("00001", "accepted")
         st.move_keypoint("00001", kid, x + 5, y)
         st.move_keypoint("00001", kid, x + 9, y)
-        assert st.history("00001") == (3, 0)
+        assert st.edits.history("00001") == (3, 0)
     with AppState(data) as st:  # a new server on the same edits
-        assert st.history("00001") == (3, 0)
+        assert st.edits.history("00001") == (3, 0)
         assert st.undo("00001")
         assert st.edits.get("00001")["keypoints"][str(kid)] == [x + 5, y]
         assert st.undo("00001") and st.edits.review("00001") == "accepted"  # back before the first move
         assert st.undo("00001") and st.edits.review("00001") is None and not st.undo("00001")
-        assert st.history("00001") == (0, 3)
+        assert st.edits.history("00001") == (0, 3)
     with AppState(data) as st:
         assert st.redo("00001") and st.edits.review("00001") == "accepted"
         st.set_review("00001", "rejected")  # a new action drops what could be redone
-        assert st.history("00001") == (2, 0)
+        assert st.edits.history("00001") == (2, 0)
 
 
 def test_a_damaged_history_is_refused_like_any_damaged_record(tmp_path):
@@ -345,7 +345,7 @@ def test_steps_already_in_the_history_are_kept_and_a_new_bad_one_is_refused(data
         copy["history"]["undo"].clear()
         assert st.edits.get("00000") == before  # a copy's changes stay in the copy
     with AppState(data) as st:  # and what was written reads back whole
-        assert st.history("00000") == (5, 0) and st.edits.get("00000")["keypoints"][str(kid)] == [x + 5, y]
+        assert st.edits.history("00000") == (5, 0) and st.edits.get("00000")["keypoints"][str(kid)] == [x + 5, y]
 
 
 def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_names():

@@ -53,13 +53,14 @@ def test_the_geometry_helpers_doctests_hold():
 
     import pnlviz.api
     import pnlviz.field.model
+    import pnlviz.geometry.angles
     import pnlviz.geometry.camera
     import pnlviz.geometry.distance
     import pnlviz.geometry.homography
     import pnlviz.geometry.projection
     import pnlviz.geometry.so3
 
-    for module in (pnlviz.api, pnlviz.field.model, pnlviz.geometry.camera, pnlviz.geometry.so3, pnlviz.geometry.distance, pnlviz.geometry.homography,
+    for module in (pnlviz.api, pnlviz.field.model, pnlviz.geometry.angles, pnlviz.geometry.camera, pnlviz.geometry.so3, pnlviz.geometry.distance, pnlviz.geometry.homography,
                    pnlviz.geometry.projection):
         result = doctest.testmod(module)
         assert result.attempted > 0 and result.failed == 0, module.__name__

@@ -4,7 +4,6 @@ Jacobian, gating, failure reasons, and the WC14 metrics on the published detecti
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from pnlviz.calib.homography import (
     HomographyKind, HomographyParams, HomographyResult, estimate_homography, template_homography,

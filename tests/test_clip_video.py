@@ -15,7 +15,6 @@ from pnlviz.geometry.camera import Camera
 from pnlviz.pipeline.clip import accept_shot, clip_changes, clip_solver, dataset_clips, read_cuts, set_cut
 from pnlviz.pipeline.export import write_export
 from pnlviz.pipeline.reader import FrameReader
-from pnlviz.app.shots import clip_shots
 
 W, H, T = 480, 270, 16
 
@@ -73,7 +72,7 @@ def test_two_threads_asking_for_a_clip_model_get_the_same_one(video, tmp_path):
 
     path, preds, _ = video
     with AppState(path, detections=preds, edits=tmp_path / "edits") as st:
-        shots = clip_shots(st)
+        shots = st.shots
         settings = st.default_settings
         got: list = []
         threads = [threading.Thread(target=lambda: got.append(shots.build("match", settings))) for _ in range(3)]
@@ -155,8 +154,8 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     st = app.state
     tab = app.session()
     tab.goto(8)
-    solver = clip_shots(st).build("match", tab.settings)
-    stems = clip_shots(st).clips["match"]
+    solver = st.shots.build("match", tab.settings)
+    stems = st.shots.clips["match"]
     tab.show()
     shown = tab.view()
     assert shown.camera is solver.camera(8)
@@ -176,7 +175,7 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     assert solver.camera(9) is not before  # the neighbour follows the edit
     tab.goto(9)
     assert tab.view().camera is solver.camera(9)
-    errors, cuts, keyframes = clip_shots(st).strip(stems[9], tab.settings)
+    errors, cuts, keyframes = st.shots.strip(stems[9], tab.settings)
     assert keyframes == [8] and cuts == [] and len(errors) == T
     assert "1 keyframe (corrected by hand)" in tab.panels.clip_text.content
     tab.clip.accept_shot()
@@ -188,7 +187,7 @@ def test_the_app_shows_a_clip_frame_under_its_shot_and_an_edit_updates_the_shot(
     assert kp[str(int(ids[j]))]["provenance"] == "shot"
     tab.goto(6)
     tab.clip.toggle_cut()
-    assert [s.start for s in clip_shots(st).build("match", tab.settings).shots] == [0, 6]
+    assert [s.start for s in st.shots.build("match", tab.settings).shots] == [0, 6]
 
 
 def test_an_edit_on_a_clip_frame_redraws_the_other_tabs_on_its_shot(video, tmp_path, serve):
@@ -201,8 +200,8 @@ def test_an_edit_on_a_clip_frame_redraws_the_other_tabs_on_its_shot(video, tmp_p
     a, b = app.session(), app.session()
     a.goto(8)
     b.goto(10)
-    solver = clip_shots(st).build("match", a.settings)
-    stems = clip_shots(st).clips["match"]
+    solver = st.shots.build("match", a.settings)
+    stems = st.shots.clips["match"]
     a.show()
     b.show()
     b.flush()

@@ -186,7 +186,10 @@ def test_a_far_detection_is_exported_flagged_and_a_hand_confirms_it(images_only,
 
 def test_accepting_a_frame_with_flagged_points_says_so_and_h_hides_them(images_only, tmp_path, serve):
     """G on a frame whose snapshot has a point beyond the gate: the panel names it, and H hides
-    it on that frame (one undo step) although the tab has moved on."""
+    it on that frame (one undo step) although the tab has moved on, without recalibrating it or
+    changing its review: still accepted, the same camera, the point gone from its labels and from
+    the export; Ctrl+Z brings it back."""
+    from pnlviz.pipeline.export import export_frame
     data, detector = images_only
     app = serve(data, edits=tmp_path / "edits", detector=detector)
     st = app.state
@@ -198,10 +201,21 @@ def test_accepting_a_frame_with_flagged_points_says_so_and_h_hides_them(images_o
     tab.editor.review("accepted", advance=True)
     assert "00007: 1 point flagged" in tab.panels.gate_text.content and "H" in tab.panels.gate_text.content
     assert said[0] == "1 flagged on 00007"
+    before = st.edits.get("00007")["snapshot"]
+    assert "5" in before["labels"]
     tab.editor.hide_flagged()
-    assert st.edits.get("00007")["keypoints"] == {"5": None} and st.edits.review("00007") == "corrected"
+    record = st.edits.get("00007")
+    assert record["keypoints"] == {"5": None} and st.edits.review("00007") == "accepted"
+    assert record["snapshot"]["camera"] == before["camera"]  # not recalibrated
+    assert set(record["snapshot"]["labels"]) == set(before["labels"]) - {"5"}
     assert tab.panels.gate_text.content == ""  # nothing flagged any more
     assert 5 not in st.view("00007", tab.settings).observations.kp_ids
+    exported = export_frame(st.reader, "00007")  # what the export writes for it
+    assert "5" not in json.loads(exported.files["keypoints/00007.json"])["keypoints"]
+    assert exported.camera == before["camera"] and exported.entry["labels"] == "snapshot"
+    assert st.undo("00007", tab.settings)
+    assert st.edits.get("00007").get("keypoints") in (None, {}) and st.edits.review("00007") == "accepted"
+    assert "5" in st.edits.get("00007")["snapshot"]["labels"]
 
 
 # ---------------------------------------------------------------------- triage over the whole dataset

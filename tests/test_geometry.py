@@ -154,6 +154,9 @@ def test_fit_ellipse_recovers_exact_ellipses_from_any_arc(e, n, span):
     center, axes, _ = fit.ellipse_params()
     np.testing.assert_allclose(center, [cu, cv], atol=1e-4 * a)
     np.testing.assert_allclose(sorted(axes), sorted([a, a * ratio]), rtol=1e-5)
+    # the same conic as the true ellipse, up to scale and sign
+    q, t_q = fit.Q / np.linalg.norm(fit.Q), truth.Q / np.linalg.norm(truth.Q)
+    assert min(np.abs(q - t_q).max(), np.abs(q + t_q).max()) < 1e-4
 
 
 def test_fit_ellipse_refuses_too_few_or_collinear_points():

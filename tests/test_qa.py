@@ -303,12 +303,12 @@ def test_the_app_applies_a_suggested_fix_as_an_undoable_edit(tmp_path, left):
     st = AppState(data, edits=tmp_path / "d.edits", source="annotation")
     try:
         assert fix_frame(st, "00002") is None  # a clean frame: nothing to fix, nothing written
-        assert st.history("00002") == (0, 0)
+        assert st.edits.history("00002") == (0, 0)
         finding = fix_frame(st, "00001")
         assert finding.kind == "wrong_class" and finding.fix["to"] == "Small rect. left main"
         fixed = st.view("00001").annotation
         assert "Small rect. left main" in fixed and "Small rect. right main" not in fixed
-        assert st.edits.review("00001") == "corrected" and st.history("00001")[0] == 1
+        assert st.edits.review("00001") == "corrected" and st.edits.history("00001")[0] == 1
         assert st.undo("00001")
         assert "Small rect. right main" in st.view("00001").annotation
     finally:

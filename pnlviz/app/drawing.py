@@ -215,7 +215,7 @@ class Painter:
 
     def show_progress(self) -> None:
         st, p = self.tab.state, self.tab.panels
-        done, total = st.review_progress()
+        done, total = sum(st.edits.counts().values()), len(st.stems)
         update_changed(p.progress, value=100.0 * done / total)
         update_changed(p.progress_text, content=cards.progress_text(done, total, st.edits.counts()))
 

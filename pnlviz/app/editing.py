@@ -38,9 +38,9 @@ class EditTrail:
 
     def act(self, stem: str, action: Callable[[], object]) -> None:
         """An edit of ``stem``: remembered when it changed the frame's history."""
-        before = self.state.history(stem)[0]
+        before = self.state.edits.history(stem)[0]
         self.guard(action)
-        if self.state.history(stem)[0] != before:
+        if self.state.edits.history(stem)[0] != before:
             self.done.append(stem)
             self.undone.clear()
 
@@ -175,12 +175,14 @@ class Editor:
         self.tab.panels.gate_text.content = text
 
     def hide_flagged(self) -> None:
-        """H: hide the points the gate flagged on the frame reviewed last (one undo step)."""
+        """H: hide the points the gate flagged on the frame reviewed last from its labels (one
+        undo step); its review status and its reviewed camera stay
+        (:meth:`pnlviz.app.state.AppState.hide_flagged`)."""
         if self.flagged is None:
             self.tab.notify("nothing flagged", "the last frame reviewed has no flagged point", error=False)
             return
         stem, ids = self.flagged
-        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, ids, self.tab.settings))
+        self.trail.act(stem, lambda: self.tab.state.hide_flagged(stem, ids, self.tab.settings))
         self.say_flagged(stem)
 
     def hide_selected(self) -> None:

@@ -13,7 +13,6 @@ import time
 import numpy as np
 
 from pnlviz.app.cards import clip_text
-from pnlviz.app.shots import clip_shots
 from pnlviz.app.timeline import strip_image, worst_frames
 from pnlviz.app.workspace import update_changed
 
@@ -37,7 +36,7 @@ class ClipPlayer:
         """Dataset indices of the frames of the tab's clip, in frame order ([] outside a clip, and
         in a named clip whose frames turned out to be unrelated pictures)."""
         name = self.clip_of.get(self.tab.index)
-        if name is None or clip_shots(self.tab.state).unrelated(name):
+        if name is None or self.tab.state.shots.unrelated(name):
             return []
         return self.clips.get(name, [])
 
@@ -46,7 +45,7 @@ class ClipPlayer:
         if not self.shot_model or not self.members():
             return None
         st = self.tab.state
-        return clip_shots(st).strip(st.stems[self.tab.index], self.tab.settings)
+        return st.shots.strip(st.stems[self.tab.index], self.tab.settings)
 
     def errors(self) -> list[float]:
         """Each clip frame's error under its shot model when it has one (its observations' median
@@ -123,14 +122,14 @@ class ClipPlayer:
         """Review the frame's whole shot at once: every frame accepted with what its shot shows."""
         if not self.members():
             return
-        done = clip_shots(self.tab.state).accept(self.tab.stem, self.tab.settings)
+        done = self.tab.state.shots.accept(self.tab.stem, self.tab.settings)
         self.tab.notify("shot accepted", f"{len(done)} frames reviewed ({done[0]} .. {done[-1]})" if done
                         else "nothing to accept", error=False)
         self.tab.show()
 
     def toggle_cut(self) -> None:
         """A cut before this frame added by hand, or removed when there is one."""
-        cut = clip_shots(self.tab.state).toggle_cut(self.tab.stem, self.tab.settings) if self.members() else None
+        cut = self.tab.state.shots.toggle_cut(self.tab.stem, self.tab.settings) if self.members() else None
         if cut is None:
             self.tab.notify("no cut", "a cut goes before a frame of a clip other than its first", error=False)
         else:

@@ -47,9 +47,8 @@ class PnlvizApp:
         self._add_lights()
         state.subscribe(self._frame_changed)
         if state.clips:  # a video: an edit solves its shot again, and every tab on the shot redraws
-            from pnlviz.app.shots import clip_shots
 
-            clip_shots(state).listen(self._shot_changed)
+            state.shots.listen(self._shot_changed)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
         self._stop = threading.Event()

@@ -27,7 +27,6 @@ from pnlviz.app.pagesync import PageSync
 from pnlviz.app.panels import Panels
 from pnlviz.app.playback import ClipPlayer
 from pnlviz.app.scene import OVERVIEW, Scene3D, behind_camera
-from pnlviz.app.shots import clip_shots
 from pnlviz.app.state import SOURCES, FrameView, Settings
 from pnlviz.app.tabqueue import ActionGuard, TabQueue
 from pnlviz.app.viewcontrol import ViewControl
@@ -90,7 +89,7 @@ class Session:
         panel's toggle shows the frame's own camera), any other frame its own view."""
         view = self.state.view(self.stem, self.settings)
         if self.clip.shot_model and self.index in self.clip.clip_of:
-            view = clip_shots(self.state).shot_view(view, self.settings)
+            view = self.state.shots.shot_view(view, self.settings)
         return view
 
     def notify(self, title: str, body: str, error: bool = True) -> None:

@@ -17,10 +17,11 @@ import threading
 from dataclasses import dataclass, replace
 
 from pnlviz.calib.calibrate import CalibrationResult
+from pnlviz.app.host import FrameHost
 from pnlviz.calib.clip import ClipSolver
 from pnlviz.pipeline.clip import accept_shot, clip_changes, clip_solver, dataset_clips, set_cut, shot_snapshot
 
-__all__ = ["SHOT_SUBSET", "ClipShots", "ShotPlace", "clip_shots"]
+__all__ = ["SHOT_SUBSET", "ClipShots", "ShotPlace"]
 
 #: the ``subset`` of a result that is a clip frame's shot camera (the card says so)
 SHOT_SUBSET = "shot"
@@ -38,11 +39,13 @@ class ShotPlace:
 
 
 class ClipShots:
-    """The clips' shot models of one :class:`pnlviz.app.state.AppState`, shared by its tabs."""
+    """The clips' shot models of one session, shared by its tabs: made by
+    :class:`pnlviz.app.state.AppState` (:attr:`~pnlviz.app.state.AppState.shots`) with the frames
+    as its parts see them (``host``, :class:`pnlviz.app.host.FrameHost`)."""
 
-    def __init__(self, state):
-        self.state = state
-        self.clips = dataset_clips(state.stems)
+    def __init__(self, host: FrameHost):
+        self.host = host
+        self.clips = dataset_clips(host.stems)
         self._where = {s: (name, t) for name, members in self.clips.items() for t, s in enumerate(members)}
         self._solvers: dict[tuple, ClipSolver] = {}
         self._building: set[tuple] = set()
@@ -80,7 +83,7 @@ class ClipShots:
             return next((s.unrelated for (c, _), s in self._solvers.items() if c == clip and s.unrelated), None)
 
     def _ready(self, clip: str) -> bool:
-        return not any(self.state.needs_detection(s) for s in self.clips[clip])
+        return not any(self.host.needs_detection(s) for s in self.clips[clip])
 
     def build(self, clip: str, settings) -> ClipSolver:
         """The clip's model under ``settings`` (built now, in this thread, when there is none).
@@ -100,17 +103,17 @@ class ClipShots:
             if solver is not None:
                 return solver
             stems = self.clips[clip]
-            st = self.state
+            host = self.host
             cams = []
             for s in stems:
-                view = st.view(s, settings, keep=False)
+                view = host.view(s, settings, keep=False)
                 cams.append(view.result.camera if view.result is not None and view.result.ok else None)
-            solver = clip_solver(st.reader, clip, stems, settings, changes=clip_changes(st.reader, stems),
-                                 model=st.model, cameras=cams)
+            solver = clip_solver(host.reader, clip, stems, settings, changes=clip_changes(host.reader, stems),
+                                 model=host.model, cameras=cams)
             with self._lock:
                 self._solvers[key] = solver
                 for t, s in enumerate(stems):  # edits made while it was built
-                    edits = dict(st.edits.get(s).get("keypoints") or {})
+                    edits = dict(host.edits.get(s).get("keypoints") or {})
                     if edits != solver.edits.get(t, {}):
                         solver.set_edits(t, edits)
         return solver
@@ -122,7 +125,7 @@ class ClipShots:
             with self._lock:
                 self._building.discard(key)
         for s in self.clips[key[0]]:
-            self.state._changed(s)  # what the clip's frames show changed: the tabs showing one redraw
+            self.host.notify(s)  # what the clip's frames show changed: the tabs showing one redraw
 
     def changed(self, stem: str) -> None:
         """A frame changed (its edits, its review, its detections): its clip's models follow."""
@@ -130,20 +133,20 @@ class ClipShots:
         if where is None:
             return
         clip, t = where
-        record = self.state.edits.get(stem)
+        record = self.host.edits.get(stem)
         solved: set[str] = set()
         with self._lock:
             for key, solver in list(self._solvers.items()):
                 if key[0] != clip:
                     continue
-                if stem in self.state.detected and not solver.base[t]:  # detections came: built again
+                if stem in self.host.reader.detected and not solver.base[t]:  # detections came: built again
                     del self._solvers[key]
                     continue
                 edits = dict(record.get("keypoints") or {})
                 if edits != solver.edits.get(t, {}):
                     k = solver.set_edits(t, edits)
                     solved |= {self.clips[clip][u] for u in solver.shots[k]}
-                    if key[1] == self.state.default_settings:
+                    if key[1] == self.host.default_settings:
                         self._refresh_reviewed(clip, solver, k, key[1])
         if solved:
             for callback in list(self._shot_listeners):
@@ -153,10 +156,10 @@ class ClipShots:
         """The frames of shot ``k`` reviewed with their shot record what it shows now."""
         stems = self.clips[clip]
         for t in solver.shots[k]:
-            snap = (self.state.edits.get(stems[t]).get("snapshot") or {})
-            if snap.get("shot") is not None:
-                self.state.edits.update(stems[t], snapshot=shot_snapshot(self.state.reader, solver, clip, stems, t,
-                                                                          settings))
+            snap = (self.host.edits.get(stems[t]).get("snapshot") or {})
+            if snap.get("shot") is not None:  # the tabs are being told already (this runs as they are)
+                self.host.write(stems[t], snapshot=shot_snapshot(self.host.reader, solver, clip, stems, t, settings),
+                                notify=False)
 
     def snapshot(self, stem: str, settings) -> dict | None:
         """The review snapshot of a frame reviewed with its shot, as the shot shows it now (None
@@ -166,7 +169,7 @@ class ClipShots:
             return None
         self.changed(stem)
         solver = place.solver or self.build(place.clip, settings)
-        return shot_snapshot(self.state.reader, solver, place.clip, place.stems, place.t, settings)
+        return shot_snapshot(self.host.reader, solver, place.clip, place.stems, place.t, settings)
 
     def shot_view(self, view, settings):
         """``view`` (a frame's own :class:`pnlviz.pipeline.view.FrameView`) as its shot model
@@ -204,7 +207,7 @@ class ClipShots:
             return []
         solver = place.solver or self.build(place.clip, settings)
         k = solver.shot_of(place.t)
-        return accept_shot(self.state.reader, solver, place.clip, place.stems, k, settings)
+        return accept_shot(self.host.reader, solver, place.clip, place.stems, k, settings, write=self.host.write)
 
     def toggle_cut(self, stem: str, settings) -> bool | None:
         """Add a cut before the frame (remove it when there is one); True when there is one now,
@@ -215,22 +218,11 @@ class ClipShots:
         solver = place.solver or self.build(place.clip, settings)
         cut = place.t not in {r.start for r in solver.shots}
         with self._lock:
-            set_cut(self.state.reader, solver, place.clip, place.t, cut)
+            set_cut(self.host.reader, solver, place.clip, place.t, cut)
             for key, other in list(self._solvers.items()):  # the other settings' models follow the saved cuts
                 if key[0] == place.clip and other is not solver:
                     del self._solvers[key]
+        for callback in list(self._shot_listeners):  # the clip's frames show other shots: every tab redraws
+            callback(list(place.stems))
         return cut
 
-
-_CREATE = threading.Lock()
-
-
-def clip_shots(state) -> ClipShots:
-    """The clips' shot models of an :class:`pnlviz.app.state.AppState`, made on first use and
-    following every change of its frames from then on."""
-    with _CREATE:
-        shots = getattr(state, "_clip_shots", None)
-        if shots is None:
-            shots = state._clip_shots = ClipShots(state)
-            state.subscribe(shots.changed, first=True)  # the shot solved again before the tabs redraw
-    return shots

@@ -35,7 +35,9 @@ from pnlviz.data.edits import (
 )
 from pnlviz.field.model import load_field_model
 from pnlviz.app.activity import UserActivity
-from pnlviz.app.triage import Triage
+from pnlviz.app.host import FrameHost
+from pnlviz.app.shots import ClipShots
+from pnlviz.app.triage import DetectionCache, SummaryStore, Triage, cache_paths
 from pnlviz.pipeline import FrameReader, FrameView, Settings, frame_view
 
 #: views kept in memory (the frames on screen and around them; the whole dataset is in summaries)
@@ -111,14 +113,22 @@ class AppState:
         assert edits_store is not None  # FrameReader.open always opens the edits folder
         self.ds, self.edits, self.size = self.reader.ds, edits_store, size
         self.stems = self.reader.stems
-        #: every frame's calibration summary and the background pass (the detector's results
-        #: are kept on disk beside them)
-        self.triage = Triage(self, writable)
-        #: the tabs' actions mark it; the background pass waits for a pause in them
-        self.activity = UserActivity()
+        summaries, detections = cache_paths(edits_store.root, writable, edits_store.warnings)
+        if detector is not None:  # the detector's results, kept on disk beside the summaries
+            self.reader.detected = DetectionCache(detections, edits_store.warnings)
         self.predictions, self.detected = self.reader.predictions, self.reader.detected
         #: the settings a new tab starts with: "both" once there are detections, unless told otherwise
         self.default_settings = Settings(source=source or self.reader.default_settings().source)
+        #: the frames as the session's parts see them (they get this, never the session)
+        self.host = FrameHost(self.stems, self.reader, edits_store, self.model, self.default_settings, self.view,
+                              self.cached_view, self.needs_detection, self.write, self.notify)
+        #: the tabs' actions mark it; the background pass waits for a pause in them
+        self.activity = UserActivity()
+        #: every frame's calibration summary and the background pass
+        self.triage = Triage(self.host, SummaryStore(summaries, edits_store.warnings),
+                             wait_quiet=self.activity.wait_quiet, run_detector=self.run_detector)
+        self._shots: ClipShots | None = None
+        self._shots_lock = threading.Lock()
         #: the frame a new tab opens: the first with an image, the most telling one
         self.first_index = next((i for i, s in enumerate(self.stems) if self.ds.frame(s).has_image), 0)
         self._cache: dict[tuple, FrameView] = {}
@@ -204,7 +214,7 @@ class AppState:
                         (v.settings.source == "annotation" and v.origin == "annotation")]:
                 del self._cache[key]
             self._previews.pop(stem, None)
-        self._changed(stem)
+        self.notify(stem)
 
     def image(self, stem: str) -> np.ndarray | None:
         """The frame's pixels (BGR), decoded on demand; a few recent ones are kept."""
@@ -277,6 +287,16 @@ class AppState:
             self._previews[stem] = (key, view)
         return view
 
+    @property
+    def shots(self) -> ClipShots:
+        """The clips' shot models (:class:`pnlviz.app.shots.ClipShots`), made on first use; from
+        then on they follow every change of their frames before the tabs redraw."""
+        with self._shots_lock:
+            if self._shots is None:
+                self._shots = ClipShots(self.host)
+                self.subscribe(self._shots.changed, first=True)  # the shot solved again before the tabs redraw
+            return self._shots
+
     # ------------------------------------------------------------------ change notices
     def subscribe(self, callback: Callable[[str], None], first: bool = False) -> None:
         """Call ``callback(stem)`` after every change to a frame (edit, review, new detections);
@@ -286,24 +306,36 @@ class AppState:
         else:
             self._listeners.append(callback)
 
-    def _changed(self, stem: str, changed: bool = True) -> bool:
-        """Tell the listeners that ``stem`` changed (when it did); returns ``changed``."""
+    def notify(self, stem: str, changed: bool = True) -> bool:
+        """Tell the listeners (the shot models, then every tab) that ``stem`` shows something else
+        now (when ``changed``); returns ``changed``."""
         if changed:
             for callback in list(self._listeners):
                 callback(stem)
         return changed
 
     # ------------------------------------------------------------------ review and edits
-    def _edit(self, stem: str, change: Callable[[dict], None], *, corrected: bool = True,
-              settings: Settings | None = None, merge: object = None) -> None:
-        """One user action on one frame, one undo step, autosaved at once
-        (:meth:`pnlviz.data.edits.EditsStore.act`); a reviewed frame then records what it shows
-        under ``settings`` (:meth:`snapshot`)."""
+    def write(self, stem: str, change: Callable[[dict], None] | None = None, *, corrected: bool = True,
+              settings: Settings | None = None, merge: object = None,
+              snapshot: dict | Callable[[dict], dict | None] | None = None, notify: bool = True) -> bool:
+        """The one door for a change to a frame's edit record, whoever makes it (a drag, a review,
+        an accepted shot, a fix of the label-error finder): ``change(record)`` as one user action,
+        one undo step, validated and written at once (:meth:`pnlviz.data.edits.EditsStore.act`;
+        ``corrected``: the frame becomes "corrected"; ``merge``: see there); then the review
+        snapshot, ``snapshot`` when given (a shot's; a function of the record as changed, for one
+        made from it), else what the frame shows under ``settings`` when it is reviewed
+        (:meth:`snapshot`); then every tab is told (``notify`` False: a snapshot refreshed while they
+        are being told already). True when the record changed."""
         self.index_of(stem)
-        changed = self.edits.act(stem, change, corrected=corrected, merge=merge)
-        if changed:
+        with self.edits.lock(stem):  # the change and the snapshot that goes with it are one
+            changed = change is not None and self.edits.act(stem, change, corrected=corrected, merge=merge)
+            snap = snapshot(self.edits.get(stem)) if callable(snapshot) else snapshot
+            if snap is not None and snap != self.edits.get(stem).get("snapshot"):
+                self.edits.update(stem, snapshot=snap)
+                changed = True
+        if snapshot is None and changed:
             self.snapshot(stem, settings)
-        self._changed(stem, changed)
+        return self.notify(stem, changed) if notify else changed
 
     def snapshot(self, stem: str, settings: Settings | None = None) -> dict | None:
         """Record in a reviewed (accepted or corrected) frame's edit record what it shows under
@@ -318,9 +350,7 @@ class AppState:
                 return None
             snap = None
             if (record.get("snapshot") or {}).get("shot") is not None:  # reviewed with its shot: as it shows now
-                from pnlviz.app.shots import clip_shots
-
-                snap = clip_shots(self).snapshot(stem, settings or self.default_settings)
+                snap = self.shots.snapshot(stem, settings or self.default_settings)
             if snap is None:
                 view = self.view(stem, settings or self.default_settings)
                 snap = take_snapshot(view, record, self.applied_detection_settings(view.origin, view.settings),
@@ -337,7 +367,7 @@ class AppState:
                             f"got {str(status)[:20]!r}")
         if status == "corrected" and self.edits.review(stem) == "corrected":
             self.edits.keep_review(stem)  # set by the edits, now confirmed by hand: undo keeps it
-        self._edit(stem, lambda rec: rec.__setitem__("review", status), corrected=False, settings=settings)
+        self.write(stem, lambda rec: rec.__setitem__("review", status), corrected=False, settings=settings)
 
     def set_annotation(self, stem: str, annotation: dict[str, np.ndarray]) -> None:
         """Store an edited annotation (autosaved at once) and mark the frame corrected."""
@@ -346,7 +376,7 @@ class AppState:
             parse_annotation(text)
         except DataError as exc:
             raise EditError(exc.problem) from None
-        self._edit(stem, lambda rec: rec.__setitem__("annotation", text))
+        self.write(stem, lambda rec: rec.__setitem__("annotation", text))
 
     def move_keypoint(self, stem: str, kid: int, x: float, y: float, settings: Settings | None = None,
                       merge: object = None) -> None:
@@ -355,7 +385,7 @@ class AppState:
         kid = check_keypoint_id(kid)
         self.index_of(stem)
         xy = check_position(x, y, self.frame_size(stem), stem)
-        self._edit(stem, lambda rec: set_keypoint(rec, kid, xy), settings=settings, merge=merge)
+        self.write(stem, lambda rec: set_keypoint(rec, kid, xy), settings=settings, merge=merge)
 
     def hide_keypoint(self, stem: str, kid, settings: Settings | None = None) -> None:
         """Mark keypoint ``kid`` not visible: it leaves the calibration and the labels (``kid``: an
@@ -366,7 +396,31 @@ class AppState:
             for k in kids:
                 set_keypoint(rec, k, None)
 
-        self._edit(stem, change, settings=settings)
+        self.write(stem, change, settings=settings)
+
+    def hide_flagged(self, stem: str, kids, settings: Settings | None = None) -> bool:
+        """Hide keypoints ``kids`` (those the outlier gate flags on a reviewed frame) from its
+        labels, as reviewed: its review status and the camera its snapshot holds stay (the points
+        were never ground truth, and the camera the annotator confirmed does not move); one undo
+        step, which brings them back. A frame without a snapshot: as :meth:`hide_keypoint`."""
+        from pnlviz.data.snapshot import edits_digest
+
+        ids = sorted({check_keypoint_id(k) for k in kids})
+        snap = self.edits.get(stem).get("snapshot")
+        if snap is None:
+            self.hide_keypoint(stem, ids, settings)
+            return True
+
+        def change(rec: dict) -> None:
+            for k in ids:
+                set_keypoint(rec, k, None)
+
+        def without(record: dict) -> dict:
+            current = record.get("snapshot") or snap
+            labels = {k: v for k, v in (current.get("labels") or {}).items() if int(k) not in ids}
+            return {**current, "labels": labels, "edits": edits_digest(record)}
+
+        return self.write(stem, change, corrected=False, settings=settings, snapshot=without)
 
     def move_line_point(self, stem: str, name: str, index: int, x: float, y: float,
                         settings: Settings | None = None) -> None:
@@ -374,24 +428,18 @@ class AppState:
         self.index_of(stem)
         size = self.frame_size(stem)
         xy = check_position(x, y, size, stem)
-        self._edit(stem, lambda rec: move_line_point(rec, lambda: self.ds.annotation(stem), stem, name, index, xy,
+        self.write(stem, lambda rec: move_line_point(rec, lambda: self.ds.annotation(stem), stem, name, index, xy,
                                                      size), settings=settings)
 
     def undo(self, stem: str, settings: Settings | None = None, back: bool = True) -> bool:
         """Take back the frame's last change (whoever made it), or with ``back`` False do again
         the last one taken back; False if there is none."""
         self.index_of(stem)
-        changed = self.edits.step(stem, back=back)
+        changed = self.edits.step(stem, back=back)  # the record's own history: the door's other side
         if changed:
             self.snapshot(stem, settings)
-        return self._changed(stem, changed)
+        return self.notify(stem, changed)
 
     def redo(self, stem: str, settings: Settings | None = None) -> bool:
         return self.undo(stem, settings, back=False)
 
-    def history(self, stem: str) -> tuple[int, int]:
-        """(undo steps, redo steps) the frame has."""
-        return self.edits.history(stem)
-
-    def review_progress(self) -> tuple[int, int]:
-        return sum(self.edits.counts().values()), len(self.stems)

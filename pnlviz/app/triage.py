@@ -23,11 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from pnlviz.app.host import FrameHost
 from pnlviz.data import DataError
+from pnlviz.data.edits_layout import EditsLayout
 from pnlviz.data.predictions import parse_predictions, predictions_to_json
 from pnlviz.data.state_files import JsonLinesFile, state_folder
 
-CACHE_DIR = "cache"
 
 
 @dataclass(frozen=True)
@@ -233,8 +234,9 @@ def cache_paths(edits_root: Path, writable: bool, warnings: list[str]) -> tuple[
     """Where the summaries and the detections are kept (None, None for a read-only folder)."""
     if not writable:
         return None, None
-    folder = state_folder(Path(edits_root) / CACHE_DIR, warnings)
-    return folder / "summaries.jsonl", folder / "detections.jsonl"
+    layout = EditsLayout(edits_root)
+    state_folder(layout.cache, warnings)
+    return layout.summaries, layout.detections
 
 
 @dataclass
@@ -263,18 +265,18 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
     it has work for (a detection, a calibration) it waits for a pause in the tabs' actions (the
     state's :class:`pnlviz.app.activity.UserActivity`); a resumed pass reads its stored summaries
     without waiting."""
-    state = triage.state
-    progress = PassProgress(len(state.stems), started=time.perf_counter())
-    for i, stem in enumerate(state.stems):
-        detect, fresh = state.needs_detection(stem), triage.up_to_date(stem)
+    host = triage.host
+    progress = PassProgress(len(host.stems), started=time.perf_counter())
+    for i, stem in enumerate(host.stems):
+        detect, fresh = host.needs_detection(stem), triage.up_to_date(stem)
         if detect or not fresh:
-            state.activity.wait_quiet(stop)  # work to do: the tab the user is on goes first
-            detect = detect and state.needs_detection(stem)  # a tab may have had it detected meanwhile
+            triage.wait_quiet(stop)  # work to do: the tab the user is on goes first
+            detect = detect and host.needs_detection(stem)  # a tab may have had it detected meanwhile
         if stop.is_set():
             return progress
         if detect:
             try:
-                state.run_detector(stem)
+                triage.run_detector(stem)
                 progress.detected += 1
             except Exception:  # noqa: BLE001 - a frame the detector fails on is calibrated without
                 pass
@@ -283,7 +285,7 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
         summary = stored if stored is not None else triage.calibrate(stem)
         progress.done += 1
         progress.failed += not summary.ok
-        if i % every == 0 or i == len(state.stems) - 1:
+        if i % every == 0 or i == len(host.stems) - 1:
             say(progress.text())
         time.sleep(0)
     progress.finished = True
@@ -294,32 +296,32 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
 
 
 class Triage:
-    """The summaries of a state's frames (:class:`pnlviz.app.state.AppState`), kept up to date
-    as views are computed, and the background pass. ``writable``: keep them on disk (the edits
-    folder's ``cache/``); the detector's results go there too (:class:`DetectionCache`)."""
+    """The summaries of the session's frames (``host``, :class:`pnlviz.app.host.FrameHost`), kept
+    up to date as views are computed (``store``: where they are kept), and the background pass,
+    which waits for the tabs with ``wait_quiet(stop)`` and detects with ``run_detector(stem)``.
+    Made by :class:`pnlviz.app.state.AppState`, which gives it these and nothing else."""
 
-    def __init__(self, state, writable: bool):
-        self.state = state
-        warnings = state.edits.warnings
-        summaries, detections = cache_paths(state.edits.root, writable, warnings)
-        self.store = SummaryStore(summaries, warnings)
-        if state.detector is not None:
-            state.reader.detected = DetectionCache(detections, warnings)
+    def __init__(self, host: FrameHost, store: SummaryStore, *, wait_quiet: Callable[[threading.Event], object],
+                 run_detector: Callable[[str], None]):
+        self.host = host
+        self.store = store
+        self.wait_quiet = wait_quiet
+        self.run_detector = run_detector
         self.progress: PassProgress | None = None
 
     def has_detections(self, stem: str) -> bool:
-        reader = self.state.reader
+        reader = self.host.reader
         return reader.predictions is not None and (stem in reader.predictions or stem in reader.detected)
 
     def token(self, stem: str, settings=None) -> str:
-        return summary_token(settings or self.state.default_settings, self.state.edits.digest(stem),
+        return summary_token(settings or self.host.default_settings, self.host.edits.digest(stem),
                              self.has_detections(stem))
 
     def note(self, view, judge: bool = False) -> FrameSummary | None:
         """Keep the summary of a view just computed under the default settings; ``judge``: with
         the label-error finder's score (the background pass; not after each edit, which must stay
         quick)."""
-        if view.settings != self.state.default_settings:
+        if view.settings != self.host.default_settings:
             return None
         summary = summarize(view, self.token(view.stem), judge=judge)
         old = None if judge else self.store.get(view.stem)
@@ -332,9 +334,9 @@ class Triage:
         """The frame's summary under ``settings``: the stored one while the frame's edits are the
         same (detections that came since aside) for the default settings, else of its view if
         computed."""
-        settings = settings or self.state.default_settings
-        if settings != self.state.default_settings:  # other settings: the views computed under them
-            view = self.state.cached_view(stem, settings)
+        settings = settings or self.host.default_settings
+        if settings != self.host.default_settings:  # other settings: the views computed under them
+            view = self.host.cached_view(stem, settings)
             return summarize(view, "") if view is not None else None
         summary = self.store.get(stem)  # noted whenever a view under the default settings is computed
         return summary if summary is not None and same_inputs(summary.token, self.token(stem)) else None
@@ -342,7 +344,7 @@ class Triage:
     def summaries(self, settings=None) -> dict[str, FrameSummary]:
         """Every frame's summary that is known (see :meth:`lookup`), by stem."""
         out = {}
-        for stem in self.state.stems:
+        for stem in self.host.stems:
             s = self.lookup(stem, settings)
             if s is not None:
                 out[stem] = s
@@ -359,7 +361,7 @@ class Triage:
 
     def calibrate(self, stem: str) -> FrameSummary:
         """The frame calibrated under the default settings, its summary kept (the view is not)."""
-        view = self.state.view(stem, keep=False)  # noted there, judged (a view not kept: the pass's)
+        view = self.host.view(stem, keep=False)  # noted there, judged (a view not kept: the pass's)
         stored = self.store.get(stem)
         return stored if stored is not None and stored.token == self.token(stem) else \
             summarize(view, self.token(stem), judge=True)

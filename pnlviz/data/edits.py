@@ -13,6 +13,8 @@ Layout::
     <edits>/frames/<stem>.json.damaged  a file that failed validation, moved aside (kept, never deleted)
     <edits>/lock                        held by the one process writing here (its pid and URL inside)
 
+(every path of the folder is named in one place: :mod:`pnlviz.data.edits_layout`)
+
 Every record is validated when it is read and before it is written (the same rules), so what is
 on disk is always something the app can use. Writes are atomic (a crash leaves the old file or
 the new one) and every read-modify-write of a frame runs under that frame's lock, so concurrent
@@ -42,6 +44,7 @@ from typing import Any
 
 from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.data.atomic import atomic_write_text
+from pnlviz.data.edits_layout import EditsLayout
 from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
 from pnlviz.data.reading import read_file
@@ -246,7 +249,8 @@ class EditsStore:
 
     def __init__(self, root: Path, *, writable: bool = True):
         self.root = Path(root)
-        self.frames = self.root / "frames"
+        self.layout = EditsLayout(self.root)
+        self.frames = self.layout.frames
         self.writable = writable
         self.warnings: list[str] = []
         self._cache: dict[str, dict] = {}
@@ -267,7 +271,7 @@ class EditsStore:
     def _take_folder(self) -> None:
         try:
             self.frames.mkdir(parents=True, exist_ok=True)
-            fd = os.open(self.root / "lock", os.O_RDWR | os.O_CREAT, 0o644)
+            fd = os.open(self.layout.lock, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
             raise EditsFolderError(f"{self.root}: the edits folder cannot be written ({exc.strerror or exc}); "
                                    f"give --edits a folder you can write") from None
@@ -399,7 +403,7 @@ class EditsStore:
             rec["updated"] = time.time()
             if self.identity is not None:
                 rec["frame"] = self.identity(stem)
-            path = self.frames / f"{stem}.json"  # a split's frame: frames/<split>/<stem>.json
+            path = self.layout.record(stem)  # a split's frame: frames/<split>/<stem>.json
             rec = validate_record(rec, str(path), self._checked_steps(stem))
             path.parent.mkdir(exist_ok=True)
             atomic_write_text(path, _record_text(rec))

@@ -28,13 +28,14 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from pnlviz.data.edits_layout import EditsLayout
 from pnlviz.data.errors import DataError
 
 __all__ = ["IDENTITY_FILE", "check_identity", "frame_identity", "identity_problem", "require_edits_folder",
            "write_dataset_file"]
 
 #: the file naming the dataset an edits folder was made for
-IDENTITY_FILE = "dataset.json"
+IDENTITY_FILE = EditsLayout(Path(".")).identity.name  #: the dataset file's name
 #: bytes of an image file read into its frame's digest (its header and the first of its data)
 IMAGE_HEAD = 16384
 #: records checked when a folder is opened (an export checks every one it writes)
@@ -155,7 +156,7 @@ def check_identity(store, ds, *, force: bool = False, stems: Iterable[str] | Non
 
 def _made_for(root: Path) -> str:
     try:
-        return f" (made for {json.loads((Path(root) / IDENTITY_FILE).read_text())['dataset']})"
+        return f" (made for {json.loads(EditsLayout(root).identity.read_text())['dataset']})"
     except (OSError, ValueError, KeyError, TypeError):
         return ""
 
@@ -164,7 +165,7 @@ def write_dataset_file(root: Path, ds) -> None:
     """``<edits>/dataset.json``: the dataset the folder is made for (written once, when missing)."""
     from pnlviz.data.atomic import atomic_write_text
 
-    path = Path(root) / IDENTITY_FILE
+    path = EditsLayout(root).identity
     if path.exists():
         return
     with contextlib.suppress(OSError):
@@ -182,6 +183,6 @@ def require_edits_folder(path, what: str = "--edits") -> Path:
         raise DataError(source, "does not exist (an edits folder is made by pnlviz serve)")
     if not p.is_dir():
         raise DataError(source, "is not a folder (an edits folder holds frames/ with one record per frame)")
-    if not any((p / name).exists() for name in ("frames", "lock", IDENTITY_FILE)):
+    if not EditsLayout(p).is_edits_folder():
         raise DataError(source, "is not an edits folder (it holds no frames/, lock or dataset.json)")
     return p

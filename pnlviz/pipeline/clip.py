@@ -13,7 +13,7 @@ The cuts a hand added or removed are kept in the edits folder, beside the frames
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -35,7 +35,6 @@ from pnlviz.pipeline.reader import FrameReader, Settings
 
 __all__ = ["accept_shot", "clip_changes", "clip_solver", "dataset_clips", "read_cuts", "set_cut", "shot_snapshot"]
 
-CLIPS_DIR = "clips"
 
 
 def dataset_clips(stems: Sequence[str]) -> dict[str, list[str]]:
@@ -45,8 +44,7 @@ def dataset_clips(stems: Sequence[str]) -> dict[str, list[str]]:
 
 
 def _cuts_path(reader: FrameReader, clip: str) -> Path:
-    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in clip)[:120] or "_"
-    return reader.edits_folder.root / CLIPS_DIR / f"{safe}.json"
+    return reader.edits_folder.layout.cuts(clip)
 
 
 def _cuts_of(obj) -> CutEdits:
@@ -147,19 +145,30 @@ def shot_snapshot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Seq
             "shot": {"clip": clip, "shot": k, "first": stems[shot.start], "last": stems[shot.stop - 1]}}
 
 
+def _accept(record: dict) -> None:
+    """The review of a frame of an accepted shot: accepted, unless corrected by hand."""
+    if record.get("review") != "corrected":
+        record["review"] = "accepted"
+
+
 def accept_shot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Sequence[str], k: int,
-                settings: Settings | None = None) -> list[str]:
+                settings: Settings | None = None, write: Callable[..., object] | None = None) -> list[str]:
     """Review shot ``k`` of the clip at once: every frame of it accepted (a frame corrected by hand
     stays "corrected"), with the snapshot of what the shot model shows (one undo step per frame).
-    Returns the stems reviewed."""
+    ``write(stem, change, corrected=False, snapshot=...)``: the door the app's edits go through
+    (:meth:`pnlviz.app.state.AppState.write`, which tells every tab); by default the edits folder
+    is written directly. Returns the stems reviewed."""
+    folder = reader.edits_folder
+
+    def direct(stem: str, change: Callable[[dict], None], *, corrected: bool, snapshot: dict) -> None:
+        folder.act(stem, change, corrected=corrected)
+        folder.update(stem, snapshot=snapshot)
+
+    write = write or direct
     done = []
     for t in solver.shots[k]:
         stem = stems[t]
-        with reader.edits_folder.lock(stem):
-            snap = shot_snapshot(reader, solver, clip, stems, t, settings)
-            # the review is the undo step; the snapshot goes with it
-            if reader.edits_folder.review(stem) != "corrected":
-                reader.edits_folder.act(stem, lambda rec: rec.__setitem__("review", "accepted"), corrected=False)
-            reader.edits_folder.update(stem, snapshot=snap)
+        with folder.lock(stem):  # the snapshot and the review it goes with are one
+            write(stem, _accept, corrected=False, snapshot=shot_snapshot(reader, solver, clip, stems, t, settings))
         done.append(stem)
     return done

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
+from typing import Any, Protocol
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,6 +64,19 @@ class FrameRead:
     error: str | None = None
 
 
+class DetectionStore(Protocol):
+    """Detections by stem as the reader looks them up: a dict, or the app's store on disk
+    (:class:`pnlviz.app.triage.DetectionCache`)."""
+
+    def __contains__(self, stem: object, /) -> bool: ...
+
+    def get(self, stem: str, default: Any = None, /) -> Any: ...
+
+    def __setitem__(self, stem: str, pred: Any, /) -> None: ...
+
+    def __len__(self) -> int: ...
+
+
 class FrameReader:
     """Where a dataset's frames come from, read one frame at a time (:meth:`read`).
 
@@ -81,7 +95,7 @@ class FrameReader:
         self.data = Path(data if data is not None else getattr(ds, "path", "."))
         self.predictions = predictions
         #: detections made since the predictions were read (the app's detector), looked up after them
-        self.detected: dict[str, object] = {}
+        self.detected: DetectionStore = {}
         self.edits = edits
         w, h = size
         self.size = (w, h)

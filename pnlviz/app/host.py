@@ -1,0 +1,50 @@
+"""What the session's parts are given by the session (no GUI here): :class:`FrameHost`.
+
+:class:`pnlviz.app.state.AppState` creates its parts (the frames' summaries and background pass,
+:class:`pnlviz.app.triage.Triage`; the clips' shot models, :class:`pnlviz.app.shots.ClipShots`) and
+hands each the few things it uses, as one typed value: the frames, their reader and views, the
+one door through which a frame's edit record changes, and the notice that a frame changed. A
+part never holds the session itself and never reaches into it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pnlviz.data.edits import EditsStore
+    from pnlviz.field.model import FieldModel
+    from pnlviz.pipeline import FrameReader, FrameView, Settings
+
+__all__ = ["FrameHost", "Write"]
+
+#: the one door for a change to a frame's edit record: ``write(stem, change, *, corrected=True,
+#: settings=None, merge=None, snapshot=None) -> bool`` (:meth:`pnlviz.app.state.AppState.write`)
+Write = Callable[..., bool]
+
+
+@dataclass(frozen=True)
+class FrameHost:
+    """The session's frames as its parts see them.
+
+    ``stems``: the frames in dataset order; ``reader``: where their inputs are read
+    (:class:`pnlviz.pipeline.FrameReader`) and its edits folder ``edits``; ``model``: the pitch;
+    ``default_settings``: the settings frames are seen with unless a tab says otherwise;
+    ``view(stem, settings, keep=True)``: a frame's view, cached; ``cached_view(stem, settings)``:
+    the view if it is computed already (None otherwise); ``needs_detection(stem)``: whether the
+    frame still waits for the detector; ``write``: the one door for edits (:data:`Write`);
+    ``notify(stem)``: tell every tab that the frame shows something else now.
+    """
+
+    stems: Sequence[str]
+    reader: FrameReader
+    edits: EditsStore
+    model: FieldModel
+    default_settings: Settings
+    view: Callable[..., FrameView]
+    cached_view: Callable[..., FrameView | None]
+    needs_detection: Callable[[str], bool]
+    write: Write
+    notify: Callable[[str], Any]
