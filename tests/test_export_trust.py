@@ -345,3 +345,69 @@ def test_the_summary_file_survives_a_torn_line_and_is_compacted(tmp_path):
     assert len(path.read_text().splitlines()) == 2  # compacted
     again.put(FrameSummary("c", True, None, 3.0, 1.0, None, "t"))
     assert SummaryStore(path).get("c").worst == 3.0
+
+
+def test_a_hand_slip_is_kept_but_said_at_once_listed_when_accepted_and_in_the_manifest(images_only, tmp_path, serve):
+    """A keypoint dragged 44 px off where the frame's other points put it: the hand rules (it stays
+    there, exported at the hand's position), but the panel says "possible slip" on release,
+    accepting the frame lists it, and the export carries it (manifest "slips", "slip": true). The
+    same point put back where it belongs is no slip."""
+    from pnlviz.app.modes import PointKind, Selection
+    from pnlviz.pipeline.export import export_frame
+
+    data, detector = images_only
+    app = serve(data, edits=tmp_path / "edits", detector=detector)
+    st = app.state
+    st.run_detector("00000")
+    tab = app.session()
+    tab.goto(st.find("00000"))
+    said = []
+    tab.notify = lambda title, body, error=True: said.append(title)
+    view = st.view("00000", tab.settings)
+    obs = view.observations
+    kid = int(obs.kp_ids[len(obs.kp_ids) // 2])
+    true_xy = obs.kp_xy[len(obs.kp_ids) // 2]
+    tab.editor.release("00000", Selection(PointKind.KEYPOINTS, kid), true_xy + [44.0, 0.0], snap_to_pitch=False)
+    assert said == [f"possible slip: point {kid}"]
+    assert f"point {kid} is 4" in tab.panels.gate_text.content and "a slip?" in tab.panels.gate_text.content
+    assert st.edits.get("00000")["keypoints"][str(kid)] == pytest.approx(list(true_xy + [44.0, 0.0]))  # kept
+    tab.editor.review("accepted", advance=False)
+    assert said[-1] == "1 possible slip on 00000"
+    slips = st.edits.get("00000")["snapshot"]["slips"]
+    assert list(slips) == [str(kid)] and 40 < slips[str(kid)] < 48
+    exported = export_frame(st.reader, "00000")
+    label = json.loads(exported.files["keypoints/00000.json"])["keypoints"][str(kid)]
+    assert label["slip"] is True and label["provenance"] == "hand" and not label["flagged"]
+    assert (label["x"], label["y"]) == pytest.approx(tuple(true_xy + [44.0, 0.0]))
+    assert exported.entry["slips"] == slips
+    said.clear()
+    tab.editor.release("00000", Selection(PointKind.KEYPOINTS, kid), true_xy, snap_to_pitch=False)
+    assert said == [] and "slip" not in st.edits.get("00000")["snapshot"]
+
+
+def test_accepting_a_frame_the_label_error_finder_flags_asks_once(tmp_path, serve):
+    """A frame whose right touchline is annotated as the left one: G does not accept it but says
+    what the label-error finder found (and that F fixes it); G again accepts it as it is. A frame
+    the finder does not flag is accepted at the first G."""
+    data = tmp_path / "frames"
+    data.mkdir()
+    for stem in ("sn22_00004", "sn22_00097"):
+        shutil.copy(EXAMPLES_DIR / "sample" / f"{stem}.json", data / f"{stem}.json")
+    ann = json.loads((data / "sn22_00004.json").read_text())
+    ann["Side line left"] = ann.pop("Side line right")
+    (data / "sn22_00004.json").write_text(json.dumps(ann))
+    app = serve(data, edits=tmp_path / "edits")
+    st = app.state
+    tab = app.session()
+    said = []
+    tab.notify = lambda title, body, error=True: said.append((title, body))
+    tab.goto(st.find("sn22_00004"))
+    tab.editor.review("accepted", advance=False)
+    assert st.edits.review("sn22_00004") is None
+    assert said[-1][0] == "sn22_00004: accept anyway?" and "Side line left" in said[-1][1] and "F applies" in said[-1][1]
+    assert "**G** again accepts it" in tab.panels.gate_text.content
+    tab.editor.review("accepted", advance=False)
+    assert st.edits.review("sn22_00004") == "accepted"
+    tab.goto(st.find("sn22_00097"))
+    tab.editor.review("accepted", advance=False)
+    assert st.edits.review("sn22_00097") == "accepted"

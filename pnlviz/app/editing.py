@@ -94,6 +94,8 @@ class Editor:
         self.grabs = self.releases = 0  # drags started and released in this tab
         self.live_preview = True  # recalibrate while a point is dragged (off: only on release)
         self.flagged: tuple[str, list[int]] | None = None  # the last reviewed frame's flagged points, for H
+        #: the frame (and its edits) an accept was asked about once: a second G accepts it as it is
+        self.asked: tuple[str, str] | None = None
         self.last_recalibration_ms = 0.0
 
     # ------------------------------------------------------------------ choices
@@ -151,10 +153,35 @@ class Editor:
             tab.notify("refused", f"review status {str(status)[:20]!r} is not one of the options")
             return
         stem = tab.stem
+        if status == "accepted" and self._ask_first(stem):
+            return
         self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status, tab.settings))
         self.say_flagged(stem)
         if advance and status != "clear" and tab.state.edits.review(stem) == status:
             tab.advance_from(stem)
+
+    def _ask_first(self, stem: str) -> bool:
+        """Accepting a frame the label-error finder flags (a class on the wrong side, a mirrored
+        frame: :func:`pnlviz.app.triage.judge_view`) asks once: True (not accepted) the first time,
+        with the finding said; the same frame with the same edits accepted at the second G."""
+        from pnlviz.app.triage import judge_view
+
+        state = self.tab.state
+        qa = judge_view(state.view(stem, self.tab.settings))
+        if qa is None or qa.score < 1 or not qa.findings:
+            return False
+        key = (stem, state.edits.digest(stem))
+        if self.asked == key:
+            self.asked = None
+            return False
+        self.asked = key
+        worst = qa.findings[0]
+        fix = " **F** applies its suggested fix;" if worst.fix is not None else ""
+        text = (f"**{stem} not accepted yet: the label-error finder flags it** ({worst.message}).{fix} "
+                f"**G** again accepts it as it is.")
+        self.tab.notify(f"{stem}: accept anyway?", text.replace("**", ""), error=False)
+        self.tab.panels.gate_text.content = text
+        return True
 
     def say_flagged(self, stem: str) -> None:
         """After a review: the points of the frame the export's outlier gate flags, said in the
@@ -162,7 +189,10 @@ class Editor:
         from pnlviz.pipeline.snapshot import REVIEWED, snapshot_flags
 
         record = self.tab.state.edits.get(stem)
-        flagged, limit = snapshot_flags(record) if record.get("review") in REVIEWED else ({}, 0.0)
+        reviewed = record.get("review") in REVIEWED
+        flagged, limit = snapshot_flags(record) if reviewed else ({}, 0.0)
+        slips = {int(k): float("inf") if v is None else float(v)
+                 for k, v in ((record.get("snapshot") or {}).get("slips") or {}).items()} if reviewed else {}
         self.flagged = (stem, sorted(flagged)) if flagged else None
         text = ""
         if flagged:
@@ -172,6 +202,37 @@ class Editor:
                     f"{limit:.1f} px from the camera; exported flagged, not as ground truth): {ids}. "
                     f"**H** hides them.")
             self.tab.notify(f"{len(flagged)} flagged on {stem}", text.replace("**", ""), error=False)
+        if slips:
+            ids = ", ".join(f"{k} ({'off camera' if r == float('inf') else f'{r:.0f} px'})"
+                            for k, r in sorted(slips.items()))
+            more = (f"**{stem}: {len(slips)} point{'s' if len(slips) > 1 else ''} placed by hand far from where the "
+                    f"rest of the frame puts {'them' if len(slips) > 1 else 'it'}** (possible slips, kept as placed "
+                    f"and listed in the export's manifest): {ids}.")
+            self.tab.notify(f"{len(slips)} possible slip{'s' if len(slips) > 1 else ''} on {stem}",
+                            more.replace("**", ""), error=False)
+            text = f"{text} {more}".strip()
+        self.tab.panels.gate_text.content = text
+
+    def say_slip(self, stem: str, kid: int) -> None:
+        """After a keypoint was placed or moved by hand: when the rest of the frame puts it farther
+        than the outlier gate from where it was put (:func:`pnlviz.pipeline.snapshot.hand_slips`),
+        say so at once; the point stays where the hand put it."""
+        from pnlviz.pipeline.snapshot import hand_slips
+
+        state, settings = self.tab.state, self.tab.settings
+        try:
+            view = state.view(stem, settings)
+            found = hand_slips(view, state.reader.frame_settings(view.settings), state.model, kids=[kid])
+        except EditError:
+            return
+        if kid not in found:
+            return
+        r = found[kid]
+        far = "off the camera" if r == float("inf") else f"{r:.0f} px"
+        text = (f"**point {kid} is {far} from where the rest of {stem} puts it: a slip?** It stays where "
+                f"you put it (a hand's point is never moved) and is listed as a possible slip when the frame "
+                f"is reviewed and in the export's manifest; Ctrl+Z takes it back.")
+        self.tab.notify(f"possible slip: point {kid}", text.replace("**", ""), error=False)
         self.tab.panels.gate_text.content = text
 
     def hide_flagged(self) -> None:
@@ -212,6 +273,7 @@ class Editor:
         kid = self.place_id
         uv = self._snapped(uv)
         self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv, settings=self.tab.settings))
+        self.say_slip(stem, kid)
         overlay = self.tab.painter.overlay
         if stem == self.tab.stem and overlay is not None and kid in overlay.keypoints.keys:
             self.select(Selection(PointKind.KEYPOINTS, kid))
@@ -244,6 +306,8 @@ class Editor:
             self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
 
         self.trail.act(stem, edit)
+        if point.kind is not PointKind.LINE_POINTS:
+            self.say_slip(stem, point.kid)
         if point.kind is PointKind.GHOSTS and stem == self.tab.stem:
             self.select(Selection(PointKind.KEYPOINTS, point.kid))
 

@@ -342,7 +342,7 @@ class AppState:
         ``settings`` (default: :attr:`default_settings`): its labels with their provenance, the
         detections and settings used, the camera (:func:`pnlviz.pipeline.snapshot.take_snapshot`),
         which is what an export of the frame writes. Returns the snapshot (None: not reviewed)."""
-        from pnlviz.pipeline.snapshot import REVIEWED, take_snapshot
+        from pnlviz.pipeline.snapshot import REVIEWED, hand_slips, take_snapshot
 
         with self.edits.lock(stem):  # the view and the record it is taken with are one
             record = self.edits.get(stem)
@@ -355,6 +355,9 @@ class AppState:
                 view = self.view(stem, settings or self.default_settings)
                 snap = take_snapshot(view, record, self.applied_detection_settings(view.origin, view.settings),
                                      self.model)
+                slips = hand_slips(view, self.reader.frame_settings(view.settings), self.model)
+                if slips:  # hand points the rest of the frame disagrees with: said, and in the manifest
+                    snap["slips"] = {str(k): (v if v != float("inf") else None) for k, v in sorted(slips.items())}
             if snap != record.get("snapshot"):
                 self.edits.update(stem, snapshot=snap)
         return snap

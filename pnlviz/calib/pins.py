@@ -159,3 +159,28 @@ def flagged_pins(obs: Observations, residuals: dict[int, float], limit_px: float
     """The pinned keypoints farther than ``limit_px`` from the camera: id -> residual (px)."""
     return {int(i): float(residuals.get(int(i), np.inf)) for i in obs.kp_ids[obs.pins]
             if not residuals.get(int(i), np.inf) <= limit_px}
+
+
+def slips(obs: Observations, fit, limit_px: float, kids=None) -> dict[int, float]:
+    """The hand-placed keypoints (``kids``: these only; default all the pinned ones) farther than
+    ``limit_px`` from the camera the *other* observations give: id -> that distance (px). A slip of
+    the hand pulls a camera fitted with it towards itself (a pin weighs more than a detection),
+    so its residual under that camera hides it; without it, the rest of the frame says where the
+    point belongs. ``fit(observations) -> Camera | None``: the frame's calibration. A point whose
+    frame gives no camera without it is not judged."""
+    out: dict[int, float] = {}
+    wanted = None if kids is None else {int(k) for k in kids}
+    for i in np.flatnonzero(obs.pins):
+        kid = int(obs.kp_ids[i])
+        if wanted is not None and kid not in wanted:
+            continue
+        keep = np.ones(obs.n_keypoints, bool)
+        keep[i] = False
+        cam = fit(obs.subset(keep))
+        if cam is None:
+            continue
+        uv = cam.project(obs.kp_xyz[i])
+        d = float(np.hypot(*(uv - obs.kp_xy[i])))
+        if not d <= limit_px:  # NaN (behind the camera) is a slip too
+            out[kid] = round(d, 2) if np.isfinite(d) else float("inf")
+    return out

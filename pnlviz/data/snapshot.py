@@ -12,7 +12,12 @@ Layout::
                          "residual": px | null}},        # pixels of the frame
      "camera": {SoccerNet camera at 960x540} | null,
      "failure": "why no camera" | null,
-     "shot": {"clip": name, "shot": index, "first": stem, "last": stem} | absent}
+     "shot": {"clip": name, "shot": index, "first": stem, "last": stem} | absent,
+     "slips": {"<id>": px | null} | absent}             # hand points the rest of the frame disagrees with
+
+"slips": the keypoints a hand placed farther than the outlier gate from the camera the frame's
+other observations give (:func:`pnlviz.calib.pins.slips`): kept as placed (the hand rules), said
+when the frame was reviewed and carried into the export's manifest.
 
 "shot" is there when the frame was reviewed with its shot (a clip's shot model,
 :mod:`pnlviz.pipeline.clip`): the camera is the shot's, and a label of provenance "shot" is a
@@ -103,4 +108,15 @@ def validate_snapshot(obj: Any, source: str) -> dict:
             raise DataError(source, f'snapshot: "shot" must be an object with the shot\'s index, got {describe(shot)}')
         out["shot"] = {"clip": str(shot.get("clip", ""))[:200], "shot": int(index),
                        "first": str(shot.get("first", ""))[:200], "last": str(shot.get("last", ""))[:200]}
+    slips = obj.get("slips")
+    if slips is not None:
+        if not isinstance(slips, Mapping) or len(slips) > 73:
+            raise DataError(source, f'snapshot: "slips" must be an object {{id: px}}, got {describe(slips)}')
+        kept: dict[str, float | None] = {}
+        for k, v in slips.items():
+            px = None if v is None else as_number(v)  # null: the rest of the frame puts it off the camera
+            if not str(k).isdigit() or not 1 <= int(k) <= 73 or (v is not None and (px is None or not px >= 0)):
+                raise DataError(source, f'snapshot: "slips" must map keypoint ids to pixels, got {describe({k: v})}')
+            kept[str(int(k))] = None if px is None else float(px)
+        out["slips"] = kept
     return out

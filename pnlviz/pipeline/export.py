@@ -6,12 +6,14 @@ Layout (a folder or a zip):
 
 * ``annotations/<stem>.json``: SoccerNet line annotation, with the corrected line points;
 * ``keypoints/<stem>.json``: keypoint labels, ``{"image_size": [W, H], "reviewed": bool, "review":
-  status, "keypoints": {"id": {"x", "y", "visible", "set", "provenance", "residual", "flagged"}}}``
+  status, "keypoints": {"id": {"x", "y", "visible", "set", "provenance", "residual", "flagged", "slip"}}}``
   in pixels, corrected keypoints included (hidden ones left out); ``provenance``: annotation,
   detection, hand, or shot (a frame reviewed with its clip's shot model, :mod:`pnlviz.pipeline.clip`:
   a point placed by hand on another frame of the shot, carried here through the shot's cameras);
   ``residual``: px to the frame's exported camera; ``flagged``: beyond the outlier gate
-  (:mod:`pnlviz.pipeline.snapshot`), not ground truth;
+  (:mod:`pnlviz.pipeline.snapshot`), not ground truth; ``slip``: placed by hand farther than the
+  gate from where the rest of the frame puts it (kept as placed; the manifest's ``"slips"`` gives
+  the distances, null where the rest puts it off the camera);
 * ``cameras/camera_<stem>.json``: the calibrated camera at 960x540 (SoccerNet format);
 * ``homographies.json``: ``{stem: 3x3}``, each calibrated frame's homography from the ground plane
   (X, Y, 1) in metres (SoccerNet world frame) to the frame's own pixels, without lens distortion
@@ -121,6 +123,9 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
     shot = (record.get("snapshot") or {}).get("shot")
     if shot is not None and fl.basis == "snapshot":
         entry["shot"] = shot  # reviewed with its shot: the camera is the shot model's
+    slips = ((record.get("snapshot") or {}).get("slips") or {}) if fl.basis == "snapshot" else {}
+    if slips:  # hand points the rest of the frame disagreed with when it was reviewed: kept, listed
+        entry["slips"] = dict(slips)
     try:
         ann = reader.annotation(stem, record)
     except DataError as exc:
@@ -140,7 +145,8 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
     kps = {}
     for kid, label in fl.labels.items():
         kps[str(kid)] = {"x": label.x, "y": label.y, "visible": inside(label, fl.size), "set": label.set,
-                         "provenance": label.provenance, "residual": label.residual, "flagged": kid in flagged}
+                         "provenance": label.provenance, "residual": label.residual, "flagged": kid in flagged,
+                         "slip": str(kid) in slips}
     reviewed = fl.basis != "unreviewed"
     homography = frame_homography(fl.camera, fl.size)
     files[f"keypoints/{stem}.json"] = dumps({"image_size": [W, H], "reviewed": reviewed, "review": record.get("review"),

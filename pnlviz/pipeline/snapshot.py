@@ -151,6 +151,29 @@ def take_snapshot(view, record: Mapping, detection_settings: Mapping, model: Fie
                                                          "nothing to calibrate from")}
 
 
+def hand_slips(view, frame_settings, model: FieldModel | None = None, gate_px: float = GATE_PX,
+               kids=None) -> dict[int, float]:
+    """The hand-placed keypoints of ``view`` (``kids``: these only) farther than the outlier gate
+    (``gate_px`` at 960x540, scaled to the frame) from the camera the frame's other observations
+    give, calibrated as the view was (``frame_settings``, :class:`pnlviz.calib.frame.FrameSettings`):
+    id -> px (:func:`pnlviz.calib.pins.slips`). One calibration per hand point judged."""
+    from pnlviz.calib.calibrate import calibrate
+    from pnlviz.calib.frame import calib_params
+    from pnlviz.calib.pins import slips
+
+    obs = view.observations
+    if obs is None or not obs.pins.any():
+        return {}
+    model = model or load_field_model()
+    params = calib_params(frame_settings, view.origin)
+
+    def fit(o):
+        result = calibrate(o, params, model)
+        return result.camera if result.ok else None
+
+    return slips(obs, fit, gate_threshold(tuple(view.size), gate_px), kids)
+
+
 def _from_snapshot(snap: Mapping) -> FrameLabels:
     labels = {int(k): Label(v["x"], v["y"], v["set"], v["provenance"], v["residual"])
               for k, v in snap["labels"].items()}
@@ -203,4 +226,4 @@ def view_labels(view, record: Mapping, model: FieldModel | None = None) -> Frame
 
 
 __all__ = ["GATE_PX", "REVIEWED", "FrameLabels", "Label", "gate", "gate_threshold", "labels_of", "provenance",
-           "residuals", "reviewed_labels", "snapshot_flags", "take_snapshot", "view_labels"]
+           "residuals", "reviewed_labels", "snapshot_flags", "take_snapshot", "view_labels", "hand_slips"]
