@@ -272,11 +272,11 @@ def test_the_app_filters_and_sorts_frames_by_the_same_scores(left):
     for stem, a in (("clean", ann), ("bad", bad)):
         fc = calibrate_frame(FrameInputs((960, 540), a))  # the app's view of the frame: its calibration
         view = SimpleNamespace(annotation=a, origin="annotation", result=fc.result, observations=fc.observations,
-                               size=(960, 540))
+                               size=(960, 540), detections=None)
         scores[stem] = suspect_score(view)
     assert scores["clean"][0] < 1 and scores["clean"][1] is None
     assert scores["bad"][0] == pytest.approx(check_frame(bad).score) and "Small rect. right main" in scores["bad"][1]
-    assert suspect_score(SimpleNamespace(annotation=ann, origin="detections", result=None)) == (None, None)
+    assert suspect_score(SimpleNamespace(annotation=None, origin="detections", result=None)) == (None, None)
 
     def summary(stem, suspect, note=None):
         return FrameSummary(stem, True, None, 1.0, 1.0, 0.9, "", suspect, note)
@@ -325,6 +325,50 @@ def test_a_frame_the_app_could_not_calibrate_is_a_suspect_without_a_camera():
     fc = calibrate_frame(FrameInputs((960, 540), ann))
     assert not fc.ok and fc.result is not None
     view = SimpleNamespace(annotation=ann, origin="annotation", result=fc.result, observations=fc.observations,
-                           size=(960, 540))
+                           size=(960, 540), detections=None)
     score, note = suspect_score(view)
     assert score == 1.0 and note.startswith("the annotation gives no camera")
+
+
+def test_the_apps_suspects_are_pnlviz_qas_findings_on_the_same_folder(tmp_path):
+    """One judge: the background pass's suspect score and worst finding of every frame are what
+    `pnlviz qa` writes for the same folder, frames that no longer calibrate included (a class
+    renamed across the pitch breaks frame 00003's calibration: qa finds the class by leaving each
+    out, and so does the app, instead of "no camera")."""
+    import json
+    import threading
+
+    from pnlviz.app.state import AppState
+    from pnlviz.calib.frame import FrameInputs, calibrate_frame
+    from pnlviz.commands import main
+
+    _, clean = synthetic(7)
+    wrong = dict(clean)
+    wrong["Small rect. right main"] = wrong.pop("Small rect. left main")
+    _, other = synthetic(15)
+    broken = dict(other)
+    broken["Big rect. left main"] = broken.pop("Big rect. right main")
+    _, sparse = synthetic(2)
+    sparse = dict(sparse)
+    sparse["Side line bottom"] = sparse.pop("Side line top")
+    frames = {"00001": clean, "00002": wrong, "00003": broken, "00004": sparse}
+    assert not calibrate_frame(FrameInputs((960, 540), broken)).ok  # the frame no longer calibrates
+    data = _dataset(tmp_path / "d", frames)
+    out = tmp_path / "qa.jsonl"
+    assert main(["qa", "--data", str(data), "--out", str(out), "--no-progress"]) == 0
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    qa = {line["stem"]: line for line in lines if "stem" in line}
+    st = AppState(data, edits=tmp_path / "d.edits", source="annotation")
+    try:
+        st.triage.run(threading.Event(), lambda text: None)
+        summaries = st.triage.summaries()
+        app = {stem: (s.suspect, s.suspect_note) for stem, s in summaries.items()}
+    finally:
+        st.close()
+    assert set(app) == set(qa) == set(frames)
+    for stem, line in qa.items():
+        worst = line["findings"][0]["message"] if line["findings"] else None
+        assert app[stem] == (pytest.approx(line["score"], abs=1e-3), worst), stem
+    assert qa["00003"]["score"] >= 10 and qa["00003"]["findings"][0]["kind"] == "wrong_class"
+    assert [s for s, _ in sorted(app.items(), key=lambda kv: -kv[1][0])][:2] == \
+        [line["stem"] for line in lines if "stem" in line][:2]  # the same order, most suspect first

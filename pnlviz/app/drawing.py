@@ -123,7 +123,7 @@ class Painter:
         """The label-error finder's findings on ``view`` as marks to draw
         (:func:`pnlviz.calib.qa.finding_marks`; judged once per view, not at all when the background
         pass judged the same inputs clean): none when the findings layer is off, or for a frame
-        calibrated from anything but its annotation."""
+        without an annotation."""
         if not self.layers.findings:
             return []
         if self._judged is None or self._judged[0] is not view:

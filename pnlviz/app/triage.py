@@ -94,23 +94,23 @@ def summarize(view, token: str, judge: bool = False) -> FrameSummary:
 
 
 def judge_view(view):
-    """The label-error finder's verdict (:func:`pnlviz.calib.qa.check_frame`, reusing the view's
-    calibration) on a frame calibrated from its annotation alone; None for a frame calibrated
-    from anything else, or without an annotation. Raises what the finder raises."""
-    from pnlviz.calib.frame import FrameCalibration
+    """The label-error finder's verdict on the frame's annotation (its edits applied) and its
+    detections, exactly as ``pnlviz qa`` judges the frame with the same inputs
+    (:func:`pnlviz.calib.qa.check_frame` with its own calibration, so a frame whose annotation
+    gives no camera is judged too: a class that breaks it is found by leaving each out); None for
+    a frame without an annotation. Raises what the finder raises."""
     from pnlviz.calib.qa import check_frame
 
-    if not view.annotation or view.origin != "annotation" or view.result is None:
+    if not view.annotation:
         return None
-    return check_frame(view.annotation, view.size,
-                       calibration=FrameCalibration(view.observations, view.origin, None, view.result))
+    return check_frame(view.annotation, tuple(view.size), view.detections)
 
 
 def fix_frame(state, stem: str, settings=None):
     """Apply the suggested fix of the frame's worst finding that has one (the label-error
     finder's, on the frame as the tab shows it) as an ordinary annotation edit, undoable like
-    any other: the finding, or None when there is nothing to fix (a frame calibrated from
-    anything but its annotation is not judged)."""
+    any other: the finding, or None when there is nothing to fix (a frame without an annotation
+    is not judged)."""
     from pnlviz.calib.qa import apply_fix
 
     view = state.view(stem, settings)
@@ -122,8 +122,8 @@ def fix_frame(state, stem: str, settings=None):
 
 
 def suspect_score(view) -> tuple[float | None, str | None]:
-    """The label-error finder's score of a frame calibrated from its annotation alone, and its
-    worst finding in words (:func:`judge_view`); (None, None) for a frame it does not judge."""
+    """The label-error finder's score of a frame's annotation, and its worst finding in words
+    (:func:`judge_view`: what ``pnlviz qa`` says of it); (None, None) for a frame it does not judge."""
     try:
         qa = judge_view(view)
     except Exception:  # noqa: BLE001 - a bug here must not stop the background pass: the frame is not judged
