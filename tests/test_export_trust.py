@@ -411,3 +411,56 @@ def test_accepting_a_frame_the_label_error_finder_flags_asks_once(tmp_path, serv
     tab.goto(st.find("sn22_00097"))
     tab.editor.review("accepted", advance=False)
     assert st.edits.review("sn22_00097") == "accepted"
+
+
+def test_visible_occluded_absent_cycle_on_o_and_a_note_reach_the_export(images_only, tmp_path, serve):
+    """O on a selected keypoint: occluded (drawn "(id)", the list says so; exported with its
+    position, "visible": false, COCO v=1), then absent (not exported), then visible again, each one
+    undo step. A note typed on the frame is saved at once, keeps the review status, and is in the
+    manifest; the camera never moves for a visibility (occlusion is a label, not an observation)."""
+    from pnlviz.app.modes import PointKind, Selection
+    from pnlviz.pipeline.export import export_frame
+
+    data, detector = images_only
+    app = serve(data, edits=tmp_path / "edits", detector=detector)
+    st = app.state
+    st.run_detector("00000")
+    tab = app.session()
+    tab.goto(st.find("00000"))
+    said = []
+    tab.notify = lambda title, body, error=True: said.append(title)
+    tab.editor.review("accepted", advance=False)
+    camera = st.edits.get("00000")["snapshot"]["camera"]
+    kid = int(st.view("00000", tab.settings).observations.kp_ids[0])
+
+    def exported():
+        part = export_frame(st.reader, "00000")
+        return json.loads(part.files["keypoints/00000.json"])["keypoints"], part
+
+    tab.editor.select(Selection(PointKind.KEYPOINTS, kid))
+    tab.editor.cycle_visibility()
+    assert said[-1] == f"point {kid} occluded" and st.edits.get("00000")["occluded"] == [kid]
+    tab.show()
+    assert f"({kid})" in tab.painter.overlay.keypoints.labels
+    assert f"{kid} · occluded" in " ".join(tab.panels.points.options)
+    kps, part = exported()
+    assert kps[str(kid)]["occluded"] is True and kps[str(kid)]["visible"] is False
+    coco = part.coco_annotation["keypoints"]
+    assert coco[3 * (kid - 1) + 2] == 1 and part.entry["occluded"] == [kid]
+    assert st.edits.get("00000")["snapshot"]["camera"] == camera  # not recalibrated
+    tab.editor.select(Selection(PointKind.KEYPOINTS, kid))
+    tab.editor.cycle_visibility()
+    assert said[-1] == f"point {kid} absent" and str(kid) not in exported()[0]
+    assert "occluded" not in st.edits.get("00000")
+    tab.editor.select(Selection(PointKind.KEYPOINTS, kid))  # selectable as a ghost's id: chosen from the list
+    tab.editor.cycle_visibility()
+    assert said[-1] == f"point {kid} visible" and exported()[0][str(kid)]["visible"] is True
+    tab.editor.set_note("goal post hidden by the keeper; check 00001 too")
+    record = st.edits.get("00000")
+    assert record["note"] == "goal post hidden by the keeper; check 00001 too" and record["review"] == "corrected"
+    assert exported()[1].entry["note"] == record["note"]
+    steps = st.edits.history("00000")[0]
+    tab.editor.set_note("goal post hidden by the keeper; check 00001 too!")  # typing on: the same undo step
+    assert st.edits.history("00000")[0] == steps
+    tab.editor.undo()
+    assert st.edits.get("00000").get("note") is None

@@ -131,10 +131,12 @@ def point_rows(overlay: Overlay | None, hidden: set[int]) -> list[str]:
     and ghost."""
     rows = ["-"]
     if overlay is not None:
+        labels = dict(zip(overlay.keypoints.keys, overlay.keypoints.labels))
         for kid in sorted(overlay.keypoints.keys):
             r = overlay.residuals.get(kid)
             pin = " · flagged pin" if kid in overlay.flagged else " · pinned" if kid in overlay.pinned else ""
-            rows.append(f"{kid} · visible{pin}" + (f" · {r:.1f} px" if r is not None else ""))
+            seen = "occluded" if str(labels.get(kid, "")).startswith("(") else "visible"  # "(12)": occluded
+            rows.append(f"{kid} · {seen}{pin}" + (f" · {r:.1f} px" if r is not None else ""))
         rows += [f"{kid} · hidden" for kid in sorted(hidden)]
         rows += [f"{kid} · ghost" for kid in sorted(overlay.ghosts.keys)]
     return rows

@@ -147,7 +147,8 @@ class Painter:
         the point is let go)."""
         tab = self.tab
         overlay = overlay_geometry(view, self.layers, tab.state.model, hidden=self.hidden_ids(view.stem),
-                                   findings=() if preview else self.findings(view))
+                                   findings=() if preview else self.findings(view),
+                                   occluded=set(tab.state.edits.get(view.stem).get("occluded") or ()))
         colors = self.blended(overlay, view) if self.opacity < 1.0 else None
         tab.workspace.show_overlay(overlay, colors, keypoints=self.layers.keypoints, ghosts=self.layers.ghosts,
                                    line_points=tab.editor.drag_mode is DragMode.LINE_POINTS, ids=self.layers.ids)
@@ -182,6 +183,9 @@ class Painter:
                                                            tab.guard.save_error, tab.app.detection_status(view.stem)))
         update_changed(p.filter_text, content=cards.filter_text(view.stem, n, frames.outside_filter, flt))
         update_changed(p.card, content=cards.calibration_card(view, st) + cards.findings_text(self.findings(view)))
+        note = st.edits.get(view.stem).get("note") or ""
+        if p.note.value != note:
+            tab.queue.set_value(p.note, note)  # the frame's note (not an edit of it)
         self.show_points_list(view)
         self.show_selected()
         self.show_progress()

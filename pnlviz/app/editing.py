@@ -254,6 +254,49 @@ class Editor:
         self.selected = None
         self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid, self.tab.settings))
 
+    def cycle_visibility(self) -> None:
+        """O: the selected keypoint visible -> occluded (labelled where it is, hidden behind
+        something: COCO v=1) -> absent (not on the frame) -> visible again (where its source put
+        it); one undo step each."""
+        from pnlviz.data.edits import set_keypoint, set_occluded
+
+        tab = self.tab
+        if self.selected is None or self.selected.kind is not PointKind.KEYPOINTS:
+            tab.notify("nothing selected", "select a keypoint first (click it)", error=False)
+            return
+        stem, kid = tab.stem, self.selected.kid
+        record = tab.state.edits.get(stem)
+        occluded = kid in (record.get("occluded") or [])
+        absent = str(kid) in (record.get("keypoints") or {}) and record["keypoints"][str(kid)] is None
+
+        def change(rec: dict) -> None:
+            if absent:  # visible again: the hand's "absent" taken back, the source's position shows
+                rec["keypoints"] = {k: v for k, v in (rec.get("keypoints") or {}).items() if k != str(kid)} or None
+            elif occluded:
+                set_occluded(rec, kid, False)
+                set_keypoint(rec, kid, None)
+            else:
+                set_occluded(rec, kid, True)
+
+        self.trail.act(stem, lambda: tab.state.write(stem, change, settings=tab.settings))
+        now = "visible" if absent else "absent" if occluded else "occluded"
+        obs = tab.state.view(stem, tab.settings).observations
+        if now == "visible" and (obs is None or kid not in obs.kp_ids):
+            now = "absent (nothing else puts it on this frame: Shift+click places it)"
+        tab.notify(f"point {kid} {now}", f"{stem}: keypoint {kid} is {now} now (O cycles visible, occluded, absent)",
+                   error=False)
+        if now == "absent":
+            self.selected = None
+
+    def set_note(self, text: str) -> None:
+        """The frame's note for a colleague (saved at once, exported in the manifest; not a label
+        change: the review status stays)."""
+        from pnlviz.data.edits import set_note
+
+        tab, stem = self.tab, self.tab.stem
+        self.trail.act(stem, lambda: tab.state.write(stem, lambda rec: set_note(rec, str(text)), corrected=False,
+                                                     merge=("note", stem)))  # typing: one undo step
+
     def apply_fix(self) -> None:
         """The suggested fix of the frame's worst finding (the label-error finder's: a class
         renamed, stray points dropped, points moved onto their marking, a marking added), applied

@@ -44,6 +44,7 @@ RESIDUAL_RGB = (255, 0, 0)
 DETECTED_RGB = (255, 255, 255)  # white: detected line extremities
 GHOST_RGB = (200, 200, 200)
 PIN_RGB = (0, 0, 0)  # black box: a pinned keypoint (placed or moved by hand)
+OCCLUDED_RGB = (128, 128, 128)  # an occluded keypoint's colour is mixed half with this grey
 FLAGGED_RGB = (255, 90, 0)  # orange box: a pinned keypoint the camera cannot agree with
 
 #: BGR of the same, for OpenCV drawing
@@ -183,10 +184,11 @@ def finding_segments(marks) -> dict[str, Segments]:
 
 
 def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldModel | None = None,
-                     hidden: Set[int] = frozenset(), findings=()) -> Overlay:
-    """The overlays of ``view`` that ``layers`` asks for. ``hidden``: keypoint ids marked not
-    visible (no ghost is offered for them); ``findings``: the frame's label-error findings to
-    draw (:func:`pnlviz.calib.qa.finding_marks`)."""
+                     hidden: Set[int] = frozenset(), findings=(), occluded: Set[int] = frozenset()) -> Overlay:
+    """The overlays of ``view`` that ``layers`` asks for. ``hidden``: keypoint ids marked absent
+    (no ghost is offered for them); ``findings``: the frame's label-error findings to draw
+    (:func:`pnlviz.calib.qa.finding_marks`); ``occluded``: keypoint ids marked occluded, drawn
+    greyed with their id in brackets ("(12)")."""
     model = model or load_field_model()
     W, H = view.size
     res = view.result
@@ -220,7 +222,9 @@ def overlay_geometry(view: FrameView, layers: Layers = Layers(), model: FieldMod
     if obs is not None and obs.n_keypoints:
         ids = [int(k) for k in obs.kp_ids]
         kp_colours = np.array([SET_RGB.get(str(s), (255, 255, 255)) for s in obs.kp_sets], np.uint8)
-        markers = Markers(ids, obs.kp_xy.copy(), kp_colours, [str(k) for k in ids])
+        dim = np.array([k in occluded for k in ids], bool)
+        kp_colours[dim] = (kp_colours[dim].astype(np.uint16) + OCCLUDED_RGB) // 2
+        markers = Markers(ids, obs.kp_xy.copy(), kp_colours, [f"({k})" if k in occluded else str(k) for k in ids])
         camera = res.camera if res is not None else None  # None unless res.ok
         if camera is not None:
             proj = camera.project(obs.kp_xyz)

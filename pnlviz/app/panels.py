@@ -143,6 +143,8 @@ class Panels:
             statuses = tuple(f"{k} ({v})" for k, v in REVIEW_KEYS.items()) + ("clear",)
             self.review = gui.add_button_group("status", statuses)
             self.advance = gui.add_checkbox("then next frame", initial_value=True)
+            self.note = gui.add_text("note", initial_value="", hint="a note on this frame for a colleague: saved at once, "
+                                                                    "exported in the manifest")
             self.gate_text = gui.add_markdown("")
             self.progress = gui.add_progress_bar(0.0)
             self.progress_text = gui.add_markdown("")
@@ -160,6 +162,7 @@ class Panels:
             self.points = gui.add_dropdown("on this frame", ("-",), initial_value="-",
                                            hint="the frame's keypoints: choose one to select it")
             self.hide = gui.add_button("not visible (Delete)")
+            self.visibility = gui.add_button("visible / occluded / absent (O)")
             self.drag_mode = gui.add_dropdown("drag", labels(DragMode), initial_value=DragMode.KEYPOINTS.value)
             self.snap = gui.add_checkbox("snap to pitch", initial_value=False,
                                          hint="a point dropped within 8 screen pixels of a projected "
@@ -206,6 +209,8 @@ class Panels:
         self.kp_id.on_update(on(lambda _: edit.set_place_id(self.kp_id.value)))
         self.points.on_update(on(lambda _: edit.select_listed(self.points.value)))
         self.hide.on_click(on(lambda _: edit.hide_selected()))
+        self.visibility.on_click(on(lambda _: edit.cycle_visibility()))
+        self.note.on_update(on(lambda _: edit.set_note(self.note.value)))
         self.drag_mode.on_update(on(lambda _: edit.set_drag_mode(self.drag_mode.value)))
         self.snap.on_update(on(lambda _: edit.set_snap(self.snap.value)))
         self.history.on_click(on(lambda e: edit.undo() if e.target.value == "undo" else edit.redo()))
@@ -248,6 +253,7 @@ class Panels:
                 ("image view / 3D view", "V", None, s.toggle_mode),
                 ("fit the frame", "0", None, view.fit),
                 ("native resolution", "1", None, view.native),
+                ("selected point: visible, occluded, absent", "O", None, edit.cycle_visibility),
                 ("selected point not visible", "delete", None, edit.hide_selected),
                 ("selected point not visible ", "backspace", None, edit.hide_selected),
                 ("clear the selection", "escape", None, lambda: edit.select(None)))

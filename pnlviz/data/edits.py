@@ -4,7 +4,9 @@ Layout::
 
     <edits>/frames/<stem>.json          {"review": "accepted"|"corrected"|"rejected",
                                          "annotation": {SoccerNet annotation},
-                                         "keypoints": {"<id>": [x, y] | null},   # pixels; null = not visible
+                                         "keypoints": {"<id>": [x, y] | null},   # pixels; null = absent
+                                         "occluded": [<id>, ...],     # labelled but hidden behind something (COCO v=1)
+                                         "note": "free text for a colleague",
                                          "history": {"undo": [step, ...], "redo": [step, ...]},
                                          "snapshot": {what was on screen when reviewed},
                                          "updated": <unix time>}
@@ -53,9 +55,11 @@ from pnlviz.data.snapshot import edits_digest, validate_snapshot
 REVIEW_STATES = ("accepted", "corrected", "rejected")
 #: the fields a record may hold; anything else is dropped when it is read ("frame": the identity of
 #: the frame it was written for, :mod:`pnlviz.data.edits_folder`)
-FIELDS = ("review", "annotation", "keypoints", "history", "snapshot", "updated", "frame")
+FIELDS = ("review", "annotation", "keypoints", "occluded", "note", "history", "snapshot", "updated", "frame")
 #: the fields an undo step may restore
-UNDOABLE = ("annotation", "keypoints", "review")
+UNDOABLE = ("annotation", "keypoints", "occluded", "note", "review")
+#: the longest note on a frame (characters)
+MAX_NOTE = 2000
 #: undo steps kept per frame (and per direction)
 HISTORY_LIMIT = 100
 #: seconds within which actions of one merge key are one undo step (:meth:`EditsStore.act`)
@@ -144,6 +148,24 @@ def set_keypoint(rec: dict, kid: int, xy: tuple[float, float] | None) -> None:
     rec["keypoints"] = {**(rec.get("keypoints") or {}), str(kid): None if xy is None else list(xy)}
 
 
+def set_occluded(rec: dict, kid: int, occluded: bool) -> None:
+    """In a record: keypoint ``kid`` occluded (labelled where it is, but hidden behind a player or
+    an object: COCO's v=1) or not."""
+    ids = set(rec.get("occluded") or []) - {int(kid)}
+    if occluded:
+        ids.add(int(kid))
+    rec["occluded"] = sorted(ids) or None
+
+
+def set_note(rec: dict, text: str) -> None:
+    """In a record: the frame's note (free text for a colleague; empty: none)."""
+    if not isinstance(text, str):
+        raise EditError(f"a note is text, got {type(text).__name__}")
+    if len(text) > MAX_NOTE:
+        raise EditError(f"a note has at most {MAX_NOTE} characters, got {len(text)}")
+    rec["note"] = text.strip() or None
+
+
 def move_line_point(rec: dict, source: Callable[[], Mapping | None], stem: str, name: str, index: int,
                     xy: tuple[float, float], size: tuple[int, int]) -> None:
     """In a record: point ``index`` of annotated class ``name`` at pixel ``xy`` of a frame of
@@ -177,6 +199,16 @@ def validate_record(obj: Any, source: str, checked_before: Collection[int] = ())
         if not isinstance(kps, Mapping):
             raise DataError(source, f'"keypoints" must be an object of id -> [x, y] | null, got {describe(kps)}')
         rec["keypoints"] = dict(validate_keypoint(k, v, source) for k, v in kps.items())
+    occluded = obj.get("occluded")
+    if occluded is not None:
+        if not isinstance(occluded, list) or not all(type(k) is int and k in keypoint_ids() for k in occluded):
+            raise DataError(source, f'"occluded" must be a list of keypoint ids (1..73), got {describe(occluded)}')
+        rec["occluded"] = sorted(set(occluded))
+    note = obj.get("note")
+    if note is not None:
+        if not isinstance(note, str) or len(note) > MAX_NOTE:
+            raise DataError(source, f'"note" must be text of at most {MAX_NOTE} characters, got {describe(note)}')
+        rec["note"] = note
     if obj.get("snapshot") is not None:
         rec["snapshot"] = validate_snapshot(obj["snapshot"], source)
     history = obj.get("history")

@@ -6,7 +6,8 @@ Layout (a folder or a zip):
 
 * ``annotations/<stem>.json``: SoccerNet line annotation, with the corrected line points;
 * ``keypoints/<stem>.json``: keypoint labels, ``{"image_size": [W, H], "reviewed": bool, "review":
-  status, "keypoints": {"id": {"x", "y", "visible", "set", "provenance", "residual", "flagged", "slip"}}}``
+  status, "keypoints": {"id": {"x", "y", "visible", "occluded", "set", "provenance", "residual", "flagged",
+  "slip"}}}``
   in pixels, corrected keypoints included (hidden ones left out); ``provenance``: annotation,
   detection, hand, or shot (a frame reviewed with its clip's shot model, :mod:`pnlviz.pipeline.clip`:
   a point placed by hand on another frame of the shot, carried here through the shot's cameras);
@@ -20,9 +21,10 @@ Layout (a folder or a zip):
   (the camera file has it); its inverse maps pixels to the pitch. The same matrix is in the
   frame's keypoints file (``"homography"``, null without a camera);
 * ``coco_keypoints.json``: COCO keypoints, one "pitch" instance per frame with the 73 keypoints
-  (v = 2 inside the image, 1 labelled outside it, 0 absent or flagged by the gate);
+  (v = 2 inside the image, 1 labelled outside it or occluded, 0 absent or flagged by the gate);
 * ``manifest.json``: what each exported frame carries and what was changed (names, not paths:
-  the export does not say where the server's files live).
+  the export does not say where the server's files live), its ``"occluded"`` keypoints and the
+  annotator's ``"note"``.
 
 A frame of a dataset in splits (stem ``<split>/<stem>``) keeps its split in every name:
 ``annotations/valid/00042.json``, ``cameras/valid/camera_00042.json``.
@@ -126,6 +128,11 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
     slips = ((record.get("snapshot") or {}).get("slips") or {}) if fl.basis == "snapshot" else {}
     if slips:  # hand points the rest of the frame disagreed with when it was reviewed: kept, listed
         entry["slips"] = dict(slips)
+    occluded = set(record.get("occluded") or ())
+    if occluded & set(fl.labels):
+        entry["occluded"] = sorted(occluded & set(fl.labels))
+    if record.get("note"):
+        entry["note"] = record["note"]  # for a colleague
     try:
         ann = reader.annotation(stem, record)
     except DataError as exc:
@@ -144,9 +151,9 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
         files[f"annotations/{stem}.json"] = dumps(annotation_to_json(ann)).encode()
     kps = {}
     for kid, label in fl.labels.items():
-        kps[str(kid)] = {"x": label.x, "y": label.y, "visible": inside(label, fl.size), "set": label.set,
-                         "provenance": label.provenance, "residual": label.residual, "flagged": kid in flagged,
-                         "slip": str(kid) in slips}
+        kps[str(kid)] = {"x": label.x, "y": label.y, "visible": inside(label, fl.size) and kid not in occluded,
+                         "occluded": kid in occluded, "set": label.set, "provenance": label.provenance,
+                         "residual": label.residual, "flagged": kid in flagged, "slip": str(kid) in slips}
     reviewed = fl.basis != "unreviewed"
     homography = frame_homography(fl.camera, fl.size)
     files[f"keypoints/{stem}.json"] = dumps({"image_size": [W, H], "reviewed": reviewed, "review": record.get("review"),
@@ -156,7 +163,7 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
     flat: list[object] = [0.0] * (3 * N_KEYPOINTS)
     for key, k in kps.items():
         i = int(key) - 1
-        # COCO v: 2 visible ground truth, 1 labelled outside the image, 0 flagged by the gate
+        # COCO v: 2 visible ground truth, 1 labelled but not visible (outside the image, or occluded), 0 flagged
         flat[3 * i:3 * i + 3] = [k["x"], k["y"], 0 if k["flagged"] else 2 if k["visible"] else 1]
     image_id = reader.index_of(stem) + 1  # the frame's place in the dataset: the same whatever is exported
     frame = reader.ds.frame(stem)
