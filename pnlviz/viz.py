@@ -291,12 +291,13 @@ def inset_top_view(image: np.ndarray, camera: Camera, share: float = 0.28) -> np
 
 
 def keypoint_map(model: FieldModel | None = None, *, px_per_m: float = 16.0,
-                 highlight: int | None = None, legend: bool = True) -> np.ndarray:
+                 highlight: int | None = None, legend: bool = True, text_scale: float | None = None) -> np.ndarray:
     """A top view of the pitch with every keypoint id, coloured by set (:data:`SET_RGB`): the
     picture of PnLCalib's numbering. The far touchline (y < 0, "top" in SoccerNet's names) is at
     the top, the main camera's side at the bottom; the crossbar's corners (2.44 m above the posts)
     are drawn just behind their goal line. ``highlight``: an id drawn larger, ringed; ``legend``:
-    the sets' colours and the orientation written along the bottom. BGR uint8."""
+    the sets' colours and the orientation written along the bottom; ``text_scale``: the ids'
+    font scale (default: grows with ``px_per_m``). BGR uint8."""
     model = model or load_field_model()
     legend_h = 56 if legend else 0
     pitch, px = _top_canvas(model, px_per_m)
@@ -312,7 +313,7 @@ def keypoint_map(model: FieldModel | None = None, *, px_per_m: float = 16.0,
         hx, hy = (int(round(v)) for v in where[highlight])
         cv2.line(image, (0, hy), (W - 1, hy), (0, 215, 255), max(1, int(px_per_m / 8)), cv2.LINE_AA)
         cv2.line(image, (hx, 0), (hx, H - legend_h - 1), (0, 215, 255), max(1, int(px_per_m / 8)), cv2.LINE_AA)
-    scale = max(0.4, px_per_m / 26)
+    scale = max(0.4, px_per_m / 26) if text_scale is None else float(text_scale)
     order = sorted(ids, key=lambda k: k == highlight)  # the highlighted one drawn last, on top
     dot = max(3, int(px_per_m * 0.25)) + 2
     taken: list = [(int(p[0]) - dot, int(p[1]) - dot, int(p[0]) + dot, int(p[1]) + dot) for p in where.values()]

@@ -410,3 +410,21 @@ def test_the_modes_keep_the_texts_the_user_sees():
     assert Mode.IMAGE.other is Mode.THREE_D and Mode.THREE_D.other is Mode.IMAGE and Mode("3d") is Mode.THREE_D
     assert {"keypoints": 1}[PointKind.KEYPOINTS] == 1  # the point kinds name the nodes and layers
     assert Selection(PointKind.GHOSTS, 4).is_keypoint and not Selection(PointKind.LINE_POINTS, ("a", 0)).is_keypoint
+
+
+def test_the_keypoint_map_shows_the_chosen_id_large_enough_to_read():
+    """The picker's map is the part of the pitch around the chosen keypoint (60% of the pitch's
+    length: ids about 8 px tall in the 320 px panel of a 1600x900 screen, not 5): for every id its
+    guides (the yellow cross through it) are in the picture."""
+    from pnlviz.app.panels import MAP_PX_PER_M, picker_map
+    from pnlviz.field import load_field_model
+    from pnlviz.viz import keypoint_map
+
+    model = load_field_model()
+    whole = picker_map(model, None).shape
+    assert whole[1] <= 0.65 * keypoint_map(model, px_per_m=MAP_PX_PER_M, legend=False).shape[1]  # shown larger
+    for kid in (int(k) for k in model.keypoint_ids):
+        image = picker_map(model, kid).astype(int)
+        assert image.shape == whole
+        guide = (np.abs(image - (255, 215, 0)).sum(axis=2) < 90)
+        assert guide.sum(axis=0).max() > 0.5 * image.shape[0], kid  # the vertical guide through the id

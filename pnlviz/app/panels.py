@@ -20,7 +20,9 @@ LAYERS = ("keypoints", "ids", "ghosts", "refined_pitch", "initial_pitch", "refer
           "residuals", "detected_lines", "findings")
 REVIEW_KEYS = {"accepted": "G", "corrected": "C", "rejected": "R"}
 PANEL_WIDTH = 320
-MAP_PX_PER_M = 6.0  # the keypoint map beside the picker (about 700 px wide, shown at the panel's width)
+MAP_PX_PER_M = 6.0  # the keypoint map beside the picker (about 700 px wide before it is cropped)
+MAP_CROP = 0.6  # the share of the map's width shown, around the chosen keypoint
+MAP_TEXT_SCALE = 0.55  # the ids' font scale on it
 
 #: every key of the app: (keys, what), for the help section (the bridge handles + and -, the
 #: arrows; viser's camera keys W A S D Q E pan and zoom the image view too)
@@ -56,8 +58,17 @@ def choice_id(choice) -> int | None:
 
 
 def picker_map(model, kid: int | None) -> np.ndarray:
-    """The keypoint map with ``kid`` highlighted, RGB, for the panel."""
-    return cv2.cvtColor(keypoint_map(model, px_per_m=MAP_PX_PER_M, highlight=kid, legend=False), cv2.COLOR_BGR2RGB)
+    """The keypoint map with ``kid`` highlighted, RGB, for the panel: the part of the pitch around
+    it (:data:`MAP_CROP` of its length), so that the ids stay legible at the panel's width (about
+    8 px tall on a 1600x900 screen; the whole pitch would make them 5)."""
+    image = keypoint_map(model, px_per_m=MAP_PX_PER_M, highlight=kid, legend=False, text_scale=MAP_TEXT_SCALE)
+    W = image.shape[1]
+    width = int(W * MAP_CROP)
+    x = W // 2
+    if kid is not None and int(kid) in model.keypoints:
+        x = int(round(W / 2 + MAP_PX_PER_M * float(model.keypoints[int(kid)].xyz[0])))
+    left = int(np.clip(x - width // 2, 0, W - width))
+    return cv2.cvtColor(np.ascontiguousarray(image[:, left:left + width]), cv2.COLOR_BGR2RGB)
 
 
 def layer_words(name: str) -> str:
