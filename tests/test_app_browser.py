@@ -436,6 +436,34 @@ def test_every_label_names_its_input(data, browser, serve):
     page.close()
 
 
+def test_the_title_stays_in_view_and_no_webgl_notice_covers_the_image(data, browser, serve):
+    """At 1600x900 with the panel scrolled to its bottom (editing points far below the title), the
+    frame's title is still at the top of the panel; viser's "Software WebGL rendering" notice (this
+    machine has no GPU, like most annotation VMs) is closed as it appears."""
+    app = serve(data)
+    page = browser.new_page(viewport={"width": 1600, "height": 900})
+    page.goto(app.page_url)
+    wait_for_text(page, "focal")
+    stem = tab(app).stem
+    wait_until(lambda: page.evaluate("() => (window.__pnlvizBridge || {}).softwareNoticeClosed || 0") > 0
+               or page.evaluate("() => !/swiftshader|llvmpipe|software/i.test("
+                                "(document.createElement('canvas').getContext('webgl') || {getParameter: () => ''})"
+                                ".getParameter(7937) || '')"), timeout=20)
+    assert page.get_by_text("Software WebGL rendering").count() == 0
+    scrolled = page.evaluate("""() => {
+        let el = document.getElementById('pnlviz-title');
+        while (el && !['auto', 'scroll'].includes(getComputedStyle(el).overflowY)) el = el.parentElement;
+        if (!el) return 0;
+        el.scrollTop = el.scrollHeight;
+        return el.scrollTop; }""")
+    assert scrolled > 300  # the panel is long: it did scroll
+    time.sleep(0.5)
+    title = page.get_by_role("heading", name=stem)
+    box = title.bounding_box()
+    assert box is not None and 0 <= box["y"] < 120, box  # still at the top of the panel
+    page.close()
+
+
 def test_a_page_from_another_origin_cannot_connect(data, browser, serve):
     """A page served from another local port opens a websocket to the app: refused at the
     handshake, so it reads nothing and changes nothing."""

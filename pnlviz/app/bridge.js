@@ -526,10 +526,49 @@
       else target.id = id;
     }
   };
+  // viser's "Software WebGL rendering detected" notice stays until closed and covers the image on
+  // every load of a machine without a GPU (most annotation VMs): closed as it appears (once per page)
+  const closeSoftwareNotice = () => {
+    for (const note of document.querySelectorAll(".mantine-Notification-root")) {
+      if (!(note.textContent || "").includes("Software WebGL rendering")) continue;
+      const close = note.querySelector(".mantine-Notification-closeButton");
+      if (close) {
+        close.click();
+        state.softwareNoticeClosed = (state.softwareNoticeClosed || 0) + 1;
+      }
+    }
+  };
+  // the frame's title stays at the top of the panel while it scrolls (editing points far below it)
+  const pinTitle = () => {
+    const anchor = document.getElementById("pnlviz-title");
+    if (!anchor || anchor.dataset.pinned) return;
+    // the title's row: the ancestor beside the panel's other rows
+    let row = anchor;
+    while (row.parentElement && row.parentElement.children.length < 3) row = row.parentElement;
+    if (!row.parentElement || row === document.body) return;
+    // up to the panel's scrolling viewport, a box that hides its overflow would hold the row (a
+    // sticky element sticks to its nearest clipping box): clipped without scrolling instead
+    const scrolls = (el) => ["auto", "scroll"].includes(getComputedStyle(el).overflowY);
+    let el = row.parentElement;
+    for (; el && el !== document.body && !scrolls(el); el = el.parentElement) {
+      if (getComputedStyle(el).overflowY === "hidden") el.style.overflow = "clip";
+    }
+    if (!el || el === document.body) return;
+    let bg = "rgba(0, 0, 0, 0)";
+    for (let up = row.parentElement; up && (bg === "rgba(0, 0, 0, 0)" || bg === "transparent"); up = up.parentElement) {
+      bg = getComputedStyle(up).backgroundColor;
+    }
+    Object.assign(row.style, { position: "sticky", top: "0", zIndex: "3", background: bg });
+    anchor.dataset.pinned = "1";
+  };
   mendLabels();
   onView();
+  closeSoftwareNotice();
+  pinTitle();
   new MutationObserver(() => {
     mendLabels();
+    closeSoftwareNotice();
+    pinTitle();
     onView(); // the server's view: an answer takes the transform off before this frame is drawn
   }).observe(document.body, { childList: true, subtree: true, attributes: true, attributeFilter: ["data-v", "data-points", "data-answer"] });
   // the canvas size in CSS pixels (the screen pixels a zoom is measured in; viser reports the

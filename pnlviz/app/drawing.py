@@ -23,6 +23,9 @@ from pnlviz.viz import blank_canvas, top_view
 TOP_PX_PER_M = 3.0  # the bird's-eye view in the panel: about 350 px wide
 
 
+#: marks the title for the page script, which pins it to the top of the scrolling panel
+TITLE_ANCHOR = '<span id="pnlviz-title"></span>'
+
 class Painter:
     """What one tab shows (``tab``: its :class:`pnlviz.app.session.Session`): ``shown`` the view
     drawn last, ``overlay`` its overlays, ``drawn`` how many times the tab was drawn; ``layers``
@@ -178,7 +181,8 @@ class Painter:
         flt, n = frames.filter_label(), len(frames.order)
         position = frames.position() + 1 if frames.index in frames.order else 0
         key = sort_key_text(frames.sort, st.triage.lookup(view.stem, tab.settings))
-        update_changed(p.title, content=cards.title_text(view, position, n, frames.outside_filter, flt, key))
+        update_changed(p.title, content=cards.title_text(view, position, n, frames.outside_filter, flt, key)
+                       + TITLE_ANCHOR)  # the page keeps the title at the top of the panel (bridge.js)
         update_changed(p.status, content=cards.status_line(view, st.edits.review(view.stem), st.edits.get(view.stem),
                                                            tab.guard.save_error, tab.app.detection_status(view.stem)))
         update_changed(p.filter_text, content=cards.filter_text(view.stem, n, frames.outside_filter, flt))
