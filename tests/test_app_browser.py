@@ -328,6 +328,19 @@ def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(t
     cam = session.view().result.camera
     err = np.hypot(*(cam.project(model.keypoint_xyz(ground)) - uv).T)
     assert np.nanmedian(err) < 3.0  # four clicks to the nearest pixel: the whole pitch within a few px
+    # a ghost (a keypoint the camera puts in the frame, not observed) shift+clicked: placed where it is
+    wait_until(lambda: session.painter.overlay is not None and len(session.painter.overlay.ghosts))
+    ghosts = session.painter.overlay.ghosts
+    placed_uv = [p for _, p in chosen]
+    far = [(k, g) for i, (k, g) in enumerate(zip(ghosts.keys, ghosts.uv)) if 80 < g[0] < 880 and 80 < g[1] < 460
+           and min(np.hypot(*(g - q)) for q in [*placed_uv, *np.delete(ghosts.uv, i, axis=0)]) > 40]
+    ghost_kid, ghost_uv = far[0]
+    page.keyboard.down("Shift")
+    page.mouse.click(*on_screen(page, session, ghost_uv))
+    page.keyboard.up("Shift")
+    wait_until(lambda: str(ghost_kid) in (app.state.edits.get("bare").get("keypoints") or {}))
+    np.testing.assert_allclose(app.state.edits.get("bare")["keypoints"][str(ghost_kid)], ghost_uv, atol=1e-6)
+    assert session.editor.place_id == ghost_kid
     kid, p = chosen[0]
     drag(page, on_screen(page, session, p), (12, 8))
     wait_until(lambda: not np.allclose(app.state.edits.get("bare")["keypoints"][str(kid)], p, atol=1.0))

@@ -311,10 +311,13 @@ class Editor:
         else:
             self.tab.notify("nothing to fix", "the label-error finder suggests no fix for this frame", error=False)
 
-    def place(self, stem: str, uv) -> None:
-        """Put the chosen keypoint id at pixel ``uv`` of ``stem`` (shift+click)."""
-        kid = self.place_id
-        uv = self._snapped(uv)
+    def place(self, stem: str, uv, kid: int | None = None) -> None:
+        """Put keypoint ``kid`` (default: the chosen id) at pixel ``uv`` of ``stem`` (shift+click;
+        a ghost's own position is not snapped)."""
+        if kid is None:
+            kid, uv = self.place_id, self._snapped(uv)
+        else:
+            self.place_id = int(kid)
         self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv, settings=self.tab.settings))
         self.say_slip(stem, kid)
         overlay = self.tab.painter.overlay
@@ -392,10 +395,12 @@ class Editor:
                     best, best_d = Selection(kind, key), d
         self.select(best)
 
-    def on_place(self, uv) -> None:
-        """Shift+click (on viser's event loop): placed on the frame shown when it came."""
+    def on_place(self, uv, kid: int | None = None) -> None:
+        """Shift+click (on viser's event loop): placed on the frame shown when it came; ``kid``:
+        that keypoint (a ghost shift+clicked: it is placed where the camera puts it), else the
+        chosen id."""
         stem = self.tab.painter.shown_stem
-        self.tab.queue.enqueue(lambda: self.place(stem, uv))
+        self.tab.queue.enqueue(lambda: self.place(stem, uv, kid))
 
     def on_click(self, uv) -> None:
         self.tab.queue.enqueue(lambda: self.click(uv))

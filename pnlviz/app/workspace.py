@@ -49,7 +49,7 @@ def _disc(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
 class WorkspaceEvents:
     """What the workspace reports, in image pixels of the frame it showed."""
 
-    place: Callable[[np.ndarray], None]  # shift+click on the frame
+    place: Callable[..., None]  # shift+click on the frame: place(uv); on a ghost: place(uv, its id)
     click: Callable[[np.ndarray], None]  # a plain click on the frame (not on a point)
     pan: Callable[[DragPhase, np.ndarray, np.ndarray], None]  # (phase, start, now): screen fractions of the canvas
     pick: Callable[[Selection], None]  # a click on a point
@@ -218,6 +218,18 @@ class _PointNodes:
                                placed(self.plane).pixel_on_ray(o, o + np.asarray(event.ray_direction)))
             if i is not None:
                 events.pick(Selection(self.kind, self.keys[i]))
+
+        @node.on_click(modifier="shift")
+        async def _(event) -> None:
+            """Shift+click on a point places, as on the frame: on a ghost, that keypoint where the
+            camera puts it (the ghost becomes a keypoint); on another point, the chosen id there."""
+            o = np.asarray(event.ray_origin, float)
+            at = placed(self.plane).pixel_on_ray(o, o + np.asarray(event.ray_direction))
+            i = self._instance(event.instance_index, at)
+            if i is not None and self.kind is PointKind.GHOSTS:
+                events.place(self.uv[i].copy(), self.keys[i])
+            elif at is not None and np.all(np.isfinite(at)):
+                events.place(np.asarray(at, float))
 
         @node.on_drag
         async def _(event) -> None:
