@@ -464,3 +464,45 @@ def test_visible_occluded_absent_cycle_on_o_and_a_note_reach_the_export(images_o
     assert st.edits.history("00000")[0] == steps
     tab.editor.undo()
     assert st.edits.get("00000").get("note") is None
+
+
+def test_a_bulk_action_is_counted_first_runs_on_the_filtered_frames_and_undoes_as_one_step(images_only, tmp_path,
+                                                                                        serve):
+    """Keypoint K detected on several frames: "absent" over the filtered frames first says how many
+    frames it would change, the second apply changes exactly those (nothing else), and one Ctrl+Z
+    takes all of it back. A rename moves the point to the other id where it is."""
+    from pnlviz.app.modes import PointKind, Selection
+
+    data, detector = images_only
+    app = serve(data, edits=tmp_path / "edits", detector=detector)
+    st = app.state
+    for stem in st.stems:
+        st.run_detector(stem)
+    tab = app.session()
+    tab.goto(0)
+    shown = {s: {int(k) for k in st.view(s, tab.settings).observations.kp_ids} for s in st.stems}
+    kid = max(set.union(*shown.values()), key=lambda k: sum(k in ids for ids in shown.values()))
+    having = [s for s in st.stems if kid in shown[s]]
+    assert 1 < len(having)
+    tab.editor.select(Selection(PointKind.KEYPOINTS, kid))
+    before = {s: st.edits.get(s) for s in st.stems}
+    tab.editor.bulk("absent", "filtered frames")
+    assert tab.panels.bulk_text.content.startswith(f"**make keypoint {kid} absent on {len(having)} of {len(st.stems)}")
+    assert {s: st.edits.get(s) for s in st.stems} == before  # counted, nothing changed yet
+    tab.editor.bulk("absent", "filtered frames")
+    for s in st.stems:
+        kps = st.edits.get(s).get("keypoints") or {}
+        assert (kps.get(str(kid), 0) is None) == (s in having), s
+        assert kid not in {int(k) for k in st.view(s, tab.settings).observations.kp_ids}
+    tab.editor.undo()  # one step: every frame back
+    assert all(not (st.edits.get(s).get("keypoints") or {}) for s in st.stems)
+    # a rename on this frame: the point moves to the other id
+    stem = having[0]
+    tab.goto(st.find(stem))
+    to = next(k for k in range(1, 74) if k not in shown[stem])
+    xy = st.view(stem, tab.settings).observations.kp_xy[list(st.view(stem, tab.settings).observations.kp_ids).index(kid)]
+    tab.editor.select(Selection(PointKind.KEYPOINTS, kid))
+    tab.editor.bulk("rename", "this frame", to)
+    tab.editor.bulk("rename", "this frame", to)
+    kps = st.edits.get(stem)["keypoints"]
+    assert kps[str(kid)] is None and kps[str(to)] == pytest.approx(list(xy))

@@ -10,8 +10,8 @@ goes back to them.
 
 from __future__ import annotations
 
+
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,46 +20,11 @@ from pnlviz.app.cards import listed_id
 from pnlviz.app.modes import DragEvent, DragMode, DragPhase, PointKind, Selection, labels
 from pnlviz.app.panels import choice_id
 from pnlviz.app.state import REVIEW_STATES, EditError
+from pnlviz.app.trail import EditTrail
 from pnlviz.app.view2d import snap
 
 SNAP_PX = 8.0  # screen pixels
 CLICK_REACH_PX = 12.0  # a click this close to a point (screen pixels) selects it
-
-
-class EditTrail:
-    """The frames a tab changed, most recent last (``done``), and those it took back
-    (``undone``). ``guard(action)`` runs an edit, showing a refusal (see
-    :class:`pnlviz.app.tabqueue.ActionGuard`)."""
-
-    def __init__(self, state, guard: Callable[[Callable[[], object]], object]):
-        self.state, self.guard = state, guard
-        self.done: list[str] = []
-        self.undone: list[str] = []
-
-    def act(self, stem: str, action: Callable[[], object]) -> None:
-        """An edit of ``stem``: remembered when it changed the frame's history."""
-        before = self.state.edits.history(stem)[0]
-        self.guard(action)
-        if self.state.edits.history(stem)[0] != before:
-            self.done.append(stem)
-            self.undone.clear()
-
-    def undo(self, current: str, goto: Callable[[str], None], settings=None) -> None:
-        """Take back this tab's last change (going to its frame with ``goto(stem)``), else the
-        last change of the ``current`` frame (a reviewed frame records what it shows under the
-        tab's ``settings``)."""
-        self._step(self.done, self.undone, lambda stem: self.state.undo(stem, settings), current, goto)
-
-    def redo(self, current: str, goto: Callable[[str], None], settings=None) -> None:
-        self._step(self.undone, self.done, lambda stem: self.state.redo(stem, settings), current, goto)
-
-    def _step(self, trail: list[str], other: list[str], step: Callable[[str], bool], current: str,
-              goto: Callable[[str], None]) -> None:
-        stem = trail.pop() if trail else current
-        if stem != current:
-            goto(stem)
-        if self.guard(lambda: step(stem)):
-            other.append(stem)
 
 
 @dataclass
@@ -96,6 +61,8 @@ class Editor:
         self.flagged: tuple[str, list[int]] | None = None  # the last reviewed frame's flagged points, for H
         #: the frame (and its edits) an accept was asked about once: a second G accepts it as it is
         self.asked: tuple[str, str] | None = None
+        #: the bulk action whose count was shown: applying the same again runs it
+        self.bulk_asked: tuple | None = None
         self.last_recalibration_ms = 0.0
 
     # ------------------------------------------------------------------ choices
@@ -296,6 +263,46 @@ class Editor:
         tab, stem = self.tab, self.tab.stem
         self.trail.act(stem, lambda: tab.state.write(stem, lambda rec: set_note(rec, str(text)), corrected=False,
                                                      merge=("note", stem)))  # typing: one undo step
+
+    def bulk(self, action: str, scope: str, to: int | None = None) -> None:
+        """A bulk action (:mod:`pnlviz.app.bulk`) on the selected keypoint (else the place id) over
+        ``scope``: "this frame", "this shot" or "filtered frames" (the tab's filter); ``to``: the
+        id a rename gives it. The first time the panel says what it would change (the count);
+        the same action again runs it, all of it one undo step (Ctrl+Z)."""
+        from pnlviz.app import bulk as work
+
+        tab, st = self.tab, self.tab.state
+        sel = self.selected
+        kid = sel.kid if sel is not None and sel.kind is not PointKind.LINE_POINTS else self.place_id
+        if scope == "this shot":
+            stems = st.shots.shot_stems(tab.stem, tab.settings)
+            if stems is None:
+                tab.notify("not a clip", f"{tab.stem} is not a frame of a clip: no shot", error=False)
+                return
+        elif scope == "filtered frames":
+            stems = [st.stems[i] for i in tab.frames.order]
+        else:
+            stems = [tab.stem]
+        try:
+            bulk = work.plan(stems, action, int(kid), to=to, record=st.edits.get,
+                             view=lambda s: st.view(s, tab.settings, keep=s == tab.stem))
+        except EditError as exc:
+            tab.notify("refused", str(exc))
+            return
+        key = (bulk.action, bulk.kid, bulk.to, bulk.stems)
+        if not bulk.stems:
+            self.bulk_asked = None
+            tab.panels.bulk_text.content = f"nothing to do: {bulk.text()}"
+            return
+        if self.bulk_asked != key:
+            self.bulk_asked = key
+            tab.panels.bulk_text.content = f"**{bulk.text()}**: *apply* again runs it (one undo step)"
+            return
+        self.bulk_asked = None
+        changed = self.trail.act_many(list(bulk.stems), lambda: work.apply(bulk, st.write, tab.settings))
+        tab.panels.bulk_text.content = f"done: {bulk.text()}: {len(changed)} changed (Ctrl+Z takes it all back)"
+        tab.notify("bulk action done", f"{bulk.text()}: {len(changed)} frames changed", error=False)
+        tab.show()
 
     def apply_fix(self) -> None:
         """The suggested fix of the frame's worst finding (the label-error finder's: a class

@@ -179,6 +179,16 @@ class Panels:
                                          hint="a point dropped within 8 screen pixels of a projected "
                                               "intersection or line goes onto it")
             self.history = gui.add_button_group("history", ("undo", "redo"))
+            with gui.add_folder("Bulk", expand_by_default=False):
+                self.bulk_action = gui.add_dropdown("do", ("absent", "occluded", "visible", "rename"),
+                                                    initial_value="absent",
+                                                    hint="to the selected keypoint (else the place id) on every frame "
+                                                         "of the scope that shows it")
+                self.bulk_scope = gui.add_dropdown("on", ("this frame", "this shot", "filtered frames"),
+                                                   initial_value="filtered frames")
+                self.bulk_to = gui.add_number("rename to", initial_value=1, min=1, max=73, step=1)
+                self.bulk_apply = gui.add_button("apply (count first)")
+                self.bulk_text = gui.add_markdown("")
             self.export = gui.add_button("export labels (zip)")
 
     def _view_folder(self, gui, layers) -> None:
@@ -221,6 +231,8 @@ class Panels:
         self.points.on_update(on(lambda _: edit.select_listed(self.points.value)))
         self.hide.on_click(on(lambda _: edit.hide_selected()))
         self.visibility.on_click(on(lambda _: edit.cycle_visibility()))
+        self.bulk_apply.on_click(on(lambda _: edit.bulk(self.bulk_action.value, self.bulk_scope.value,
+                                                        int(self.bulk_to.value))))
         self.note.on_update(on(lambda _: edit.set_note(self.note.value)))
         self.drag_mode.on_update(on(lambda _: edit.set_drag_mode(self.drag_mode.value)))
         self.snap.on_update(on(lambda _: edit.set_snap(self.snap.value)))

@@ -200,6 +200,14 @@ class ClipShots:
         s = place.solver
         return [s.frame_error(t) for t in range(s.T)], [r.start for r in s.shots[1:]], s.keyframes
 
+    def shot_stems(self, stem: str, settings) -> list[str] | None:
+        """The frames of the frame's shot (built now if needed), in frame order; None outside a clip."""
+        place = self.place(stem, settings, build=False)
+        if place is None:
+            return None
+        solver = place.solver or self.build(place.clip, settings)
+        return [place.stems[t] for t in solver.shots[solver.shot_of(place.t)]]
+
     def accept(self, stem: str, settings) -> list[str]:
         """Accept the frame's whole shot (built now if needed); the stems reviewed."""
         place = self.place(stem, settings, build=False)
