@@ -9,7 +9,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from pnlviz.data.edits import set_keypoint
+from pnlviz.data.edit_changes import set_keypoint
 from pnlviz.field import load_field_model
 from pnlviz.geometry.camera import Camera
 from pnlviz.pipeline.clip import accept_shot, clip_changes, clip_solver, dataset_clips, read_cuts, set_cut

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pnlviz.data.edits import EditError, set_keypoint, set_occluded
+from pnlviz.data.edit_changes import set_keypoint, set_occluded
+from pnlviz.data.edits import EditError
 
 __all__ = ["ACTIONS", "MAX_FRAMES", "BulkPlan", "apply", "change_of", "plan"]
 

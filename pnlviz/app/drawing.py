@@ -17,7 +17,7 @@ from pnlviz.app.modes import DragMode, Mode
 from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
 from pnlviz.app.panels import LAYERS
 from pnlviz.app.state import FrameView
-from pnlviz.app.workspace import update_changed
+from pnlviz.app.handles import update_changed
 from pnlviz.viz import blank_canvas, top_view
 
 TOP_PX_PER_M = 3.0  # the bird's-eye view in the panel: about 350 px wide

@@ -225,7 +225,7 @@ class Editor:
         """O: the selected keypoint visible -> occluded (labelled where it is, hidden behind
         something: COCO v=1) -> absent (not on the frame) -> visible again (where its source put
         it); one undo step each."""
-        from pnlviz.data.edits import set_keypoint, set_occluded
+        from pnlviz.data.edit_changes import set_keypoint, set_occluded
 
         tab = self.tab
         if self.selected is None or self.selected.kind is not PointKind.KEYPOINTS:
@@ -258,7 +258,7 @@ class Editor:
     def set_note(self, text: str) -> None:
         """The frame's note for a colleague (saved at once, exported in the manifest; not a label
         change: the review status stays)."""
-        from pnlviz.data.edits import set_note
+        from pnlviz.data.edit_changes import set_note
 
         tab, stem = self.tab, self.tab.stem
         self.trail.act(stem, lambda: tab.state.write(stem, lambda rec: set_note(rec, str(text)), corrected=False,

@@ -14,7 +14,7 @@ import numpy as np
 
 from pnlviz.app.cards import clip_text
 from pnlviz.app.timeline import strip_image, worst_frames
-from pnlviz.app.workspace import update_changed
+from pnlviz.app.handles import update_changed
 
 PLAY_INTERVAL = 0.2  # seconds between frames while a clip plays
 

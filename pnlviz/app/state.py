@@ -24,14 +24,13 @@ from pnlviz.calib.frame import SOURCES, detection_settings_apply
 from pnlviz.conventions import EVAL_SIZE
 from pnlviz.data import DataError
 from pnlviz.data.annotations import annotation_to_json, parse_annotation
+from pnlviz.data.edit_changes import move_line_point, set_keypoint
 from pnlviz.data.edits import (
     REVIEW_STATES,
     EditError,
     EditsStore,
     check_keypoint_id,
     check_position,
-    move_line_point,
-    set_keypoint,
 )
 from pnlviz.field.model import load_field_model
 from pnlviz.app.activity import UserActivity

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from pnlviz.app.handles import update_changed
 from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
@@ -55,22 +56,6 @@ class WorkspaceEvents:
     pick: Callable[[Selection], None]  # a click on a point
     drag: Callable[[DragEvent], None]  # a point dragged (to the pixel in the event)
     screen_to_pixel: Callable[[np.ndarray], np.ndarray]  # screen fractions of the canvas -> image pixel
-
-
-def update_changed(handle, **props) -> None:
-    """Set those ``props`` of a viser handle (scene node or widget) that differ from what it has:
-    an unchanged value is not sent again (every scene message makes the browser draw again)."""
-    for name, value in props.items():
-        old = getattr(handle, name)
-        if isinstance(old, np.ndarray):  # viser keeps arrays in their wire type (float32, uint8)
-            new = np.asarray(value)
-            same = old.shape == new.shape and np.array_equal(old, new.astype(old.dtype, copy=False))
-        elif isinstance(value, (np.ndarray, tuple, list)):
-            same = np.shape(old) == np.shape(value) and np.array_equal(old, value)
-        else:
-            same = old == value
-        if not same:
-            setattr(handle, name, value)
 
 
 class _PointNodes:

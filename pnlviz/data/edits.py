@@ -44,7 +44,7 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from pnlviz.data.annotations import annotation_to_json, parse_annotation
+from pnlviz.data.annotations import parse_annotation
 from pnlviz.data.atomic import atomic_write_text
 from pnlviz.data.edits_layout import EditsLayout
 from pnlviz.data.errors import DataError
@@ -141,43 +141,6 @@ def check_position(x: Any, y: Any, size: tuple[int, int], stem: str) -> tuple[fl
         raise EditError(f"position ({x:.6g}, {y:.6g}) is off the {W}x{H} frame of {stem} "
                         "by more than half its size")
     return x, y
-
-
-def set_keypoint(rec: dict, kid: int, xy: tuple[float, float] | None) -> None:
-    """In a record: keypoint ``kid`` at pixel ``xy``, or not visible (None)."""
-    rec["keypoints"] = {**(rec.get("keypoints") or {}), str(kid): None if xy is None else list(xy)}
-
-
-def set_occluded(rec: dict, kid: int, occluded: bool) -> None:
-    """In a record: keypoint ``kid`` occluded (labelled where it is, but hidden behind a player or
-    an object: COCO's v=1) or not."""
-    ids = set(rec.get("occluded") or []) - {int(kid)}
-    if occluded:
-        ids.add(int(kid))
-    rec["occluded"] = sorted(ids) or None
-
-
-def set_note(rec: dict, text: str) -> None:
-    """In a record: the frame's note (free text for a colleague; empty: none)."""
-    if not isinstance(text, str):
-        raise EditError(f"a note is text, got {type(text).__name__}")
-    if len(text) > MAX_NOTE:
-        raise EditError(f"a note has at most {MAX_NOTE} characters, got {len(text)}")
-    rec["note"] = text.strip() or None
-
-
-def move_line_point(rec: dict, source: Callable[[], Mapping | None], stem: str, name: str, index: int,
-                    xy: tuple[float, float], size: tuple[int, int]) -> None:
-    """In a record: point ``index`` of annotated class ``name`` at pixel ``xy`` of a frame of
-    ``size``, in the edited annotation (made from ``source()``, the frame's own annotation, at the
-    first change); EditError when the annotation has no such point."""
-    edited = rec.get("annotation")
-    ann = parse_annotation(edited) if edited is not None else source()
-    if not ann or name not in ann or not (0 <= int(index) < len(ann[name])):
-        raise EditError(f"{stem} has no point {index} on {str(name)[:40]!r}")
-    W, H = size
-    ann[name][int(index)] = [xy[0] / (W - 1), xy[1] / (H - 1)]
-    rec["annotation"] = annotation_to_json(ann)
 
 
 def validate_record(obj: Any, source: str, checked_before: Collection[int] = ()) -> dict:

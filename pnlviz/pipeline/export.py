@@ -43,7 +43,7 @@ from __future__ import annotations
 import json
 import time
 import zipfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -109,6 +109,23 @@ def _frame_labels(reader: FrameReader, stem: str, record: dict, settings: Settin
     return view_labels(view, record, model)
 
 
+def _entry_extras(entry: dict, record: Mapping, fl: FrameLabels) -> tuple[Mapping, set[int]]:
+    """What the manifest entry says besides the labels (the shot a frame was reviewed with, its
+    slips, its occluded points, its note); returns the slips and the occluded ids."""
+    snap = record.get("snapshot") or {}
+    if snap.get("shot") is not None and fl.basis == "snapshot":
+        entry["shot"] = snap["shot"]  # reviewed with its shot: the camera is the shot model's
+    slips = (snap.get("slips") or {}) if fl.basis == "snapshot" else {}
+    if slips:  # hand points the rest of the frame disagreed with when it was reviewed: kept, listed
+        entry["slips"] = dict(slips)
+    occluded = set(record.get("occluded") or ())
+    if occluded & set(fl.labels):
+        entry["occluded"] = sorted(occluded & set(fl.labels))
+    if record.get("note"):
+        entry["note"] = record["note"]  # for a colleague
+    return slips, occluded
+
+
 def export_frame(reader: FrameReader, stem: str, settings: Settings | None = None, model: FieldModel | None = None,
                  view: FrameView | None = None, gate_px: float = GATE_PX) -> FrameExport:
     """The frame's export: a reviewed frame's labels as reviewed (:func:`reviewed_labels`),
@@ -122,17 +139,7 @@ def export_frame(reader: FrameReader, stem: str, settings: Settings | None = Non
     flagged = gate(fl, gate_px)
     entry = {**edits_entry(reader, stem), "calibrated": fl.camera is not None, "error": fl.error,
              "labels": fl.basis, "flagged": len(flagged)}
-    shot = (record.get("snapshot") or {}).get("shot")
-    if shot is not None and fl.basis == "snapshot":
-        entry["shot"] = shot  # reviewed with its shot: the camera is the shot model's
-    slips = ((record.get("snapshot") or {}).get("slips") or {}) if fl.basis == "snapshot" else {}
-    if slips:  # hand points the rest of the frame disagreed with when it was reviewed: kept, listed
-        entry["slips"] = dict(slips)
-    occluded = set(record.get("occluded") or ())
-    if occluded & set(fl.labels):
-        entry["occluded"] = sorted(occluded & set(fl.labels))
-    if record.get("note"):
-        entry["note"] = record["note"]  # for a colleague
+    slips, occluded = _entry_extras(entry, record, fl)
     try:
         ann = reader.annotation(stem, record)
     except DataError as exc:
