@@ -221,3 +221,47 @@ def test_an_edit_on_a_clip_frame_redraws_the_other_tabs_on_its_shot(video, tmp_p
     # background pass finishing meanwhile: the frame drawn is the same)
     assert drawn and set(drawn) == {stems[10]}
     assert b.view().camera is solver.camera(10) and solver.camera(10) is not before
+
+
+def test_a_shot_names_its_points_as_a_frame_does_annotation_first(tmp_path):
+    """One rule for what a point is called: a clip frame seen through its annotation and its
+    detections labels an annotated point "annotation" under its shot model as in its own review
+    snapshot (a shot-accepted frame used to export the annotation's points as detections), and a
+    point only the detector found "detection"."""
+    import json
+
+    from pnlviz.calib.frame import observations_for
+    from pnlviz.cli import main
+    from pnlviz.data import Predictions, write_predictions
+    from pnlviz.field.model import load_field_model
+    from pnlviz.geometry.camera import Camera
+    from pnlviz.pipeline import FrameReader, Settings
+    from pnlviz.pipeline.snapshot import provenance
+
+    out = tmp_path / "clip"
+    assert main(["synth", "--clip", "-n", "12", "--seed", "4", "--size", "480x270", "--out", str(out),
+                 "--no-progress"]) == 0
+    model = load_field_model()
+    stems = sorted(p.stem for p in out.glob("*.jpg"))
+    preds = {}
+    for s in stems:  # every catalogue keypoint the true camera puts in the frame, as a detector would
+        cam = Camera.from_soccernet(json.loads((out / "cameras" / f"camera_{s}.json").read_text()), (480, 270))
+        ids = [int(k) for k in model.keypoint_ids]
+        uv = cam.project(model.keypoint_xyz(np.array(ids)))
+        preds[s] = Predictions(keypoints={k: (x / 480, y / 270, 0.9) for k, (x, y) in zip(ids, uv)
+                                          if np.isfinite(x) and 2 < x < 478 and 2 < y < 268})
+    write_predictions(tmp_path / "preds.zip", preds)
+    settings = Settings(source="both")
+    with FrameReader.open(out, detections=tmp_path / "preds.zip", edits=tmp_path / "edits") as reader:
+        solver = clip_solver(reader, "clip4", stems, settings, model=model)
+        seen = {"annotation": 0, "detection": 0}
+        for t, stem in enumerate(stems):
+            inputs = reader.read(stem).inputs
+            obs, origin = observations_for(inputs, "both", model)
+            own = dict(zip(obs.kp_ids.tolist(), provenance(obs, origin, inputs.annotation, None, model)))
+            labels = solver.labels(t)
+            for kid, name in own.items():
+                if kid in labels:
+                    assert labels[kid].provenance == name, (stem, kid)
+                    seen[name] += 1
+    assert seen["annotation"] > 0 and seen["detection"] > 0

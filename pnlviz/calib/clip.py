@@ -118,7 +118,9 @@ class ClipSolver:
     observations without edits (None: nothing); ``size``: (W, H) of its frames; ``cameras``: the
     frames' own cameras when known (else calibrated here with ``calib_params``); ``changes``: the
     image change from each frame to the next (:func:`pnlviz.calib.temporal.image_changes`);
-    ``origins[t]``: "annotation" or "detection", what frame t's own labels are called."""
+    ``origins[t]``: what frame t's own labels are called: "annotation" or "detection", or per
+    keypoint ``{id: provenance}`` (a frame seen through its annotation and its detections,
+    :func:`pnlviz.pipeline.snapshot.provenance`: the one rule a frame's own review uses)."""
 
     observations: Sequence[Observations | None]
     size: tuple[int, int]
@@ -127,7 +129,7 @@ class ClipSolver:
     cameras: Sequence[Camera | None] | None = None
     changes: Sequence[float | None] | None = None
     cuts: CutEdits = field(default_factory=CutEdits)
-    origins: Sequence[str] | None = None
+    origins: Sequence[str | Mapping[int, str]] | None = None
     model: FieldModel | None = None
     #: the keypoint edits made so far: ``{frame: {"id": [x, y] | None}}`` (``cameras``, when given,
     #: are the frames' own cameras with them)
@@ -235,9 +237,10 @@ class ClipSolver:
         out: set[int] = set()
         for t in self._parts[k].frames:
             edits, base = self.edits.get(t), self.base[t]
-            if not edits or base is None or (self.origins is not None and self.origins[t] != "detection"):
+            if not edits or base is None:
                 continue
-            detected = {int(kid): base.kp_xy[i] for i, kid in enumerate(base.kp_ids)}
+            detected = {int(kid): base.kp_xy[i] for i, kid in enumerate(base.kp_ids)
+                        if self.provenance(t, int(kid)) == "detection"}
             for key, v in edits.items():
                 kid = int(key)
                 if kid in detected and (v is None or float(np.hypot(*(np.asarray(v) - detected[kid]))) > limit):
@@ -337,16 +340,24 @@ class ClipSolver:
             self._carried_by_shot[k] = carried_points(frames, self.edits, cams, self.field_model)
         return self._carried_by_shot[k]
 
+    def provenance(self, t: int, kid: int) -> str:
+        """What frame ``t``'s own keypoint ``kid`` is called (see ``origins``): "annotation" or
+        "detection"."""
+        own = self.origins[t] if self.origins is not None else None
+        if isinstance(own, Mapping):
+            return own.get(kid, "detection")
+        return own or "detection"
+
     def _frame_labels(self, t: int) -> dict[int, ClipLabel]:
         obs, cam = self.shown_observations(t), self.camera(t)
         labels: dict[int, ClipLabel] = {}
-        own = (self.origins[t] if self.origins is not None else None) or "detection"
         if obs is not None and obs.n_keypoints:
             res = np.hypot(*(cam.project(obs.kp_xyz) - obs.kp_xy).T) if cam is not None else None
             for i, kid in enumerate(obs.kp_ids.tolist()):
                 r = None if res is None or not np.isfinite(res[i]) else float(res[i])
                 labels[int(kid)] = ClipLabel(float(obs.kp_xy[i, 0]), float(obs.kp_xy[i, 1]),
-                                             "hand" if obs.pins[i] else own, r, str(obs.kp_sets[i]))
+                                             "hand" if obs.pins[i] else self.provenance(t, int(kid)), r,
+                                             str(obs.kp_sets[i]))
         for kid, uv in self._carried(self.shot_of(t)).get(t, {}).items():
             if kid not in labels:
                 labels[kid] = ClipLabel(float(uv[0]), float(uv[1]), "shot", 0.0, self.field_model.keypoints[kid].group)

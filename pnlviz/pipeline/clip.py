@@ -32,6 +32,7 @@ from pnlviz.data.state_files import read_state_json
 from pnlviz.data.snapshot import edits_digest
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.pipeline.reader import FrameReader, Settings
+from pnlviz.pipeline.snapshot import provenance
 
 __all__ = ["accept_shot", "clip_changes", "clip_solver", "dataset_clips", "read_cuts", "set_cut", "shot_snapshot"]
 
@@ -95,7 +96,7 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
     settings = settings or reader.default_settings()
     fs = reader.frame_settings(settings)
     base: list[Observations | None] = []
-    origins: list[str] = []
+    origins: list[str | dict[int, str]] = []
     edits: dict[int, dict] = {}
     origin0: str | None = None
     size: tuple[int, int] | None = None
@@ -109,7 +110,9 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
         obs, origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, model)
         origin0 = origin0 or origin
         base.append(obs)
-        origins.append("annotation" if origin == "annotation" else "detection")
+        # what each point is called: the rule of a frame's own review snapshot (annotation wins)
+        origins.append(dict(zip(obs.kp_ids.tolist(), provenance(obs, origin, read.inputs.annotation, None, model)))
+                       if obs is not None else "detection")
         if read.inputs.keypoint_edits:
             edits[t] = dict(read.inputs.keypoint_edits)
     cp = calib_params(fs, origin0)
