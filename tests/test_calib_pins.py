@@ -170,3 +170,21 @@ def test_the_app_draws_and_says_the_pins():
     assert cards.pin_lines(result)[0] == "pinned (placed by hand): 1 point (22)"
     assert any(r.startswith("22 · visible · flagged pin") for r in cards.point_rows(overlay, set()))
     assert "cannot agree" in cards.selected_text(Selection(PointKind.KEYPOINTS, 22), overlay, MODEL, 1)
+
+
+def test_observations_refuse_arrays_of_another_length_than_their_keypoints():
+    """A pin mask of the wrong length used to mean "no pins" silently: now it is refused by name,
+    as is any keypoint array whose length is not the ids'."""
+    import numpy as np
+    import pytest
+
+    from pnlviz.calib.observations import Observations
+
+    ids, xy, xyz = np.array([1, 2, 3]), np.zeros((3, 2)), np.zeros((3, 3))
+    sets, main = np.array(["Kp"] * 3), np.ones(3, bool)
+    ok = Observations(960, 540, ids, xy, xyz, sets, main, kp_pinned=np.array([True, False, False]))
+    assert ok.pins.tolist() == [True, False, False]
+    with pytest.raises(ValueError, match="kp_pinned"):
+        Observations(960, 540, ids, xy, xyz, sets, main, kp_pinned=np.array([True, False]))
+    with pytest.raises(ValueError, match="kp_xy"):
+        Observations(960, 540, ids, np.zeros((2, 2)), xyz, sets, main)

@@ -24,6 +24,9 @@ class Observations:
     * ``kp_pinned`` (N,) True for keypoints a hand placed or moved (pinned: the camera is fitted
       to them above the others and never drops them; see :mod:`pnlviz.calib.pins`). Empty means
       none.
+
+    Shapes are checked when made: a keypoint array of another length than ``kp_ids`` (a pin mask
+    of the wrong length would silently mean "no pins") is a ValueError naming it.
     """
 
     width: int
@@ -36,6 +39,17 @@ class Observations:
     lines: dict[str, np.ndarray] = field(default_factory=dict)
     circles: dict[str, np.ndarray] = field(default_factory=dict)
     kp_pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __post_init__(self) -> None:
+        n = len(np.asarray(self.kp_ids))
+        shapes = {"kp_xy": (n, 2), "kp_xyz": (n, 3), "kp_sets": (n,), "kp_main": (n,)}
+        for name, shape in shapes.items():
+            got = np.shape(getattr(self, name))
+            if got != shape and not (n == 0 and np.size(getattr(self, name)) == 0):
+                raise ValueError(f"Observations.{name}: expected shape {shape} for {n} keypoints, got {got}")
+        pinned = np.shape(self.kp_pinned)
+        if pinned not in ((n,), (0,)):
+            raise ValueError(f"Observations.kp_pinned: expected ({n},) or empty, got {pinned}")
 
     @classmethod
     def from_keypoints(cls, width: int, height: int, keypoints: dict[int, tuple[float, float]],
