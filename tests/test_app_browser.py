@@ -449,10 +449,12 @@ def test_every_label_names_its_input(data, browser, serve):
     page.close()
 
 
-def test_the_title_stays_in_view_and_no_webgl_notice_covers_the_image(data, browser, serve):
+def test_the_title_stays_in_view_no_webgl_notice_covers_the_image_and_a_slow_action_shows_a_cue(data, browser,
+                                                                                                   serve):
     """At 1600x900 with the panel scrolled to its bottom (editing points far below the title), the
     frame's title is still at the top of the panel; viser's "Software WebGL rendering" notice (this
-    machine has no GPU, like most annotation VMs) is closed as it appears."""
+    machine has no GPU, like most annotation VMs) is closed as it appears; an action running longer
+    than 150 ms shows "working..." over the image's corner until it ends (a quick one shows none)."""
     app = serve(data)
     page = browser.new_page(viewport={"width": 1600, "height": 900})
     page.goto(app.page_url)
@@ -474,6 +476,19 @@ def test_the_title_stays_in_view_and_no_webgl_notice_covers_the_image(data, brow
     title = page.get_by_role("heading", name=stem)
     box = title.bounding_box()
     assert box is not None and 0 <= box["y"] < 120, box  # still at the top of the panel
+    # an action slower than 150 ms shows the busy cue over the image until it is done
+    session = tab(app)
+    session.queue.enqueue(lambda: time.sleep(1.5))
+    cue = page.locator("#pnlviz-busy-cue")
+    cue.wait_for(state="visible", timeout=5000)
+    canvas = canvas_box(page)
+    at = cue.bounding_box()
+    assert canvas["x"] <= at["x"] < canvas["x"] + 100 and canvas["y"] <= at["y"] < canvas["y"] + 100
+    cue.wait_for(state="hidden", timeout=10000)
+    session.queue.enqueue(lambda: time.sleep(0.01))  # a quick one: no cue
+    session.queue.flush()
+    time.sleep(0.5)
+    assert page.evaluate("() => window.__pnlvizBridge.busyShown") == 1
     page.close()
 
 

@@ -428,3 +428,18 @@ def test_the_keypoint_map_shows_the_chosen_id_large_enough_to_read():
         assert image.shape == whole
         guide = (np.abs(image - (255, 215, 0)).sum(axis=2) < 90)
         assert guide.sum(axis=0).max() > 0.5 * image.shape[0], kid  # the vertical guide through the id
+
+
+def test_the_queue_says_busy_only_for_an_action_slower_than_150_ms():
+    import time
+
+    calls = []
+    queue = TabQueue(lambda *a, **k: None)
+    queue.busy = calls.append
+    queue.enqueue(lambda: time.sleep(0.02))
+    queue.flush()
+    assert calls == []
+    queue.enqueue(lambda: time.sleep(0.5))
+    queue.flush()
+    assert calls == [True, False]
+    queue.close()

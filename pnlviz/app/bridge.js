@@ -561,14 +561,42 @@
     Object.assign(row.style, { position: "sticky", top: "0", zIndex: "3", background: bg });
     anchor.dataset.pinned = "1";
   };
+  // the busy cue: the server flags an action running longer than 150 ms (#pnlviz-busy); a badge
+  // over the image's top-left corner, where the eyes are, until it is done
+  const showBusy = () => {
+    const flag = document.getElementById("pnlviz-busy");
+    const busy = !!flag && flag.dataset.busy === "1";
+    let cue = document.getElementById("pnlviz-busy-cue");
+    if (!busy) {
+      if (cue) cue.style.display = "none";
+      state.busy = false;
+      return;
+    }
+    const canvas = viewCanvas();
+    if (!canvas) return;
+    if (!cue) {
+      cue = document.createElement("div");
+      cue.id = "pnlviz-busy-cue";
+      cue.textContent = "working\u2026";
+      Object.assign(cue.style, { position: "fixed", zIndex: "1000", padding: "4px 10px", borderRadius: "12px",
+        background: "rgba(20, 20, 20, 0.8)", color: "#ffd24a", font: "600 13px sans-serif", pointerEvents: "none" });
+      document.body.appendChild(cue);
+    }
+    const box = canvas.getBoundingClientRect();
+    Object.assign(cue.style, { left: `${box.left + 12}px`, top: `${box.top + 12}px`, display: "block" });
+    if (!state.busy) state.busyShown = (state.busyShown || 0) + 1;
+    state.busy = true;
+  };
   mendLabels();
   onView();
   closeSoftwareNotice();
   pinTitle();
+  showBusy();
   new MutationObserver(() => {
     mendLabels();
     closeSoftwareNotice();
     pinTitle();
+    showBusy();
     onView(); // the server's view: an answer takes the transform off before this frame is drawn
   }).observe(document.body, { childList: true, subtree: true, attributes: true, attributeFilter: ["data-v", "data-points", "data-answer"] });
   // the canvas size in CSS pixels (the screen pixels a zoom is measured in; viser reports the

@@ -92,6 +92,11 @@ def keys_markdown() -> str:
             "**arrows** nudge · **Del** hide · **Ctrl+Z** undo · **V** 3D · more: Help")
 
 
+def busy_html(busy: bool) -> str:
+    """The element the page script reads for the busy cue (bridge.js draws it over the image)."""
+    return f'<div id="pnlviz-busy" data-busy="{int(bool(busy))}"></div>'
+
+
 def help_markdown() -> str:
     return "\n".join(f"- **{keys}**: {what}" for keys, what in KEYS)
 
@@ -119,6 +124,8 @@ class Panels:
         # the pointer bridge: a text field it writes to (hidden by the bridge) and its loader
         self.bridge_field = gui.add_text(BRIDGE_FIELD, initial_value="")
         self.bridge = gui.add_html(bridge_html(BRIDGE_FIELD, Mode.IMAGE))
+        #: the busy flag the page shows as a cue over the image (an action slower than 150 ms)
+        self.busy = gui.add_html(busy_html(False))
         self._bind()
 
     def _frame_folder(self, gui) -> None:
@@ -209,6 +216,10 @@ class Panels:
                                         initial_value=settings.alpha)
             self.sources = sources
             self.source = gui.add_dropdown("keypoint source", sources, initial_value=settings.source)
+
+    def set_busy(self, busy: bool) -> None:
+        """The tab is at work on an action (shown over the image by the page) or done."""
+        self.busy.content = busy_html(busy)
 
     def set_mode(self, mode: Mode) -> None:
         self.bridge.content = bridge_html(BRIDGE_FIELD, mode)

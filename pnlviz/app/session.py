@@ -67,6 +67,7 @@ class Session:
         self.scene3d = Scene3D(scene, nodes)
         self.panels = Panels(self)
         self.panels.set_order(len(self.frames.order), self.index)
+        self.queue.busy = self.panels.set_busy  # a cue over the image while an action takes long
         #: the image view as the page's bridge needs it (pans and zooms in the page: pnlviz.app.pagesync)
         self.page = PageSync(gui, self.workspace, self.view_control) if client is not None else None
         if self.page is not None:

@@ -21,6 +21,10 @@ from pnlviz.app.activity import UserActivity
 from pnlviz.app.state import EditError
 
 
+#: an action running longer than this (seconds) shows the busy cue
+BUSY_AFTER_S = 0.15
+
+
 class TabQueue:
     """One tab's actions, run one at a time on a thread of their own. ``notify(title, body)``
     shows an unexpected error to the tab; ``loop``: viser's event loop, which a value set from
@@ -36,6 +40,9 @@ class TabQueue:
         self._own_sets: dict[int, int] = {}
         self._own_lock = threading.Lock()
         self.closed = False
+        #: ``busy(True)`` when an action has run :data:`BUSY_AFTER_S` without ending, ``busy(False)``
+        #: when it ends (the tab shows a cue where the user looks); None: no cue
+        self.busy: Callable[[bool], None] | None = None
 
     def ordered(self, fn: Callable):
         """``fn(event)`` as a viser callback that keeps the browser's order: it only puts the call
@@ -78,12 +85,29 @@ class TabQueue:
         """One queued action; an unexpected error is printed and shown, and the tab goes on."""
         if self.activity is not None:
             self.activity.begin()
+        shown = threading.Event()
+        cue = None
+        if self.busy is not None:
+            busy = self.busy
+
+            def say_busy() -> None:
+                shown.set()
+                busy(True)
+
+            cue = threading.Timer(BUSY_AFTER_S, say_busy)
+            cue.daemon = True
+            cue.start()
         try:
             action()
         except Exception as exc:  # noqa: BLE001 - the queue would swallow it silently
             traceback.print_exc()
             self.notify("internal error", f"{type(exc).__name__}: {exc}")
         finally:
+            if cue is not None:
+                cue.cancel()
+                cue.join()  # it either never ran or has said busy: then it is said done
+                if shown.is_set() and self.busy is not None:
+                    self.busy(False)
             if self.activity is not None:
                 self.activity.end()
 
