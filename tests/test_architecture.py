@@ -23,7 +23,7 @@ ALLOWED = {
     "pnlviz.errors": set(),
     "pnlviz.field": {"pnlviz.paths"},
     "pnlviz.geometry": {"pnlviz.field"},
-    "pnlviz.data": {"pnlviz.field"},
+    "pnlviz.data": {"pnlviz.conventions", "pnlviz.field"},
     "pnlviz.labels": {"pnlviz.field", "pnlviz.geometry", "pnlviz.data"},
     "pnlviz.metrics": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data"},
     "pnlviz.calib": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.labels"},
@@ -194,3 +194,24 @@ def test_no_block_of_more_than_10_lines_written_twice():
     """Runs of 11 code lines with the same shape (the same lines, or the same with other names,
     numbers and strings), anywhere in pnlviz/."""
     assert repeated_blocks(_modules(), REPO) == []
+
+
+def test_each_vocabulary_is_written_once():
+    """Review statuses, sources, provenances, failure codes and finding kinds are defined once
+    (pnlviz/conventions.py, as Literal types and their tuples): no other module spells one of
+    those tuples out again."""
+    from pnlviz import conventions
+
+    vocabularies = [conventions.REVIEW_STATES, conventions.SOURCES, conventions.PROVENANCES,
+                    conventions.FAILURE_CODES, conventions.FINDING_KINDS, conventions.REVIEWED]
+    found = []
+    for path in _modules():
+        if path.name == "conventions.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Tuple) and len(node.elts) >= 2 and all(
+                    isinstance(e, ast.Constant) and isinstance(e.value, str) for e in node.elts):
+                words = tuple(e.value for e in node.elts)
+                if words in vocabularies:
+                    found.append(f"{path.relative_to(REPO)}:{node.lineno} {words}")
+    assert found == []

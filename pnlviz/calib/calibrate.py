@@ -44,6 +44,7 @@ from pnlviz.calib.problem import FrameData
 from pnlviz.calib.refine import CameraProblem, RefineParams
 from pnlviz.calib.voting import SUBSETS, subset_mask
 from pnlviz.conventions import DEFAULT_ALPHA, EVAL_WIDTH
+from pnlviz.conventions import FAILURE_CODES as _FAILURE_CODES
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.homography import camera_from_ground_homography
@@ -52,7 +53,7 @@ from pnlviz.geometry.homography import camera_from_ground_homography
 #: why a frame has no camera (``CalibrationResult.failure_code``; "pins": its hand-placed points
 #: alone cannot calibrate it, ``pin_condition`` says which condition fails); the engine adds "no_input"
 #: (nothing to calibrate from) and "internal" (a bug), the commands "bad_input" (unreadable files)
-FAILURE_CODES = ("too_few_keypoints", "degenerate", "no_inliers", "residual", "pins")
+FAILURE_CODES = _FAILURE_CODES
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pnlviz.conventions import PROVENANCES
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
 
@@ -56,7 +57,7 @@ __all__ = ["DISTRUST_PX", "PROVENANCE", "ClipLabel", "ClipSolver", "carried_poin
 DISTRUST_PX = 4.5
 
 #: where a clip frame's label comes from
-PROVENANCE = ("annotation", "detection", "hand", "shot")
+PROVENANCE = PROVENANCES
 
 
 @dataclass(frozen=True)

@@ -19,11 +19,12 @@ from pnlviz.calib.inputs import Detections, observations_from_annotation, observ
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.sources import KeypointEdit, apply_keypoint_edits, merge_observations
 from pnlviz.conventions import DEFAULT_ALPHA
+from pnlviz.conventions import SOURCES as _SOURCES
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
 
 #: which observations a frame is calibrated from: "both" merges annotation and detections
-SOURCES = ("annotation", "detections", "both")
+SOURCES = _SOURCES
 
 
 @dataclass(frozen=True)

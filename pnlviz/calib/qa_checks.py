@@ -17,9 +17,10 @@ from pnlviz.field.model import FieldModel
 from pnlviz.field.names import CIRCLE_CLASSES, MIRROR, MODEL_CLASSES
 from pnlviz.geometry.camera import Camera
 from pnlviz.geometry.distance import closest
+from pnlviz.conventions import FINDING_KINDS
 
 #: the kinds of finding, in the order a reviewer reads them
-KINDS = ("wrong_class", "off_projection", "split_class", "missing_class", "detection_disagreement", "no_camera")
+KINDS = FINDING_KINDS
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ def failure_words() -> dict[str, str]:
 
 def add_calibrate_parser(sub) -> None:
     from pnlviz.commands.common import add_detector_settings, add_force_edits, parse_size
+    from pnlviz.conventions import SOURCES
 
     p = sub.add_parser("calibrate", help="calibrate every frame (from annotations or PnLCalib detections)",
                        description="Calibrate every frame of a dataset and write camera_<stem>.json files "
@@ -52,7 +53,7 @@ def add_calibrate_parser(sub) -> None:
                                                    "the detector's settings file beside it (preds.json, from pnlviz "
                                                    "detect --settings) applies")
     add_detector_settings(p)
-    p.add_argument("--source", choices=("annotation", "detections", "both"), default=None,
+    p.add_argument("--source", choices=SOURCES, default=None,
                    help="what the frames are calibrated from: their annotations, their --detections, or both merged "
                         "(default: detections when --detections is given, else annotation); a frame without the "
                         "annotation uses its detections")

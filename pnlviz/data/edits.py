@@ -51,8 +51,9 @@ from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe, dumps
 from pnlviz.data.reading import read_file
 from pnlviz.data.snapshot import edits_digest, validate_snapshot
+from pnlviz.conventions import REVIEW_STATES as _REVIEW_STATES
 
-REVIEW_STATES = ("accepted", "corrected", "rejected")
+REVIEW_STATES = _REVIEW_STATES
 #: the fields a record may hold; anything else is dropped when it is read ("frame": the identity of
 #: the frame it was written for, :mod:`pnlviz.data.edits_folder`)
 FIELDS = ("review", "annotation", "keypoints", "occluded", "note", "history", "snapshot", "updated", "frame")

@@ -37,9 +37,10 @@ from typing import Any
 from pnlviz.data.errors import DataError
 from pnlviz.data.jsonio import as_number, describe
 from pnlviz.data.predictions import parse_predictions
+from pnlviz.conventions import PROVENANCES as _PROVENANCES, SOURCES
 
-PROVENANCES = ("annotation", "detection", "hand", "shot")
-SNAPSHOT_SOURCES = ("annotation", "detections", "both")
+PROVENANCES = _PROVENANCES
+SNAPSHOT_SOURCES = SOURCES
 
 
 def edits_digest(record: Mapping) -> str:

@@ -81,7 +81,7 @@ def export_stems(reader: FrameReader, include_all: bool = False) -> list[str]:
     """The frames an export holds, in dataset order: the accepted and corrected ones, or all."""
     if include_all:
         return list(reader.stems)
-    return [s for s in reader.stems if reader.edits_folder.review(s) in ("accepted", "corrected")]
+    return [s for s in reader.stems if reader.edits_folder.review(s) in REVIEWED]
 
 
 def edits_entry(reader: FrameReader, stem: str) -> dict:

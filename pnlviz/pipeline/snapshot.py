@@ -23,6 +23,7 @@ from pnlviz.calib.frame import FrameSettings, calibrate_frame
 from pnlviz.calib.inputs import observations_from_annotation
 from pnlviz.calib.observations import Observations
 from pnlviz.conventions import EVAL_SIZE
+from pnlviz.conventions import REVIEWED as _REVIEWED
 from pnlviz.data.predictions import parse_predictions, predictions_to_json
 from pnlviz.data.snapshot import edits_digest
 from pnlviz.field.model import FieldModel, load_field_model
@@ -31,7 +32,7 @@ from pnlviz.geometry.camera import Camera
 #: the outlier gate: a visible point farther than this from its frame's camera, in pixels at
 #: 960x540 (scaled with the frame's diagonal), is exported as flagged, not as ground truth
 GATE_PX = 10.0
-REVIEWED = ("accepted", "corrected")
+REVIEWED = _REVIEWED
 
 
 @dataclass(frozen=True)
