@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
 
     generate(tempfile.mkdtemp(prefix="bench_synth_warm_"), 1, args.seed + 1, size=args.size, progress=False)
     with tempfile.TemporaryDirectory(prefix="bench_synth_") as out:
-        summary = generate(out, args.frames, args.seed, size=args.size, workers=1, progress=False)
+        summary = generate(out, args.frames, args.seed, size=args.size, progress=False)
     # Where the time goes (same frames, nothing written).
     t_cam = t_render = t_ann = 0.0
     for i in range(args.frames):

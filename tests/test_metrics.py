@@ -395,7 +395,10 @@ def test_evaluate_dataset_reports_and_skips_bad_files(tmp_path, wc14):
     assert summary.unmatched_cameras == ["extra"] and len(lines) == 2
     assert all("\n" not in line for line in lines)
     # the same with Camera objects, and in two processes
-    direct = evaluate_dataset(gt, {s: cams[s] for s in stems[:3]}, progress=False, workers=2)
+    from pnlviz.commands.batch import map_items  # what pnlviz eval --workers 2 runs it with
+
+    direct = evaluate_dataset(gt, {s: cams[s] for s in stems[:3]}, progress=False,
+                              run=lambda fn, chunks: map_items(fn, chunks, processes=2, desc="eval", progress=False))
     assert [f.accuracy(5) for f in direct.frames if f.calibrated] == \
            [f.accuracy(5) for f in summary.frames if f.calibrated]
     cams_read, problems = read_cameras(pred)

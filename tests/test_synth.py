@@ -53,7 +53,10 @@ def test_same_seed_gives_identical_files_and_worker_count_does_not_matter(small_
     generate(again, 3, seed=5, size=SMALL, progress=False)
     assert folder_bytes(again) == folder_bytes(small_run)
     pooled = tmp_path / "pooled"
-    generate(pooled, 3, seed=5, size=SMALL, workers=2, progress=False)
+    from pnlviz.commands.batch import map_items  # what pnlviz synth --workers 2 runs it with
+
+    generate(pooled, 3, seed=5, size=SMALL, progress=False,
+             run=lambda fn, jobs: map_items(fn, jobs, processes=2, desc="synth", progress=False))
     assert folder_bytes(pooled) == folder_bytes(small_run)
 
 

@@ -20,6 +20,8 @@ by frame and the others go on.
 
 from __future__ import annotations
 
+import argparse
+
 import contextlib
 import itertools
 import sys
@@ -244,6 +246,31 @@ def run_batch(job: BatchJob, items: Sequence, handle: Callable[[Any], None], arg
         bar.close()
     run.elapsed = time.perf_counter() - t0
     return run
+
+
+@dataclass
+class MapJob(BatchJob):
+    """A module-level function over items (``fn(item)`` each), as a batch job: the work of the
+    commands whose library function takes a runner (``synth``, ``eval``)."""
+
+    fn: Callable[[Any], Any] | None = None
+
+    def run_chunk(self, state, items: list) -> list:
+        assert self.fn is not None
+        return [self.fn(item) for item in items]
+
+
+def map_items(fn: Callable[[Any], Any], items: Sequence, *, processes: int = 1, desc: str,
+              progress: bool = True) -> list:
+    """``fn(item)`` of every item, in order, through the batch runner (here, or in a pool of
+    ``processes`` worker processes that leave Ctrl+C to this one), under its progress bar;
+    KeyboardInterrupt when it was interrupted."""
+    out: list = []
+    run = run_batch(MapJob(fn=fn), list(items), out.append, argparse.Namespace(dask=None, scheduler=None), desc=desc,
+                    processes=processes, progress=progress)
+    if run.interrupted:
+        raise KeyboardInterrupt
+    return out
 
 
 def interrupted(kept: int, total: int, out) -> int:

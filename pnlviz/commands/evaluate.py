@@ -117,8 +117,12 @@ def _eval_soccernet(args, gt, cameras: dict, progress: bool) -> None:
     (``--gt``), printed (and written to ``--csv``)."""
     from pnlviz.metrics.soccernet import evaluate_dataset
 
-    summary = evaluate_dataset(gt, cameras, args.thresholds, progress=progress,
-                               count_unknown=not args.ignore_unknown, workers=max(1, args.workers),
+    from pnlviz.commands.batch import map_items
+
+    workers = max(1, args.workers)
+    summary = evaluate_dataset(gt, cameras, args.thresholds, progress=progress, count_unknown=not args.ignore_unknown,
+                               run=lambda fn, chunks: map_items(fn, chunks, processes=workers, desc="eval",
+                                                                progress=progress),
                                on_error=_report)
     _require_matches(args, summary, len(cameras))
     print(f"SoccerNet camera calibration (960x540): {args.gt} vs {args.pred}")

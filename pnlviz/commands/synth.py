@@ -83,6 +83,7 @@ def size_problem(size: tuple[int, int], workers: int) -> str | None:
 
 def run_synth(args: argparse.Namespace) -> int:
     """Run ``pnlviz synth``; returns the process exit code."""
+    from pnlviz.commands.batch import map_items
     from pnlviz.synth.writer import OutputFolderError, generate
 
     from pnlviz.data.outputs import check_writable
@@ -94,7 +95,9 @@ def run_synth(args: argparse.Namespace) -> int:
         return 2
     try:
         summary = generate(args.out, args.n, args.seed, size=tuple(args.size), start_index=args.start_index,
-                           workers=args.workers, progress=not args.no_progress, force=args.force, clip=args.clip)
+                           progress=not args.no_progress, force=args.force, clip=args.clip,
+                           run=lambda fn, jobs: map_items(fn, jobs, processes=min(args.workers, max(1, len(jobs))),
+                                                          desc="synth", progress=not args.no_progress))
     except OutputFolderError as exc:
         print(f"pnlviz synth: error: {exc}", file=sys.stderr)
         return 2

@@ -40,7 +40,7 @@ order they differ by float32 rounding only (< 1e-6).
 
 from __future__ import annotations
 
-import math
+import functools
 import os
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
@@ -392,13 +392,17 @@ class Summary:
         return "\n".join(lines)
 
 
+#: frames scored per task when a runner spreads the work (a task costs about 2 ms a frame)
+EVAL_CHUNK = 32
+
+
 def _evaluate_chunk(items: list[tuple[str, Any, dict]], thresholds: tuple[float, ...]) -> list[FrameResult]:
     return [evaluate_frame(cam, ann, thresholds, stem=stem) for stem, cam, ann in items]
 
 
 def evaluate_dataset(gt: Dataset | str | os.PathLike, cameras: Mapping[str, Camera | Mapping] | str | os.PathLike,
                      thresholds: Iterable[float] = DEFAULT_THRESHOLDS, progress: bool = True, *,
-                     count_unknown: bool = True, workers: int = 1,
+                     count_unknown: bool = True, run: Callable[[Callable, list], list] | None = None,
                      on_error: Callable[[str], Any] | None = None) -> Summary:
     """Score every annotated frame of ``gt`` (a :class:`Dataset`, or a folder / zip path) with
     ``cameras`` (``{stem: Camera | dict}``, or a path to a zip / folder of ``camera_<stem>.json``).
@@ -406,7 +410,9 @@ def evaluate_dataset(gt: Dataset | str | os.PathLike, cameras: Mapping[str, Came
     Bad annotations are skipped (not counted) and bad camera files make their frame
     uncalibrated; each is reported as one line to ``on_error`` and kept in the summary.
     ``count_unknown`` keeps ``Goal unknown`` / ``Line unknown`` as the official evaluator does.
-    ``workers > 1`` scores frames in that many processes (same results, same order).
+    ``run(fn, chunks)``: how chunks of frames are scored (``pnlviz eval`` gives the batch runner,
+    :func:`pnlviz.commands.batch.map_items`, with its worker processes: same results, same order);
+    by default here, under a progress bar.
     """
     from tqdm import tqdm
 
@@ -426,22 +432,17 @@ def evaluate_dataset(gt: Dataset | str | os.PathLike, cameras: Mapping[str, Came
              for stem, ann in ds.iter_annotations(on_error=bad_annotation, keep_unknown=count_unknown)]
     seen = {s for s, _, _ in items}
     unmatched = [s for s in cameras if s not in seen]
-    bar = tqdm(total=len(items), desc="eval", unit="frame", disable=not progress or None)
     frames: list[FrameResult] = []
+    if run is not None:
+        chunks = [items[i:i + EVAL_CHUNK] for i in range(0, len(items), EVAL_CHUNK)]
+        for res in run(functools.partial(_evaluate_chunk, thresholds=thresholds), chunks):
+            frames.extend(res)
+        return Summary(thresholds, frames, skipped_ann, skipped_cams, unmatched)
+    bar = tqdm(total=len(items), desc="eval", unit="frame", disable=not progress or None)
     try:
-        if workers > 1 and len(items) > 1:
-            from concurrent.futures import ProcessPoolExecutor
-
-            size = max(1, min(64, math.ceil(len(items) / (4 * workers))))
-            chunks = [items[i:i + size] for i in range(0, len(items), size)]
-            with ProcessPoolExecutor(workers) as pool:
-                for res in pool.map(_evaluate_chunk, chunks, [thresholds] * len(chunks)):
-                    frames.extend(res)
-                    bar.update(len(res))
-        else:
-            for stem, cam, ann in items:
-                frames.append(evaluate_frame(cam, ann, thresholds, stem=stem))
-                bar.update(1)
+        for stem, cam, ann in items:
+            frames.append(evaluate_frame(cam, ann, thresholds, stem=stem))
+            bar.update(1)
     finally:
         bar.close()
     return Summary(thresholds, frames, skipped_ann, skipped_cams, unmatched)

@@ -27,6 +27,7 @@ import json
 import os
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -199,17 +200,20 @@ def _worker_init() -> None:
 
 
 def _worker(job: tuple) -> str:
+    _worker_init()  # whichever process renders it: one OpenCV thread (the runner's processes are the parallelism)
     return write_frame(*job)
 
 
 def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int] = EVAL_SIZE,
-             start_index: int = 0, workers: int = 1, progress: bool = True, *, force: bool = False,
-             clip: bool = False) -> SynthSummary:
+             start_index: int = 0, progress: bool = True, *, force: bool = False,
+             clip: bool = False, run: Callable[[Callable, list], object] | None = None) -> SynthSummary:
     """Write frames ``start_index .. start_index + n - 1`` of ``seed`` into ``out_dir``; with
     ``clip``, the ``n`` frames of clip ``seed`` (:mod:`pnlviz.synth.clip`: pan-tilt-zoom shots and
     cuts, stems ``clip<seed>-IMG_<nnnn>``).
 
-    ``workers > 1`` renders in that many processes (same output). Refuses a non-empty folder
+    ``run(fn, jobs)``: how the frames are rendered (``pnlviz synth`` gives the batch runner,
+    :func:`pnlviz.commands.batch.map_items`, with its worker processes: the same output); by
+    default one after the other here, under a progress bar. Refuses a non-empty folder
     that is not a previous synthetic output of the same seed and size unless ``force`` (see
     :func:`check_output_folder`).
     """
@@ -232,18 +236,13 @@ def generate(out_dir: str | os.PathLike, n: int, seed: int, size: tuple[int, int
     from tqdm import tqdm
 
     start = time.perf_counter()
-    with tqdm(total=n, desc="synth", unit="frame", disable=not progress) as bar:
-        if workers <= 1 or n <= 1:
+    if run is not None:
+        run(_worker, jobs)
+    else:
+        with tqdm(total=n, desc="synth", unit="frame", disable=not progress) as bar:
             for job in jobs:
                 _worker(job)
                 bar.update(1)
-        else:
-            import multiprocessing
-
-            ctx = multiprocessing.get_context("spawn")
-            with ctx.Pool(min(workers, n), initializer=_worker_init) as pool:
-                for _ in pool.imap_unordered(_worker, jobs):
-                    bar.update(1)
     return SynthSummary(root, n, time.perf_counter() - start)
 
 
