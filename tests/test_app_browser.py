@@ -349,6 +349,33 @@ def test_a_frame_without_a_camera_is_labelled_and_calibrates_after_four_points(t
     page.close()
 
 
+def test_ctrl_click_selects_several_keypoints_and_delete_hides_them_in_one_step(data, browser, serve):
+    """Ctrl+click two keypoints (both ringed), Delete: both absent in one undo step; Ctrl+Z brings
+    both back."""
+    import numpy as np
+
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    stem = session.stem
+    obs = session.view().observations
+    order = np.argsort(obs.kp_xy[:, 0])
+    picks = [int(order[len(order) // 4]), int(order[3 * len(order) // 4])]  # apart, both well inside the view
+    for i in picks:
+        page.keyboard.down("Control")
+        page.mouse.click(*on_screen(page, session, obs.kp_xy[i]))
+        page.keyboard.up("Control")
+    kids = [int(obs.kp_ids[i]) for i in picks]
+    wait_until(lambda: session.editor.selected_ids() == kids)
+    assert len(session.workspace.also) == 1
+    page.keyboard.press("Delete")
+    wait_until(lambda: all((app.state.edits.get(stem).get("keypoints") or {}).get(str(k), 0) is None for k in kids))
+    assert app.state.edits.history(stem) == (1, 0)  # one step
+    page.keyboard.press("Control+z")
+    wait_until(lambda: not (app.state.edits.get(stem).get("keypoints") or {}))
+    page.close()
+
+
 def test_a_review_key_advances_and_undo_comes_back(data, browser, serve):
     app = serve(data)
     page = open_page(browser, app, "focal")

@@ -44,6 +44,55 @@ class Drag:
         return bool(np.hypot(*(self.uv - self.origin)) > 0.05)
 
 
+
+def say_slip(tab, stem: str, kid: int) -> None:
+    """After a keypoint was placed or moved by hand: when the rest of the frame puts it farther
+    than the outlier gate from where it was put (:func:`pnlviz.pipeline.snapshot.hand_slips`),
+    say so at once; the point stays where the hand put it."""
+    from pnlviz.pipeline.snapshot import hand_slips
+
+    state, settings = tab.state, tab.settings
+    try:
+        view = state.view(stem, settings)
+        found = hand_slips(view, state.reader.frame_settings(view.settings), state.model, kids=[kid])
+    except EditError:
+        return
+    if kid not in found:
+        return
+    r = found[kid]
+    far = "off the camera" if r == float("inf") else f"{r:.0f} px"
+    text = (f"**point {kid} is {far} from where the rest of {stem} puts it: a slip?** It stays where "
+            f"you put it (a hand's point is never moved) and is listed as a possible slip when the frame "
+            f"is reviewed and in the export's manifest; Ctrl+Z takes it back.")
+    tab.notify(f"possible slip: point {kid}", text.replace("**", ""), error=False)
+    tab.panels.gate_text.content = text
+
+
+
+def ask_before_accepting(editor, stem: str) -> bool:
+    """Accepting a frame the label-error finder flags (a class on the wrong side, a mirrored
+    frame: :func:`pnlviz.app.triage.judge_view`) asks once: True (not accepted) the first time,
+    with the finding said; the same frame with the same edits accepted at the second G."""
+    from pnlviz.app.triage import judge_view
+
+    state = editor.tab.state
+    qa = judge_view(state.view(stem, editor.tab.settings))
+    if qa is None or qa.score < 1 or not qa.findings:
+        return False
+    key = (stem, state.edits.digest(stem))
+    if editor.asked == key:
+        editor.asked = None
+        return False
+    editor.asked = key
+    worst = qa.findings[0]
+    fix = " **F** applies its suggested fix;" if worst.fix is not None else ""
+    text = (f"**{stem} not accepted yet: the label-error finder flags it** ({worst.message}).{fix} "
+            f"**G** again accepts it as it is.")
+    editor.tab.notify(f"{stem}: accept anyway?", text.replace("**", ""), error=False)
+    editor.tab.panels.gate_text.content = text
+    return True
+
+
 class Editor:
     """The edits of one tab (``tab``: its :class:`pnlviz.app.session.Session`, for the frame
     shown, the settings, the queue and the drawing)."""
@@ -52,6 +101,7 @@ class Editor:
         self.tab = tab
         self.trail = EditTrail(tab.state, tab.guard)
         self.selected: Selection | None = None
+        self.also: list[Selection] = []  # more keypoints selected (Ctrl+click)
         self.place_id = 1
         self.snap = False
         self.drag_mode = DragMode.KEYPOINTS
@@ -67,13 +117,32 @@ class Editor:
 
     # ------------------------------------------------------------------ choices
     def select(self, selected: Selection | None) -> None:
-        """Select a point, or nothing. Selecting a keypoint or a ghost also chooses its id for
-        placing."""
-        self.selected = selected
+        """Select a point, or nothing (the other selected keypoints too). Selecting a keypoint or
+        a ghost also chooses its id for placing."""
+        self.selected, self.also = selected, []
         if selected is not None and selected.is_keypoint:
             self.choose_id(selected.kid)
         self.tab.workspace.select(selected)
         self.tab.painter.show_selected()
+
+    def add_to_selection(self, point: Selection) -> None:
+        """Ctrl+click on a keypoint: in the selection, or out of it when it was there (Delete and
+        O then act on every selected keypoint at once, one undo step)."""
+        if point.kind is not PointKind.KEYPOINTS:
+            return
+        chosen = [s for s in [self.selected, *self.also] if s is not None and s.kind is PointKind.KEYPOINTS]
+        chosen = [s for s in chosen if s.key != point.key] if any(s.key == point.key for s in chosen) \
+            else [*chosen, point]
+        self.selected, self.also = (chosen[0], chosen[1:]) if chosen else (None, [])
+        self.tab.workspace.select(self.selected, self.also)
+        self.tab.painter.show_selected()
+        if len(chosen) > 1:
+            self.tab.notify(f"{len(chosen)} keypoints selected",
+                            "Delete: all absent; O: all to the first one's next state (one undo step)", error=False)
+
+    def selected_ids(self) -> list[int]:
+        """The ids of the selected keypoints (the first selected first)."""
+        return [s.kid for s in [self.selected, *self.also] if s is not None and s.kind is PointKind.KEYPOINTS]
 
     def choose_id(self, kid: int) -> None:
         """The id shift+click places."""
@@ -120,35 +189,12 @@ class Editor:
             tab.notify("refused", f"review status {str(status)[:20]!r} is not one of the options")
             return
         stem = tab.stem
-        if status == "accepted" and self._ask_first(stem):
+        if status == "accepted" and ask_before_accepting(self, stem):
             return
         self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status, tab.settings))
         self.say_flagged(stem)
         if advance and status != "clear" and tab.state.edits.review(stem) == status:
             tab.advance_from(stem)
-
-    def _ask_first(self, stem: str) -> bool:
-        """Accepting a frame the label-error finder flags (a class on the wrong side, a mirrored
-        frame: :func:`pnlviz.app.triage.judge_view`) asks once: True (not accepted) the first time,
-        with the finding said; the same frame with the same edits accepted at the second G."""
-        from pnlviz.app.triage import judge_view
-
-        state = self.tab.state
-        qa = judge_view(state.view(stem, self.tab.settings))
-        if qa is None or qa.score < 1 or not qa.findings:
-            return False
-        key = (stem, state.edits.digest(stem))
-        if self.asked == key:
-            self.asked = None
-            return False
-        self.asked = key
-        worst = qa.findings[0]
-        fix = " **F** applies its suggested fix;" if worst.fix is not None else ""
-        text = (f"**{stem} not accepted yet: the label-error finder flags it** ({worst.message}).{fix} "
-                f"**G** again accepts it as it is.")
-        self.tab.notify(f"{stem}: accept anyway?", text.replace("**", ""), error=False)
-        self.tab.panels.gate_text.content = text
-        return True
 
     def say_flagged(self, stem: str) -> None:
         """After a review: the points of the frame the export's outlier gate flags, said in the
@@ -180,28 +226,6 @@ class Editor:
             text = f"{text} {more}".strip()
         self.tab.panels.gate_text.content = text
 
-    def say_slip(self, stem: str, kid: int) -> None:
-        """After a keypoint was placed or moved by hand: when the rest of the frame puts it farther
-        than the outlier gate from where it was put (:func:`pnlviz.pipeline.snapshot.hand_slips`),
-        say so at once; the point stays where the hand put it."""
-        from pnlviz.pipeline.snapshot import hand_slips
-
-        state, settings = self.tab.state, self.tab.settings
-        try:
-            view = state.view(stem, settings)
-            found = hand_slips(view, state.reader.frame_settings(view.settings), state.model, kids=[kid])
-        except EditError:
-            return
-        if kid not in found:
-            return
-        r = found[kid]
-        far = "off the camera" if r == float("inf") else f"{r:.0f} px"
-        text = (f"**point {kid} is {far} from where the rest of {stem} puts it: a slip?** It stays where "
-                f"you put it (a hand's point is never moved) and is listed as a possible slip when the frame "
-                f"is reviewed and in the export's manifest; Ctrl+Z takes it back.")
-        self.tab.notify(f"possible slip: point {kid}", text.replace("**", ""), error=False)
-        self.tab.panels.gate_text.content = text
-
     def hide_flagged(self) -> None:
         """H: hide the points the gate flagged on the frame reviewed last from its labels (one
         undo step); its review status and its reviewed camera stay
@@ -214,12 +238,14 @@ class Editor:
         self.say_flagged(stem)
 
     def hide_selected(self) -> None:
-        if self.selected is None or self.selected.kind is not PointKind.KEYPOINTS:
+        """Delete: the selected keypoints (one, or several with Ctrl+click) absent, one undo step."""
+        kids = self.selected_ids()
+        if not kids:
             self.tab.notify("nothing to hide", "select a keypoint first (click it)", error=False)
             return
-        stem, kid = self.tab.stem, self.selected.kid
-        self.selected = None
-        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kid, self.tab.settings))
+        stem = self.tab.stem
+        self.selected, self.also = None, []
+        self.trail.act(stem, lambda: self.tab.state.hide_keypoint(stem, kids, self.tab.settings))
 
     def cycle_visibility(self) -> None:
         """O: the selected keypoint visible -> occluded (labelled where it is, hidden behind
@@ -228,32 +254,35 @@ class Editor:
         from pnlviz.data.edit_changes import set_keypoint, set_occluded
 
         tab = self.tab
-        if self.selected is None or self.selected.kind is not PointKind.KEYPOINTS:
+        kids = self.selected_ids()
+        if not kids:
             tab.notify("nothing selected", "select a keypoint first (click it)", error=False)
             return
-        stem, kid = tab.stem, self.selected.kid
+        stem, kid = tab.stem, kids[0]
         record = tab.state.edits.get(stem)
         occluded = kid in (record.get("occluded") or [])
         absent = str(kid) in (record.get("keypoints") or {}) and record["keypoints"][str(kid)] is None
 
-        def change(rec: dict) -> None:
-            if absent:  # visible again: the hand's "absent" taken back, the source's position shows
-                rec["keypoints"] = {k: v for k, v in (rec.get("keypoints") or {}).items() if k != str(kid)} or None
-            elif occluded:
-                set_occluded(rec, kid, False)
-                set_keypoint(rec, kid, None)
-            else:
-                set_occluded(rec, kid, True)
+        def change(rec: dict) -> None:  # every selected keypoint to the first one's next state
+            for k in kids:
+                if absent:  # visible again: the hand's "absent" taken back, the source's position shows
+                    rec["keypoints"] = {i: v for i, v in (rec.get("keypoints") or {}).items() if i != str(k)} or None
+                    set_occluded(rec, k, False)
+                elif occluded:
+                    set_occluded(rec, k, False)
+                    set_keypoint(rec, k, None)
+                else:
+                    set_occluded(rec, k, True)
 
         self.trail.act(stem, lambda: tab.state.write(stem, change, settings=tab.settings))
         now = "visible" if absent else "absent" if occluded else "occluded"
         obs = tab.state.view(stem, tab.settings).observations
         if now == "visible" and (obs is None or kid not in obs.kp_ids):
             now = "absent (nothing else puts it on this frame: Shift+click places it)"
-        tab.notify(f"point {kid} {now}", f"{stem}: keypoint {kid} is {now} now (O cycles visible, occluded, absent)",
-                   error=False)
+        named = f"point {kid}" if len(kids) == 1 else f"points {', '.join(map(str, kids))}"
+        tab.notify(f"{named} {now}", f"{stem}: {named} {now} now (O cycles visible, occluded, absent)", error=False)
         if now == "absent":
-            self.selected = None
+            self.selected, self.also = None, []
 
     def set_note(self, text: str) -> None:
         """The frame's note for a colleague (saved at once, exported in the manifest; not a label
@@ -326,7 +355,7 @@ class Editor:
         else:
             self.place_id = int(kid)
         self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv, settings=self.tab.settings))
-        self.say_slip(stem, kid)
+        say_slip(self.tab, stem, kid)
         overlay = self.tab.painter.overlay
         if stem == self.tab.stem and overlay is not None and kid in overlay.keypoints.keys:
             self.select(Selection(PointKind.KEYPOINTS, kid))
@@ -360,7 +389,7 @@ class Editor:
 
         self.trail.act(stem, edit)
         if point.kind is not PointKind.LINE_POINTS:
-            self.say_slip(stem, point.kid)
+            say_slip(self.tab, stem, point.kid)
         if point.kind is PointKind.GHOSTS and stem == self.tab.stem:
             self.select(Selection(PointKind.KEYPOINTS, point.kid))
 

@@ -7,6 +7,7 @@ value of each dropdown option is the text the user sees in it.
 from __future__ import annotations
 
 import enum
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -121,4 +122,18 @@ def labels(options: type[enum.Enum]) -> tuple[str, ...]:
     return tuple(member.value for member in options)
 
 
-__all__ = ["DragEvent", "DragMode", "DragPhase", "Filter", "Mode", "PointKind", "Selection", "Sort", "labels"]
+__all__ = ["DragEvent", "DragMode", "DragPhase", "Filter", "Mode", "PointKind", "Selection", "Sort", "WorkspaceEvents",
+           "labels"]
+
+
+@dataclass
+class WorkspaceEvents:
+    """What the workspace reports, in image pixels of the frame it showed."""
+
+    place: Callable[..., None]  # shift+click on the frame: place(uv); on a ghost: place(uv, its id)
+    click: Callable[[np.ndarray], None]  # a plain click on the frame (not on a point)
+    pan: Callable[[DragPhase, np.ndarray, np.ndarray], None]  # (phase, start, now): screen fractions of the canvas
+    pick: Callable[[Selection], None]  # a click on a point
+    pick_more: Callable[[Selection], None]  # Ctrl+click on a point: in or out of the selection
+    drag: Callable[[DragEvent], None]  # a point dragged (to the pixel in the event)
+    screen_to_pixel: Callable[[np.ndarray], np.ndarray]  # screen fractions of the canvas -> image pixel

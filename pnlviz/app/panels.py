@@ -89,7 +89,8 @@ def legend_markdown() -> str:
 def keys_markdown() -> str:
     """The keys an annotator uses most, in one line at the top of the panel."""
     return ("**G** accept · **C** corrected · **R** reject · **N/P** next/previous · **shift+click** place · "
-            "**arrows** nudge · **Del** hide · **Ctrl+Z** undo · **V** 3D · more: Help")
+            "**ctrl+click** select more · **arrows** nudge · **Del** hide · **O** occluded · **Ctrl+Z** undo · "
+            "**V** 3D · more: Help")
 
 
 def busy_html(busy: bool) -> str:

@@ -30,7 +30,8 @@ from pnlviz.app.scene import OVERVIEW, Scene3D, behind_camera
 from pnlviz.app.state import SOURCES, FrameView, Settings
 from pnlviz.app.tabqueue import ActionGuard, TabQueue
 from pnlviz.app.viewcontrol import ViewControl
-from pnlviz.app.workspace import Workspace, WorkspaceEvents
+from pnlviz.app.modes import WorkspaceEvents
+from pnlviz.app.workspace import Workspace
 
 
 class Session:
@@ -58,7 +59,8 @@ class Session:
         #: server's shared scene) a branch of its own
         nodes = "/tab" if client is not None else f"/tab/session-{id(self):x}"
         events = WorkspaceEvents(
-            place=self.editor.on_place, click=self.editor.on_click, pick=self.editor.on_pick, drag=self.editor.drag,
+            place=self.editor.on_place, click=self.editor.on_click, pick=self.editor.on_pick,
+            pick_more=lambda p: self.queue.enqueue(lambda: self.editor.add_to_selection(p)), drag=self.editor.drag,
             pan=lambda phase, start, now: self.queue.enqueue(lambda: self.view_control.pan(phase, start, now)),
             screen_to_pixel=lambda fractions: self.view_control.to_pixel(fractions))
         self.workspace = Workspace(scene, nodes, events)

@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from pnlviz.app.handles import update_changed
-from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection
+from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection, WorkspaceEvents
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
 from pnlviz.viz import ring
@@ -44,18 +43,6 @@ def _disc(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
     vertices = np.vstack([[0.0, 0.0, 0.0], np.stack([np.cos(a), np.sin(a), np.zeros(n)], 1)])
     faces = np.array([[0, 1 + i, 1 + (i + 1) % n] for i in range(n)])
     return vertices, faces
-
-
-@dataclass
-class WorkspaceEvents:
-    """What the workspace reports, in image pixels of the frame it showed."""
-
-    place: Callable[..., None]  # shift+click on the frame: place(uv); on a ghost: place(uv, its id)
-    click: Callable[[np.ndarray], None]  # a plain click on the frame (not on a point)
-    pan: Callable[[DragPhase, np.ndarray, np.ndarray], None]  # (phase, start, now): screen fractions of the canvas
-    pick: Callable[[Selection], None]  # a click on a point
-    drag: Callable[[DragEvent], None]  # a point dragged (to the pixel in the event)
-    screen_to_pixel: Callable[[np.ndarray], np.ndarray]  # screen fractions of the canvas -> image pixel
 
 
 class _PointNodes:
@@ -196,21 +183,29 @@ class _PointNodes:
     def _bind(self, node, events: WorkspaceEvents) -> None:
         grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
 
+        def hit(event):
+            """(the point clicked or None, the pixel the click's ray meets the image at)."""
+            o = np.asarray(event.ray_origin, float)
+            at = placed(self.plane).pixel_on_ray(o, o + np.asarray(event.ray_direction))
+            return self._instance(event.instance_index, at), at
+
         @node.on_click
         async def _(event) -> None:
-            o = np.asarray(event.ray_origin, float)
-            i = self._instance(event.instance_index,
-                               placed(self.plane).pixel_on_ray(o, o + np.asarray(event.ray_direction)))
+            i = hit(event)[0]
             if i is not None:
                 events.pick(Selection(self.kind, self.keys[i]))
 
+        @node.on_click(modifier="cmd/ctrl")
+        async def _(event) -> None:  # Ctrl+click: the point joins the selection (or leaves it)
+            i = hit(event)[0]
+            if i is not None:
+                events.pick_more(Selection(self.kind, self.keys[i]))
+
+        # Shift+click on a point places, as on the frame: on a ghost, that keypoint where the camera
+        # puts it (the ghost becomes a keypoint); on another point, the chosen id there
         @node.on_click(modifier="shift")
         async def _(event) -> None:
-            """Shift+click on a point places, as on the frame: on a ghost, that keypoint where the
-            camera puts it (the ghost becomes a keypoint); on another point, the chosen id there."""
-            o = np.asarray(event.ray_origin, float)
-            at = placed(self.plane).pixel_on_ray(o, o + np.asarray(event.ray_direction))
-            i = self._instance(event.instance_index, at)
+            i, at = hit(event)
             if i is not None and self.kind is PointKind.GHOSTS:
                 events.place(self.uv[i].copy(), self.keys[i])
             elif at is not None and np.all(np.isfinite(at)):
@@ -268,6 +263,7 @@ class Workspace:
         self._label_uv: dict[object, np.ndarray] = {}
         self._label_rank: dict[object, int] = {}
         self.selected: Selection | None = None
+        self.also: list[Selection] = []  # more selected keypoints (Ctrl+click)
         self.on_points: Callable[[], None] | None = None  # the points or their grab size changed
 
     # ------------------------------------------------------------------ the frame
@@ -462,22 +458,24 @@ class Workspace:
                 handle.visible = bool(show)
 
     # ------------------------------------------------------------------ selection and zoom
-    def select(self, selected: Selection | None) -> None:
-        self.selected = selected
+    def select(self, selected: Selection | None, also=()) -> None:
+        """Ring the selected point (and ``also``: more selected keypoints)."""
+        self.selected, self.also = selected, list(also)
         self._show_selection()
 
     def _show_selection(self) -> None:
-        uv = None
-        if self.selected is not None and self.plane is not None:
-            nodes = self.points.get(self.selected.kind)
-            if nodes is not None and self.selected.key in nodes.keys:
-                uv = nodes.uv[nodes.keys.index(self.selected.key)]
-        if uv is None:
+        where = []
+        for sel in [self.selected, *self.also]:
+            nodes = self.points.get(sel.kind) if sel is not None and self.plane is not None else None
+            if nodes is not None and sel is not None and sel.key in nodes.keys:
+                where.append(nodes.uv[nodes.keys.index(sel.key)])
+        if not where:
             if self._ring is not None:
                 update_changed(self._ring, visible=False)
             return
-        circle = ring(uv, RING_PX * self.world_per_px / placed(self.plane).scale, 32)
-        pts = placed(self.plane).world(np.stack([circle[:-1], circle[1:]], 1), "selection")
+        radius = RING_PX * self.world_per_px / placed(self.plane).scale
+        segments = [np.stack([c[:-1], c[1:]], 1) for c in (ring(uv, radius, 32) for uv in where)]
+        pts = placed(self.plane).world(np.concatenate(segments), "selection")
         if self._ring is None:
             self._ring = self.scene.add_line_segments(f"{self.root}/selection", pts, SELECTED_RGB, thickness=2.0,
                                                       thickness_units="screen")
