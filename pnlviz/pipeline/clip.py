@@ -163,15 +163,18 @@ def accept_shot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Seque
     is written directly. Returns the stems reviewed."""
     folder = reader.edits_folder
 
-    def direct(stem: str, change: Callable[[dict], None], *, corrected: bool, snapshot: dict) -> None:
-        folder.act(stem, change, corrected=corrected)
-        folder.update(stem, snapshot=snapshot)
+    def direct(stem: str, change: Callable[[dict], None], *, corrected: bool,
+               snapshot: Callable[[dict], dict]) -> None:
+        with folder.lock(stem):  # the snapshot and the review it goes with are one
+            folder.act(stem, change, corrected=corrected)
+            folder.update(stem, snapshot=snapshot(folder.get(stem)))
 
     write = write or direct
     done = []
     for t in solver.shots[k]:
-        stem = stems[t]
-        with folder.lock(stem):  # the snapshot and the review it goes with are one
-            write(stem, _accept, corrected=False, snapshot=shot_snapshot(reader, solver, clip, stems, t, settings))
-        done.append(stem)
+        def snapshot(record: dict, t: int = t) -> dict:  # taken under the frame's lock, with the review
+            return shot_snapshot(reader, solver, clip, stems, t, settings)
+
+        write(stems[t], _accept, corrected=False, snapshot=snapshot)  # the tabs are told after the lock
+        done.append(stems[t])
     return done
