@@ -45,7 +45,7 @@ def sort_key(sort: Sort, summary: FrameSummary | None) -> float:
         return summary.jac5 if summary.ok and summary.jac5 is not None else -1.0
     if sort is Sort.RESIDUAL:
         return -worst_residual(summary)
-    if sort is Sort.SUSPECT:  # most suspect first; not judged (another source) after, not calibrated yet last
+    if sort is Sort.SUSPECT:  # most suspect first; not judged (no annotation) after, not calibrated yet last
         if summary is None:
             return 1.0
         return -summary.suspect if summary.suspect is not None else 0.5
@@ -64,7 +64,7 @@ def sort_key_text(sort: Sort, summary: FrameSummary | None) -> str | None:
         return f"JaC@5 {summary.jac5:.3f}" if summary.jac5 is not None else "JaC@5: no annotation to score against"
     if sort is Sort.SUSPECT:
         if summary.suspect is None:
-            return "suspect score: not judged (calibrated from detections, no annotation, or edited since)"
+            return "suspect score: not judged (no annotation, or edited since)"
         return f"suspect score {summary.suspect:.2f}" + (f": {summary.suspect_note}" if summary.suspect_note else "")
     return f"worst residual {summary.worst:,.1f} px"
 
