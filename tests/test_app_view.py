@@ -381,7 +381,9 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
             self.name, self.batched_positions, self.batched_scales = name, positions, scales
             self.removed, self.handlers, self.visible = False, {}, True
 
-        def on_click(self, f):
+        def on_click(self, f=None, *, modifier=None):  # viser's: a decorator, with a modifier filter
+            if f is None:
+                return lambda g: self.handlers.__setitem__(("click", modifier), g)
             self.handlers["click"] = f
 
         def on_drag(self, f):

@@ -58,14 +58,15 @@ def say_slip(tab, stem: str, kid: int) -> None:
     except EditError:
         return
     if kid not in found:
+        if "a slip?" in tab.panels.gate_text.content:  # put right: the notice goes
+            tab.panels.gate_text.content = ""
         return
     r = found[kid]
     far = "off the camera" if r == float("inf") else f"{r:.0f} px"
     text = (f"**point {kid} is {far} from where the rest of {stem} puts it: a slip?** It stays where "
             f"you put it (a hand's point is never moved) and is listed as a possible slip when the frame "
             f"is reviewed and in the export's manifest; Ctrl+Z takes it back.")
-    tab.notify(f"possible slip: point {kid}", text.replace("**", ""), error=False)
-    tab.panels.gate_text.content = text
+    tab.panels.gate_text.content = text  # in the panel, not a notice over the image the hand works on
 
 
 
@@ -135,10 +136,7 @@ class Editor:
             else [*chosen, point]
         self.selected, self.also = (chosen[0], chosen[1:]) if chosen else (None, [])
         self.tab.workspace.select(self.selected, self.also)
-        self.tab.painter.show_selected()
-        if len(chosen) > 1:
-            self.tab.notify(f"{len(chosen)} keypoints selected",
-                            "Delete: all absent; O: all to the first one's next state (one undo step)", error=False)
+        self.tab.painter.show_selected()  # the rings say what is selected (no notice over the image)
 
     def selected_ids(self) -> list[int]:
         """The ids of the selected keypoints (the first selected first)."""
@@ -355,7 +353,7 @@ class Editor:
         else:
             self.place_id = int(kid)
         self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv, settings=self.tab.settings))
-        say_slip(self.tab, stem, kid)
+        self.tab.queue.enqueue(lambda: say_slip(self.tab, stem, kid))  # after the frame is drawn
         overlay = self.tab.painter.overlay
         if stem == self.tab.stem and overlay is not None and kid in overlay.keypoints.keys:
             self.select(Selection(PointKind.KEYPOINTS, kid))
@@ -389,7 +387,7 @@ class Editor:
 
         self.trail.act(stem, edit)
         if point.kind is not PointKind.LINE_POINTS:
-            say_slip(self.tab, stem, point.kid)
+            self.tab.queue.enqueue(lambda: say_slip(self.tab, stem, point.kid))  # after the frame is drawn
         if point.kind is PointKind.GHOSTS and stem == self.tab.stem:
             self.select(Selection(PointKind.KEYPOINTS, point.kid))
 

@@ -13,6 +13,7 @@ not calibrated again.
 
 from __future__ import annotations
 
+import json
 import math
 import threading
 import time
@@ -103,7 +104,37 @@ def judge_view(view):
 
     if not view.annotation:
         return None
-    return check_frame(view.annotation, tuple(view.size), view.detections)
+    key = _judge_key(view)
+    with _JUDGED_LOCK:
+        if key in _JUDGED:
+            return _JUDGED[key]
+    qa = check_frame(view.annotation, tuple(view.size), view.detections)
+    with _JUDGED_LOCK:
+        _JUDGED[key] = qa
+        while len(_JUDGED) > 512:
+            _JUDGED.popitem(last=False)
+    return qa
+
+
+#: the verdicts of the frames judged lately, by what they depend on: a keypoint dragged changes
+#: neither the annotation nor the detections, so the frame is not judged again (it costs one to
+#: 26 calibrations)
+_JUDGED: OrderedDict = OrderedDict()
+_JUDGED_LOCK = threading.Lock()
+
+
+def _judge_key(view) -> tuple:
+    """What the label-error finder's verdict on a view depends on: its annotation, its size, its
+    detections."""
+    import hashlib
+
+    h = hashlib.sha1()
+    for name in sorted(view.annotation):
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(np.asarray(view.annotation[name], float)).tobytes())
+    dets = "" if view.detections is None else json.dumps(predictions_to_json(view.detections), sort_keys=True)
+    h.update(dets.encode())
+    return h.hexdigest(), tuple(view.size)
 
 
 def fix_frame(state, stem: str, settings=None):
