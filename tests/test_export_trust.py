@@ -64,6 +64,20 @@ def images_only(tmp_path):
     return data, FakeDetector(preds)
 
 
+
+def _tab_on(images_only, tmp_path, serve, stem: str):
+    """The app on the image-only frames, ``stem`` detected and shown in a tab whose notices are
+    kept: (state, tab, the notices' titles)."""
+    data, detector = images_only
+    app = serve(data, edits=tmp_path / "edits", detector=detector)
+    st = app.state
+    st.run_detector(stem)
+    tab = app.session()
+    tab.goto(st.find(stem))
+    said: list[str] = []
+    tab.notify = lambda title, body, error=True: said.append(title)
+    return st, tab, said
+
 def _export_both(st, data, edits, tmp_path, *flags):
     from pnlviz.app.export import export_zip_bytes
     from pnlviz.pipeline.export import read_export_zip
@@ -190,14 +204,7 @@ def test_accepting_a_frame_with_flagged_points_says_so_and_h_hides_them(images_o
     changing its review: still accepted, the same camera, the point gone from its labels and from
     the export; Ctrl+Z brings it back."""
     from pnlviz.pipeline.export import export_frame
-    data, detector = images_only
-    app = serve(data, edits=tmp_path / "edits", detector=detector)
-    st = app.state
-    st.run_detector("00007")
-    tab = app.session()
-    tab.goto(st.find("00007"))
-    said = []
-    tab.notify = lambda title, body, error=True: said.append(title)
+    st, tab, said = _tab_on(images_only, tmp_path, serve, "00007")
     tab.editor.review("accepted", advance=True)
     assert "00007: 1 point flagged" in tab.panels.gate_text.content and "H" in tab.panels.gate_text.content
     assert said[0] == "1 flagged on 00007"
@@ -355,14 +362,7 @@ def test_a_hand_slip_is_kept_but_said_at_once_listed_when_accepted_and_in_the_ma
     from pnlviz.app.modes import PointKind, Selection
     from pnlviz.pipeline.export import export_frame
 
-    data, detector = images_only
-    app = serve(data, edits=tmp_path / "edits", detector=detector)
-    st = app.state
-    st.run_detector("00000")
-    tab = app.session()
-    tab.goto(st.find("00000"))
-    said = []
-    tab.notify = lambda title, body, error=True: said.append(title)
+    st, tab, said = _tab_on(images_only, tmp_path, serve, "00000")
     view = st.view("00000", tab.settings)
     obs = view.observations
     kid = int(obs.kp_ids[len(obs.kp_ids) // 2])
@@ -422,14 +422,7 @@ def test_visible_occluded_absent_cycle_on_o_and_a_note_reach_the_export(images_o
     from pnlviz.app.modes import PointKind, Selection
     from pnlviz.pipeline.export import export_frame
 
-    data, detector = images_only
-    app = serve(data, edits=tmp_path / "edits", detector=detector)
-    st = app.state
-    st.run_detector("00000")
-    tab = app.session()
-    tab.goto(st.find("00000"))
-    said = []
-    tab.notify = lambda title, body, error=True: said.append(title)
+    st, tab, said = _tab_on(images_only, tmp_path, serve, "00000")
     tab.editor.review("accepted", advance=False)
     camera = st.edits.get("00000")["snapshot"]["camera"]
     kid = int(st.view("00000", tab.settings).observations.kp_ids[0])

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pnlviz.data.edit_changes import set_keypoint, set_occluded
+from pnlviz.data.edit_changes import set_keypoint, set_occluded, set_visible
 from pnlviz.data.edits import EditError
 
 __all__ = ["ACTIONS", "MAX_FRAMES", "BulkPlan", "apply", "change_of", "plan"]
@@ -96,8 +96,7 @@ def change_of(bulk: BulkPlan, i: int) -> Callable[[dict], None]:
         elif bulk.action == "occluded":
             set_occluded(rec, kid, True)
         elif bulk.action == "visible":
-            set_occluded(rec, kid, False)
-            rec["keypoints"] = {k: v for k, v in (rec.get("keypoints") or {}).items() if k != str(kid)} or None
+            set_visible(rec, kid)
         else:
             if xy is None or to is None:
                 return

@@ -45,6 +45,16 @@ class Drag:
 
 
 
+def distance_text(px: float) -> str:
+    """A point's distance from where the camera puts it, in words ("44 px", "off camera")."""
+    return "off camera" if px == float("inf") else f"{px:.0f} px"
+
+
+def distances_text(found: dict[int, float]) -> str:
+    """``{id: px}`` as "12 (44 px), 19 (off camera)"."""
+    return ", ".join(f"{k} ({distance_text(r)})" for k, r in sorted(found.items()))
+
+
 def say_slip(tab, stem: str, kid: int) -> None:
     """After a keypoint was placed or moved by hand: when the rest of the frame puts it farther
     than the outlier gate from where it was put (:func:`pnlviz.pipeline.snapshot.hand_slips`),
@@ -61,9 +71,7 @@ def say_slip(tab, stem: str, kid: int) -> None:
         if "a slip?" in tab.panels.gate_text.content:  # put right: the notice goes
             tab.panels.gate_text.content = ""
         return
-    r = found[kid]
-    far = "off the camera" if r == float("inf") else f"{r:.0f} px"
-    text = (f"**point {kid} is {far} from where the rest of {stem} puts it: a slip?** It stays where "
+    text = (f"**point {kid} is {distance_text(found[kid])} from where the rest of {stem} puts it: a slip?** It stays where "
             f"you put it (a hand's point is never moved) and is listed as a possible slip when the frame "
             f"is reviewed and in the export's manifest; Ctrl+Z takes it back.")
     tab.panels.gate_text.content = text  # in the panel, not a notice over the image the hand works on
@@ -207,15 +215,13 @@ class Editor:
         self.flagged = (stem, sorted(flagged)) if flagged else None
         text = ""
         if flagged:
-            ids = ", ".join(f"{k} ({'off camera' if r == float('inf') else f'{r:.0f} px'})"
-                            for k, r in sorted(flagged.items()))
+            ids = distances_text(flagged)
             text = (f"**{stem}: {len(flagged)} point{'s' if len(flagged) > 1 else ''} flagged** (farther than "
                     f"{limit:.1f} px from the camera; exported flagged, not as ground truth): {ids}. "
                     f"**H** hides them.")
             self.tab.notify(f"{len(flagged)} flagged on {stem}", text.replace("**", ""), error=False)
         if slips:
-            ids = ", ".join(f"{k} ({'off camera' if r == float('inf') else f'{r:.0f} px'})"
-                            for k, r in sorted(slips.items()))
+            ids = distances_text(slips)
             more = (f"**{stem}: {len(slips)} point{'s' if len(slips) > 1 else ''} placed by hand far from where the "
                     f"rest of the frame puts {'them' if len(slips) > 1 else 'it'}** (possible slips, kept as placed "
                     f"and listed in the export's manifest): {ids}.")
@@ -249,7 +255,7 @@ class Editor:
         """O: the selected keypoint visible -> occluded (labelled where it is, hidden behind
         something: COCO v=1) -> absent (not on the frame) -> visible again (where its source put
         it); one undo step each."""
-        from pnlviz.data.edit_changes import set_keypoint, set_occluded
+        from pnlviz.data.edit_changes import set_keypoint, set_occluded, set_visible
 
         tab = self.tab
         kids = self.selected_ids()
@@ -264,8 +270,7 @@ class Editor:
         def change(rec: dict) -> None:  # every selected keypoint to the first one's next state
             for k in kids:
                 if absent:  # visible again: the hand's "absent" taken back, the source's position shows
-                    rec["keypoints"] = {i: v for i, v in (rec.get("keypoints") or {}).items() if i != str(k)} or None
-                    set_occluded(rec, k, False)
+                    set_visible(rec, k)
                 elif occluded:
                     set_occluded(rec, k, False)
                     set_keypoint(rec, k, None)

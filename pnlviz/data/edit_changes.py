@@ -10,7 +10,7 @@ from collections.abc import Callable, Mapping
 from pnlviz.data.annotations import annotation_to_json, parse_annotation
 from pnlviz.data.edits import MAX_NOTE, EditError
 
-__all__ = ["move_line_point", "set_keypoint", "set_note", "set_occluded"]
+__all__ = ["move_line_point", "set_keypoint", "set_note", "set_occluded", "set_visible"]
 
 
 def set_keypoint(rec: dict, kid: int, xy: tuple[float, float] | None) -> None:
@@ -48,3 +48,10 @@ def move_line_point(rec: dict, source: Callable[[], Mapping | None], stem: str, 
     W, H = size
     ann[name][int(index)] = [xy[0] / (W - 1), xy[1] / (H - 1)]
     rec["annotation"] = annotation_to_json(ann)
+
+
+def set_visible(rec: dict, kid: int) -> None:
+    """In a record: keypoint ``kid`` neither absent nor occluded: the hand's "absent" taken back,
+    so the position its source (or an earlier placement) gives shows again."""
+    set_occluded(rec, kid, False)
+    rec["keypoints"] = {k: v for k, v in (rec.get("keypoints") or {}).items() if k != str(kid)} or None
