@@ -376,6 +376,41 @@ def test_ctrl_click_selects_several_keypoints_and_delete_hides_them_in_one_step(
     page.close()
 
 
+def test_a_ctrl_drag_box_selects_the_keypoints_inside_it_and_o_occludes_them_all(data, browser, serve):
+    """Ctrl+drag from an empty place of the image draws a box: exactly the keypoints inside it are
+    selected (the camera does not turn, nothing moves); O then marks them all occluded in one
+    undo step."""
+    import numpy as np
+
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    stem = session.stem
+    wait_until(lambda: session.painter.overlay is not None and len(session.painter.overlay.keypoints) >= 4)
+    marks = session.painter.overlay.keypoints
+    screen = np.array([on_screen(page, session, uv) for uv in marks.uv])
+    order = np.argsort(screen[:, 0])
+    lo = screen[order[:2]].min(axis=0) - 15  # a box around the two leftmost points ...
+    hi = screen[order[:2]].max(axis=0) + 15
+    hi[0] = min(hi[0], (screen[order[1], 0] + screen[order[2], 0]) / 2)  # ... that stops short of the third
+    inside = [int(marks.keys[i]) for i in range(len(marks)) if np.all((screen[i] >= lo) & (screen[i] <= hi))]
+    assert len(inside) >= 2 and min(np.hypot(*(screen - lo).T)) > 14  # the press is on no point
+    camera_before = camera_state(session)
+    page.keyboard.down("Control")
+    drag(page, tuple(lo), tuple(hi - lo))
+    page.keyboard.up("Control")
+    wait_until(lambda: sorted(session.editor.selected_ids()) == sorted(inside))
+    assert sorted(session.editor.selected_ids()) == sorted(inside)
+    np.testing.assert_allclose(camera_state(session), camera_before)  # a box, not a pan or a turn of the camera
+    assert not app.state.edits.get(stem).get("keypoints")  # nothing moved
+    assert page.evaluate("document.getElementById('pnlviz-box') === null")  # the rectangle is gone
+    page.keyboard.press("o")
+    wait_until(lambda: set(inside) <= set(app.state.edits.get(stem).get("occluded") or []))
+    assert set(app.state.edits.get(stem).get("occluded")) == set(inside)
+    assert app.state.edits.history(stem) == (1, 0)  # one step for all of them
+    page.close()
+
+
 def test_a_review_key_advances_and_undo_comes_back(data, browser, serve):
     app = serve(data)
     page = open_page(browser, app, "focal")

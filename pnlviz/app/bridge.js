@@ -17,6 +17,10 @@
 //   candidate: its pointer moves are kept from viser, so viser never starts a drag; past 3 px it
 //   is a pan (viser's pending click is cancelled with a pointercancel), else the release goes on
 //   to viser as a click (select, deselect; shift+click places, and is never taken).
+// - Box selection: a ctrl (or cmd) drag from a place on the image with no point under it draws a
+//   rectangle; at the release the rectangle goes to the server (fractions of the canvas as the
+//   server renders it), which adds the keypoints inside it to the selection. A ctrl+click on a
+//   point stays viser's (in or out of the selection).
 // - The canvas at the device pixel ratio: viser lowers its resolution on a slow machine unless the
 //   URL carries ?fixedDpr=<ratio> (read when the page starts), so a page whose URL carries
 //   another ratio (or none) reloads once with its own window.devicePixelRatio.
@@ -64,6 +68,7 @@
     base: -1, k: 0, sent: null, dirty: false, // the gesture in the air (unanswered), one waiting
     wheelTimer: null, idleMs: 120, press: null, point: null, swallowClick: false,
     view: null, gestures: 0, latency: [], pendingInputs: [], rafPending: false,
+    boxPress: null, boxes: 0, box: null, // a ctrl+drag in the air; boxes drawn; the last one [k, x0, y0, x1, y1]
   };
   window.__pnlvizBridge = state;
 
@@ -115,6 +120,7 @@
       nudge: [state.nudgeX, state.nudgeY],
       canvas: canvas ? [canvas.clientWidth, canvas.clientHeight] : null,
       view: g ? [g.k, g.base, g.s, g.tx, g.ty] : null,
+      box: state.box,
     });
     Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set.call(input, message);
     input.dispatchEvent(new Event("input", { bubbles: true }));
@@ -290,16 +296,23 @@
     return best;
   };
   const plainLeft = (e) => e.button === 0 && !e.shiftKey && !e.ctrlKey && !e.altKey && !e.metaKey;
+  const ctrlLeft = (e) => e.button === 0 && !e.shiftKey && !e.altKey && (e.ctrlKey || e.metaKey);
   window.addEventListener(
     "pointerdown",
     (event) => {
       state.swallowClick = false;
       if (state.press) finishPress(); // its release never came (the window lost the pointer)
-      if (!imageMode() || !plainLeft(event) || !canvasOf(event.target)) return;
+      if (state.boxPress) finishBox(false);
+      const plain = plainLeft(event);
+      if (!imageMode() || !(plain || ctrlLeft(event)) || !canvasOf(event.target)) return;
       const p = local(event);
       if (!p) return;
       const point = pointAt(p);
       if (point === undefined) return;
+      if (!plain) { // ctrl+press: on a point, viser's ctrl+click; elsewhere a box candidate
+        if (!point) state.boxPress = { id: event.pointerId, x0: event.clientX, y0: event.clientY, p0: p, el: null };
+        return;
+      }
       if (point) {
         state.point = { id: event.pointerId, x0: event.clientX, y0: event.clientY, at: point, box: [p[0], p[1]] };
         return;
@@ -339,6 +352,30 @@
         press.y = event.clientY;
         return;
       }
+      const bp = state.boxPress;
+      if (bp && event.pointerId === bp.id) {
+        if (!(event.buttons & 1)) {
+          finishBox(false); // released unseen
+          return;
+        }
+        event.stopImmediatePropagation(); // viser sees no move: the camera does not turn
+        if (!bp.el && Math.max(Math.abs(event.clientX - bp.x0), Math.abs(event.clientY - bp.y0)) > 3) {
+          cancelViser(bp.id);
+          bp.el = document.createElement("div");
+          bp.el.id = "pnlviz-box";
+          bp.el.style.cssText = "position:fixed;border:1px dashed #fff;outline:1px solid rgba(0,0,0,.6);" +
+            "background:rgba(0,200,255,.12);pointer-events:none;z-index:1000";
+          document.body.appendChild(bp.el);
+        }
+        if (bp.el) {
+          const [x, y] = [Math.min(bp.x0, event.clientX), Math.min(bp.y0, event.clientY)];
+          Object.assign(bp.el.style, { left: `${x}px`, top: `${y}px`, width: `${Math.abs(event.clientX - bp.x0)}px`,
+                                       height: `${Math.abs(event.clientY - bp.y0)}px` });
+          bp.x = event.clientX;
+          bp.y = event.clientY;
+        }
+        return;
+      }
       const pt = state.point;
       if (pt && event.pointerId === pt.id) {
         const dx = event.clientX - pt.x0;
@@ -358,9 +395,35 @@
     if (press && press.panning) endGesture();
     return !!(press && press.panning);
   };
-  window.addEventListener("blur", () => finishPress());
+  window.addEventListener("blur", () => {
+    finishPress();
+    finishBox(false);
+  });
+  // a ctrl+drag is over: with ``send``, the box (fractions of the canvas as the server renders it,
+  // the page's transform undone) goes to the server, which selects the keypoints inside it
+  const finishBox = (send_) => {
+    const bp = state.boxPress;
+    state.boxPress = null;
+    if (!bp || !bp.el) return false;
+    bp.el.remove();
+    const st = stage();
+    if (!send_ || !st) return true;
+    const r = st.clip.getBoundingClientRect();
+    const T = state.T;
+    const frac = (cx, cy) => [(cx - r.left - T.tx) / T.s / r.width, (cy - r.top - T.ty) / T.s / r.height];
+    const [a, b] = [frac(bp.x0, bp.y0), frac(bp.x, bp.y)];
+    state.boxes += 1;
+    state.box = [state.boxes, Math.min(a[0], b[0]), Math.min(a[1], b[1]), Math.max(a[0], b[0]), Math.max(a[1], b[1])];
+    send();
+    return true;
+  };
   const released = (event) => {
     if (state.cancelling) return;
+    const bp = state.boxPress;
+    if (bp && event.pointerId === bp.id && finishBox(event.type === "pointerup")) {
+      event.stopImmediatePropagation(); // viser's click was called off when the box started
+      state.swallowClick = event.type === "pointerup";
+    }
     const press = state.press;
     if (press && event.pointerId === press.id && finishPress()) {
       event.stopImmediatePropagation(); // viser's click was called off at the start of the pan

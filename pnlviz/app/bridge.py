@@ -74,11 +74,25 @@ class Gesture:
 
 
 @dataclass(frozen=True)
+class Box:
+    """A rectangle drawn in the page with a ctrl+drag: ``k`` its sequence number, (``x0``, ``y0``)
+    - (``x1``, ``y1``) its corners as fractions of the canvas as the server renders it (the page's
+    own pan and zoom undone), ``x0 <= x1``, ``y0 <= y1``."""
+
+    k: int
+    x0: float
+    y0: float
+    x1: float
+    y1: float
+
+
+@dataclass(frozen=True)
 class PointerMessage:
     """The bridge's state: ``n`` its sequence number, ``log_zoom`` the total log-zoom asked for so
     far, (``x``, ``y``) the pointer as fractions of the canvas, ``nudge`` the total arrow-key
     nudge so far (image pixels, x and y), ``canvas`` the canvas size in CSS pixels (None: unknown),
-    ``gesture`` the last pan and zoom done in the page (None: none yet)."""
+    ``gesture`` the last pan and zoom done in the page (None: none yet), ``box`` the last
+    rectangle drawn (None: none yet)."""
 
     n: int
     log_zoom: float
@@ -87,6 +101,19 @@ class PointerMessage:
     nudge: tuple[int, int]
     canvas: tuple[int, int] | None = None
     gesture: Gesture | None = None
+    box: Box | None = None
+
+
+def _box(value) -> Box | None:
+    """A box field ``[k, x0, y0, x1, y1]``; ValueError when malformed."""
+    if value is None:
+        return None
+    k, x0, y0, x1, y1 = value  # ValueError / TypeError when not five
+    b = Box(int(k), float(x0), float(y0), float(x1), float(y1))
+    if b.k < 1 or not all(math.isfinite(v) and abs(v) <= 1e4 for v in (b.x0, b.y0, b.x1, b.y1)) \
+            or b.x0 > b.x1 or b.y0 > b.y1:
+        raise ValueError("box out of range")
+    return b
 
 
 def _gesture(value) -> Gesture | None:
@@ -117,6 +144,7 @@ def parse_pointer(text: str) -> PointerMessage | None:
         canvas = d.get("canvas")
         canvas = (int(canvas[0]), int(canvas[1])) if canvas is not None else None
         gesture = _gesture(d.get("view"))
+        box = _box(d.get("box"))
     except (KeyError, IndexError, TypeError, ValueError, OverflowError):
         return None
     if canvas is not None and not (1 <= canvas[0] <= 20000 and 1 <= canvas[1] <= 20000):
@@ -125,4 +153,4 @@ def parse_pointer(text: str) -> PointerMessage | None:
         return None
     if max(abs(nx), abs(ny)) > 10 ** 7:
         return None
-    return PointerMessage(n, log_zoom, min(max(x, 0.0), 1.0), min(max(y, 0.0), 1.0), (nx, ny), canvas, gesture)
+    return PointerMessage(n, log_zoom, min(max(x, 0.0), 1.0), min(max(y, 0.0), 1.0), (nx, ny), canvas, gesture, box)

@@ -10,12 +10,12 @@ goes back to them.
 
 from __future__ import annotations
 
-
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
+from pnlviz.app.asking import ask_before_accepting, distances_text, say_slip
 from pnlviz.app.cards import listed_id
 from pnlviz.app.modes import DragEvent, DragMode, DragPhase, PointKind, Selection, labels
 from pnlviz.app.panels import choice_id
@@ -42,64 +42,6 @@ class Drag:
     def moved(self) -> bool:
         """A press without a move changes nothing."""
         return bool(np.hypot(*(self.uv - self.origin)) > 0.05)
-
-
-
-def distance_text(px: float) -> str:
-    """A point's distance from where the camera puts it, in words ("44 px", "off camera")."""
-    return "off camera" if px == float("inf") else f"{px:.0f} px"
-
-
-def distances_text(found: dict[int, float]) -> str:
-    """``{id: px}`` as "12 (44 px), 19 (off camera)"."""
-    return ", ".join(f"{k} ({distance_text(r)})" for k, r in sorted(found.items()))
-
-
-def say_slip(tab, stem: str, kid: int) -> None:
-    """After a keypoint was placed or moved by hand: when the rest of the frame puts it farther
-    than the outlier gate from where it was put (:func:`pnlviz.pipeline.snapshot.hand_slips`),
-    say so at once; the point stays where the hand put it."""
-    from pnlviz.pipeline.snapshot import hand_slips
-
-    state, settings = tab.state, tab.settings
-    try:
-        view = state.view(stem, settings)
-        found = hand_slips(view, state.reader.frame_settings(view.settings), state.model, kids=[kid])
-    except EditError:
-        return
-    if kid not in found:
-        if "a slip?" in tab.panels.gate_text.content:  # put right: the notice goes
-            tab.panels.gate_text.content = ""
-        return
-    text = (f"**point {kid} is {distance_text(found[kid])} from where the rest of {stem} puts it: a slip?** It stays where "
-            f"you put it (a hand's point is never moved) and is listed as a possible slip when the frame "
-            f"is reviewed and in the export's manifest; Ctrl+Z takes it back.")
-    tab.panels.gate_text.content = text  # in the panel, not a notice over the image the hand works on
-
-
-
-def ask_before_accepting(editor, stem: str) -> bool:
-    """Accepting a frame the label-error finder flags (a class on the wrong side, a mirrored
-    frame: :func:`pnlviz.app.triage.judge_view`) asks once: True (not accepted) the first time,
-    with the finding said; the same frame with the same edits accepted at the second G."""
-    from pnlviz.app.triage import judge_view
-
-    state = editor.tab.state
-    qa = judge_view(state.view(stem, editor.tab.settings))
-    if qa is None or qa.score < 1 or not qa.findings:
-        return False
-    key = (stem, state.edits.digest(stem))
-    if editor.asked == key:
-        editor.asked = None
-        return False
-    editor.asked = key
-    worst = qa.findings[0]
-    fix = " **F** applies its suggested fix;" if worst.fix is not None else ""
-    text = (f"**{stem} not accepted yet: the label-error finder flags it** ({worst.message}).{fix} "
-            f"**G** again accepts it as it is.")
-    editor.tab.notify(f"{stem}: accept anyway?", text.replace("**", ""), error=False)
-    editor.tab.panels.gate_text.content = text
-    return True
 
 
 class Editor:
@@ -145,6 +87,22 @@ class Editor:
         self.selected, self.also = (chosen[0], chosen[1:]) if chosen else (None, [])
         self.tab.workspace.select(self.selected, self.also)
         self.tab.painter.show_selected()  # the rings say what is selected (no notice over the image)
+
+    def select_in_box(self, lo, hi) -> None:
+        """A box drawn with ctrl+drag (corners ``lo``, ``hi`` in image pixels): the keypoints the
+        frame shows inside it join the selection (Delete and O then act on all of them)."""
+        overlay = self.tab.painter.overlay
+        if overlay is None or not len(overlay.keypoints):
+            return
+        uv = np.asarray(overlay.keypoints.uv, float)
+        inside = np.all((uv >= np.minimum(lo, hi)) & (uv <= np.maximum(lo, hi)), axis=1)
+        chosen = [s for s in [self.selected, *self.also] if s is not None and s.kind is PointKind.KEYPOINTS]
+        known = {s.key for s in chosen}
+        chosen += [Selection(PointKind.KEYPOINTS, int(k)) for k, ok in zip(overlay.keypoints.keys, inside)
+                   if ok and int(k) not in known]
+        self.selected, self.also = (chosen[0], chosen[1:]) if chosen else (None, [])
+        self.tab.workspace.select(self.selected, self.also)
+        self.tab.painter.show_selected()
 
     def selected_ids(self) -> list[int]:
         """The ids of the selected keypoints (the first selected first)."""

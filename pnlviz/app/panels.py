@@ -89,7 +89,7 @@ def legend_markdown() -> str:
 def keys_markdown() -> str:
     """The keys an annotator uses most, in one line at the top of the panel."""
     return ("**G** accept · **C** corrected · **R** reject · **N/P** next/previous · **shift+click** place · "
-            "**ctrl+click** select more · **arrows** nudge · **Del** hide · **O** occluded · **Ctrl+Z** undo · "
+            "**ctrl+click/drag** select more · **arrows** nudge · **Del** hide · **O** occluded · **Ctrl+Z** undo · "
             "**V** 3D · more: Help")
 
 

@@ -66,6 +66,7 @@ class Session:
         self.workspace = Workspace(scene, nodes, events)
         self.view_control = ViewControl(self.workspace, client, self.painter.show_zoom, self.editor.nudge,
                                         self.queue.enqueue)
+        self.view_control.on_box = self.editor.select_in_box
         self.scene3d = Scene3D(scene, nodes)
         self.panels = Panels(self)
         self.panels.set_order(len(self.frames.order), self.index)

@@ -58,6 +58,9 @@ class ViewControl:
         self.version = self.pushes = 0
         self.gesture_seen = -1
         self.on_push: Callable[[int | None, bool], None] | None = None
+        #: a box drawn in the page (ctrl+drag): ``on_box(lo, hi)``, its corners in image pixels
+        self.on_box: Callable[[np.ndarray, np.ndarray], None] | None = None
+        self.box_seen = 0
 
     @property
     def in_image(self) -> bool:
@@ -133,6 +136,11 @@ class ViewControl:
             self.resized(msg.canvas)
         if msg.gesture is not None:
             self.gesture(msg.gesture)
+        if msg.box is not None and msg.box.k > self.box_seen:
+            self.box_seen = msg.box.k
+            if self.in_image and self.on_box is not None:
+                b = msg.box
+                self.on_box(self.to_pixel((b.x0, b.y0)), self.to_pixel((b.x1, b.y1)))
         if msg.log_zoom != log_zoom:
             self.zoom_by(math.exp(float(np.clip(msg.log_zoom - log_zoom, -3.0, 3.0))),
                          (msg.x * self.canvas[0], msg.y * self.canvas[1]))
