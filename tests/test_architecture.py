@@ -32,8 +32,8 @@ ALLOWED = {
                       "pnlviz.synth"},
     "pnlviz.viz": {"pnlviz.field", "pnlviz.geometry"},
     "pnlviz.api": {"pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.calib", "pnlviz.detect", "pnlviz.viz"},
-    "pnlviz.pipeline": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.calib",
-                        "pnlviz.metrics"},
+    "pnlviz.pipeline": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.labels",
+                        "pnlviz.calib", "pnlviz.metrics"},
     "pnlviz.app": {"pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data", "pnlviz.calib",
                    "pnlviz.metrics", "pnlviz.viz", "pnlviz.pipeline"},  # not detect: the app never imports torch
     "pnlviz.commands": {"pnlviz", "pnlviz.paths", "pnlviz.conventions", "pnlviz.field", "pnlviz.geometry", "pnlviz.data",

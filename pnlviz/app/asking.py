@@ -61,3 +61,32 @@ def ask_before_accepting(editor, stem: str) -> bool:
     editor.tab.notify(f"{stem}: accept anyway?", text.replace("**", ""), error=False)
     editor.tab.panels.gate_text.content = text
     return True
+
+
+def say_flagged(editor, stem: str) -> None:
+    """After a review: the points of the frame the export's outlier gate flags, said in the
+    panel and remembered for H (:meth:`pnlviz.app.editing.Editor.hide_flagged`)."""
+    from pnlviz.pipeline.snapshot import REVIEWED, snapshot_flags
+
+    record = editor.tab.state.edits.get(stem)
+    reviewed = record.get("review") in REVIEWED
+    flagged, limit = snapshot_flags(record) if reviewed else ({}, 0.0)
+    slips = {int(k): float("inf") if v is None else float(v)
+             for k, v in ((record.get("snapshot") or {}).get("slips") or {}).items()} if reviewed else {}
+    editor.flagged = (stem, sorted(flagged)) if flagged else None
+    text = ""
+    if flagged:
+        ids = distances_text(flagged)
+        text = (f"**{stem}: {len(flagged)} point{'s' if len(flagged) > 1 else ''} flagged** (farther than "
+                f"{limit:.1f} px from the camera; exported flagged, not as ground truth): {ids}. "
+                f"**H** hides them.")
+        editor.tab.notify(f"{len(flagged)} flagged on {stem}", text.replace("**", ""), error=False)
+    if slips:
+        ids = distances_text(slips)
+        more = (f"**{stem}: {len(slips)} point{'s' if len(slips) > 1 else ''} placed by hand far from where the "
+                f"rest of the frame puts {'them' if len(slips) > 1 else 'it'}** (possible slips, kept as placed "
+                f"and listed in the export's manifest): {ids}.")
+        editor.tab.notify(f"{len(slips)} possible slip{'s' if len(slips) > 1 else ''} on {stem}",
+                        more.replace("**", ""), error=False)
+        text = f"{text} {more}".strip()
+    editor.tab.panels.gate_text.content = text

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pnlviz.app.asking import ask_before_accepting, distances_text, say_slip
+from pnlviz.app.asking import ask_before_accepting, say_flagged, say_slip
 from pnlviz.app.cards import listed_id
 from pnlviz.app.modes import DragEvent, DragMode, DragPhase, PointKind, Selection, labels
 from pnlviz.app.panels import choice_id
@@ -156,37 +156,9 @@ class Editor:
         if status == "accepted" and ask_before_accepting(self, stem):
             return
         self.trail.act(stem, lambda: tab.state.set_review(stem, None if status == "clear" else status, tab.settings))
-        self.say_flagged(stem)
+        say_flagged(self, stem)
         if advance and status != "clear" and tab.state.edits.review(stem) == status:
             tab.advance_from(stem)
-
-    def say_flagged(self, stem: str) -> None:
-        """After a review: the points of the frame the export's outlier gate flags, said in the
-        panel and remembered for H (:meth:`hide_flagged`)."""
-        from pnlviz.pipeline.snapshot import REVIEWED, snapshot_flags
-
-        record = self.tab.state.edits.get(stem)
-        reviewed = record.get("review") in REVIEWED
-        flagged, limit = snapshot_flags(record) if reviewed else ({}, 0.0)
-        slips = {int(k): float("inf") if v is None else float(v)
-                 for k, v in ((record.get("snapshot") or {}).get("slips") or {}).items()} if reviewed else {}
-        self.flagged = (stem, sorted(flagged)) if flagged else None
-        text = ""
-        if flagged:
-            ids = distances_text(flagged)
-            text = (f"**{stem}: {len(flagged)} point{'s' if len(flagged) > 1 else ''} flagged** (farther than "
-                    f"{limit:.1f} px from the camera; exported flagged, not as ground truth): {ids}. "
-                    f"**H** hides them.")
-            self.tab.notify(f"{len(flagged)} flagged on {stem}", text.replace("**", ""), error=False)
-        if slips:
-            ids = distances_text(slips)
-            more = (f"**{stem}: {len(slips)} point{'s' if len(slips) > 1 else ''} placed by hand far from where the "
-                    f"rest of the frame puts {'them' if len(slips) > 1 else 'it'}** (possible slips, kept as placed "
-                    f"and listed in the export's manifest): {ids}.")
-            self.tab.notify(f"{len(slips)} possible slip{'s' if len(slips) > 1 else ''} on {stem}",
-                            more.replace("**", ""), error=False)
-            text = f"{text} {more}".strip()
-        self.tab.panels.gate_text.content = text
 
     def hide_flagged(self) -> None:
         """H: hide the points the gate flagged on the frame reviewed last from its labels (one
@@ -197,7 +169,7 @@ class Editor:
             return
         stem, ids = self.flagged
         self.trail.act(stem, lambda: self.tab.state.hide_flagged(stem, ids, self.tab.settings))
-        self.say_flagged(stem)
+        say_flagged(self, stem)
 
     def hide_selected(self) -> None:
         """Delete: the selected keypoints (one, or several with Ctrl+click) absent, one undo step."""

@@ -39,6 +39,7 @@ import numpy as np
 from pnlviz.conventions import PROVENANCES
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
+from pnlviz.labels.types import Label
 
 from .calibrate import CalibParams, calibrate
 from .cuts import CutEdits, apply_cuts, find_shots
@@ -50,7 +51,7 @@ from .shot_fit import ShotFit, distances
 from .sources import apply_keypoint_edits
 from .temporal import ShotSolver
 
-__all__ = ["DISTRUST_PX", "PROVENANCE", "ClipLabel", "ClipSolver", "carried_points"]
+__all__ = ["DISTRUST_PX", "PROVENANCE", "ClipSolver", "carried_points"]
 
 #: a detected keypoint the hand moved farther than this (px at 960 px width) is not trusted on the
 #: shot's other frames (3 x the detection noise of :class:`TemporalParams`)
@@ -58,18 +59,6 @@ DISTRUST_PX = 4.5
 
 #: where a clip frame's label comes from
 PROVENANCE = PROVENANCES
-
-
-@dataclass(frozen=True)
-class ClipLabel:
-    """One keypoint label of a clip frame: pixels, its provenance (:data:`PROVENANCE`), its
-    distance (px) to the frame's shot camera (None without one), its set."""
-
-    x: float
-    y: float
-    provenance: str
-    residual: float | None
-    set: str = ""
 
 
 def _in_view(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -156,7 +145,7 @@ class ClipSolver:
         self.found = apply_cuts([range(0, self.T)], CutEdits(frozenset(starts)), self.T)
         self._parts = parts
         self._seconds = [0.0] * len(parts)
-        self._labels: dict[int, dict[int, ClipLabel]] | None = None
+        self._labels: dict[int, dict[int, Label]] | None = None
         self._carried_by_shot: dict[int, dict[int, dict[int, np.ndarray]]] | None = None
         self._drop: list[frozenset[int]] = [frozenset()] * len(parts)
         for k in range(len(parts)):  # the edits made before: their shots leave the detections they corrected out
@@ -320,7 +309,7 @@ class ClipSolver:
             self._solve(j, warm)
 
     # ------------------------------------------------------------------ labels
-    def labels(self, t: int) -> dict[int, ClipLabel]:
+    def labels(self, t: int) -> dict[int, Label]:
         """Frame ``t``'s labels with provenance (see the module docstring), computed when asked
         for (the points carried through its shot once per shot and solve)."""
         if self._labels is None:
@@ -349,19 +338,18 @@ class ClipSolver:
             return own.get(kid, "detection")
         return own or "detection"
 
-    def _frame_labels(self, t: int) -> dict[int, ClipLabel]:
+    def _frame_labels(self, t: int) -> dict[int, Label]:
         obs, cam = self.shown_observations(t), self.camera(t)
-        labels: dict[int, ClipLabel] = {}
+        labels: dict[int, Label] = {}
         if obs is not None and obs.n_keypoints:
             res = np.hypot(*(cam.project(obs.kp_xyz) - obs.kp_xy).T) if cam is not None else None
             for i, kid in enumerate(obs.kp_ids.tolist()):
                 r = None if res is None or not np.isfinite(res[i]) else float(res[i])
-                labels[int(kid)] = ClipLabel(float(obs.kp_xy[i, 0]), float(obs.kp_xy[i, 1]),
-                                             "hand" if obs.pins[i] else self.provenance(t, int(kid)), r,
-                                             str(obs.kp_sets[i]))
+                labels[int(kid)] = Label(float(obs.kp_xy[i, 0]), float(obs.kp_xy[i, 1]), str(obs.kp_sets[i]),
+                                         "hand" if obs.pins[i] else self.provenance(t, int(kid)), r)
         for kid, uv in self._carried(self.shot_of(t)).get(t, {}).items():
             if kid not in labels:
-                labels[kid] = ClipLabel(float(uv[0]), float(uv[1]), "shot", 0.0, self.field_model.keypoints[kid].group)
+                labels[kid] = Label(float(uv[0]), float(uv[1]), self.field_model.keypoints[kid].group, "shot", 0.0)
         return labels
 
     # ------------------------------------------------------------------ internals

@@ -1,4 +1,5 @@
-"""Dataclasses of :mod:`pnlviz.labels`: parameters, keypoint labels and line extremities."""
+"""Dataclasses of :mod:`pnlviz.labels`: parameters, keypoint labels and line extremities, and
+the label a reviewed or exported frame carries (:class:`Label`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,21 @@ import numpy as np
 
 #: The keypoint sets of the paper, in the order they are computed.
 SETS: tuple[str, ...] = ("Kp", "Kpe", "Kp1", "Kp2", "Kp3")
+
+
+@dataclass(frozen=True)
+class Label:
+    """One keypoint label of a reviewed or exported frame, whoever made it (a frame's own review,
+    a clip's shot model, an export): pixels of the frame, its set, where it came from (one of
+    :data:`pnlviz.conventions.PROVENANCES`), its distance (px) to the frame's camera (None
+    without a camera). (:class:`KeypointLabel` is the other kind: a label *generated* from a line
+    annotation to train the detector.)"""
+
+    x: float
+    y: float
+    set: str
+    provenance: str
+    residual: float | None
 
 
 @dataclass(frozen=True)

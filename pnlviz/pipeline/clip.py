@@ -23,16 +23,13 @@ from pnlviz.calib.frame import calib_params, detection_settings_apply, observati
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.shot import TemporalParams
 from pnlviz.calib.temporal import image_changes
-from pnlviz.conventions import EVAL_SIZE
 from pnlviz.data import atomic_write_text
 from pnlviz.data.errors import DataError
 from pnlviz.data.layout import video_clips
-from pnlviz.data.predictions import predictions_to_json
 from pnlviz.data.state_files import read_state_json
-from pnlviz.data.snapshot import edits_digest
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.pipeline.reader import FrameReader, Settings
-from pnlviz.pipeline.snapshot import provenance
+from pnlviz.pipeline.snapshot import provenance, review_snapshot
 
 __all__ = ["accept_shot", "clip_changes", "clip_solver", "dataset_clips", "read_cuts", "set_cut", "shot_snapshot"]
 
@@ -135,17 +132,12 @@ def shot_snapshot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Seq
     if read.inputs is not None:
         origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, solver.field_model)[1]
     dets = reader.detections(stem) if origin in ("detections", "both") else None
-    camera = solver.camera(t)
     k = solver.shot_of(t)
     shot = solver.shots[k]
-    return {"settings": {"source": settings.source, "pnl": settings.pnl, "alpha": settings.alpha},
-            "detection_settings": dict(detection_settings_apply(origin, fs)), "size": [int(v) for v in solver.size],
-            "detections": predictions_to_json(dets) if dets is not None else None, "edits": edits_digest(record),
-            "labels": {str(kid): {"x": lab.x, "y": lab.y, "set": lab.set, "provenance": lab.provenance,
-                                  "residual": lab.residual} for kid, lab in solver.labels(t).items()},
-            "camera": None if camera is None else camera.scaled(*EVAL_SIZE).to_soccernet(),
-            "failure": None if camera is not None else "the shot has no camera here",
-            "shot": {"clip": clip, "shot": k, "first": stems[shot.start], "last": stems[shot.stop - 1]}}
+    return review_snapshot(record, solver.labels(t), solver.camera(t), "the shot has no camera here",
+                           settings=settings, detection_settings=detection_settings_apply(origin, fs),
+                           size=solver.size, detections=dets,
+                           shot={"clip": clip, "shot": k, "first": stems[shot.start], "last": stems[shot.stop - 1]})
 
 
 def _accept(record: dict) -> None:

@@ -28,23 +28,12 @@ from pnlviz.data.predictions import parse_predictions, predictions_to_json
 from pnlviz.data.snapshot import edits_digest
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
+from pnlviz.labels.types import Label
 
 #: the outlier gate: a visible point farther than this from its frame's camera, in pixels at
 #: 960x540 (scaled with the frame's diagonal), is exported as flagged, not as ground truth
 GATE_PX = 10.0
 REVIEWED = _REVIEWED
-
-
-@dataclass(frozen=True)
-class Label:
-    """One keypoint label: pixels of the frame, its set, where it came from, its distance to the
-    frame's camera (None without a camera)."""
-
-    x: float
-    y: float
-    set: str
-    provenance: str
-    residual: float | None
 
 
 @dataclass
@@ -132,6 +121,27 @@ def _camera_json(camera: Camera | None) -> dict | None:
     return None if camera is None else camera.scaled(*EVAL_SIZE).to_soccernet()
 
 
+def review_snapshot(record: Mapping, labels: Mapping[int, Label], camera: Camera | None, failure: str | None, *,
+                    settings, detection_settings: Mapping, size, detections=None, shot: Mapping | None = None) -> dict:
+    """The one builder of a review snapshot (format: :mod:`pnlviz.data.snapshot`), whoever
+    reviews: a frame's own view (:func:`take_snapshot`) or a clip's shot model
+    (:func:`pnlviz.pipeline.clip.shot_snapshot`). ``record``: the frame's edit record (its edits'
+    digest is kept); ``labels``: what an export writes; ``camera`` (None: ``failure`` says why);
+    ``settings``: the app's :class:`pnlviz.pipeline.settings.Settings`; ``detections``: the ones
+    the labels used (None: none); ``shot``: where a shot-reviewed frame's shot is."""
+    snap = {"settings": {"source": settings.source, "pnl": settings.pnl, "alpha": settings.alpha},
+            "detection_settings": dict(detection_settings), "size": [int(v) for v in size],
+            "detections": predictions_to_json(detections) if detections is not None else None,
+            "edits": edits_digest(record),
+            "labels": {str(k): {"x": v.x, "y": v.y, "set": v.set, "provenance": v.provenance, "residual": v.residual}
+                       for k, v in labels.items()},
+            "camera": _camera_json(camera),
+            "failure": None if camera is not None else failure}
+    if shot is not None:
+        snap["shot"] = dict(shot)
+    return snap
+
+
 def take_snapshot(view, record: Mapping, detection_settings: Mapping, model: FieldModel | None = None) -> dict:
     """The review snapshot of a frame's ``view`` (a :class:`pnlviz.pipeline.view.FrameView`
     computed with ``record``'s edits): its labels, their provenance, the detections it used
@@ -140,16 +150,10 @@ def take_snapshot(view, record: Mapping, detection_settings: Mapping, model: Fie
     camera = view.result.camera if view.result is not None and view.result.ok else None
     used = view.detections is not None and view.origin in ("detections", "both")
     labels = labels_of(view.observations, view.origin, view.annotation, record.get("keypoints"), camera, model)
-    s = view.settings
-    return {"settings": {"source": s.source, "pnl": s.pnl, "alpha": s.alpha},
-            "detection_settings": dict(detection_settings), "size": [int(v) for v in view.size],
-            "detections": predictions_to_json(view.detections) if used else None,
-            "edits": edits_digest(record),
-            "labels": {str(k): {"x": v.x, "y": v.y, "set": v.set, "provenance": v.provenance, "residual": v.residual}
-                       for k, v in labels.items()},
-            "camera": _camera_json(camera),
-            "failure": None if camera is not None else (view.result.failure if view.result is not None else
-                                                         "nothing to calibrate from")}
+    failure = view.result.failure if view.result is not None else "nothing to calibrate from"
+    return review_snapshot(record, labels, camera, failure, settings=view.settings,
+                           detection_settings=detection_settings, size=view.size,
+                           detections=view.detections if used else None)
 
 
 def hand_slips(view, frame_settings, model: FieldModel | None = None, gate_px: float = GATE_PX,
@@ -227,4 +231,5 @@ def view_labels(view, record: Mapping, model: FieldModel | None = None) -> Frame
 
 
 __all__ = ["GATE_PX", "REVIEWED", "FrameLabels", "Label", "gate", "gate_threshold", "labels_of", "provenance",
-           "residuals", "reviewed_labels", "snapshot_flags", "take_snapshot", "view_labels", "hand_slips"]
+           "residuals", "review_snapshot", "reviewed_labels", "snapshot_flags", "take_snapshot", "view_labels",
+           "hand_slips"]
