@@ -20,6 +20,7 @@ from pnlviz.app.editing import Drag, EditTrail
 from pnlviz.app.frameorder import FrameOrder, visible_order
 from pnlviz.app.modes import DragMode, DragPhase, Filter, Mode, PointKind, Selection, Sort, labels
 from pnlviz.app.overlay import Markers, Overlay
+from pnlviz.app.host import TabHandle
 from pnlviz.app.playback import ClipPlayer
 from pnlviz.app.shots import ClipShots
 from pnlviz.app.state import REVIEW_STATES, AppState, EditError
@@ -321,13 +322,12 @@ def clip_tab(errors):
     """A tab on a clip of frames 2..6 of a dataset (frame 7 beside it), with these errors."""
     stems = [f"f{i}" for i in range(8)]
     views = {f"f{i}": fake_view(residuals=(e,)) for i, e in zip(range(2, 7), errors) if e is not None}
-    tab = SimpleNamespace(index=2, settings=None, notes=[], panels=SimpleNamespace(clip_text=None),
-                          state=SimpleNamespace(stems=stems, shots=ClipShots(SimpleNamespace(stems=stems)),
-                                                triage=SimpleNamespace(lookup=lambda stem, settings: views.get(stem))))
-    tab.goto = lambda i: setattr(tab, "index", i)
-    tab.notify = lambda title, body, error=True: tab.notes.append(title)
-    tab.queue = SimpleNamespace(closed=False, enqueue=lambda action: action())
-    return tab, ClipPlayer(tab, {"clip": [2, 3, 4, 5, 6]})
+    tab = SimpleNamespace(index=2, notes=[])
+    handle = TabHandle(index=lambda: tab.index, settings=lambda: None, goto=lambda i: setattr(tab, "index", i),
+                       show=lambda: None, notify=lambda title, body, error=True: tab.notes.append(title))
+    queue = SimpleNamespace(closed=False, enqueue=lambda action: action())
+    return tab, ClipPlayer(handle, {"clip": [2, 3, 4, 5, 6]}, stems=stems, shots=ClipShots(SimpleNamespace(stems=stems)),
+                           summaries=lambda stem, settings: views.get(stem), queue=queue)
 
 
 def test_the_clip_steps_to_its_end_and_stops():

@@ -1,10 +1,13 @@
-"""What the session's parts are given by the session (no GUI here): :class:`FrameHost`.
+"""What the session's parts are given by the session (no GUI here): :class:`FrameHost`, and
+what a tab's parts are given by their tab: :class:`TabHandle`.
 
 :class:`pnlviz.app.state.AppState` creates its parts (the frames' summaries and background pass,
 :class:`pnlviz.app.triage.Triage`; the clips' shot models, :class:`pnlviz.app.shots.ClipShots`) and
 hands each the few things it uses, as one typed value: the frames, their reader and views, the
 one door through which a frame's edit record changes, and the notice that a frame changed. A
-part never holds the session itself and never reaches into it.
+part never holds the session itself and never reaches into it. A tab's parts are given, the same
+way, the few things of their tab they use (:class:`TabHandle`: which frame it shows, with which
+settings; going to another frame; drawing it again; a notice), not the tab.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ if TYPE_CHECKING:
     from pnlviz.field.model import FieldModel
     from pnlviz.pipeline import FrameReader, FrameView, Settings
 
-__all__ = ["FrameHost", "Write"]
+__all__ = ["FrameHost", "TabHandle", "Write"]
 
 #: the one door for a change to a frame's edit record: ``write(stem, change, *, corrected=True,
 #: settings=None, merge=None, snapshot=None) -> bool`` (:meth:`pnlviz.app.state.AppState.write`)
@@ -48,3 +51,16 @@ class FrameHost:
     needs_detection: Callable[[str], bool]
     write: Write
     notify: Callable[[str], Any]
+
+
+@dataclass(frozen=True)
+class TabHandle:
+    """One tab as its parts see it: ``index()`` the dataset index of the frame it shows,
+    ``settings()`` the settings it shows it with, ``goto(index)`` go to another frame, ``show()``
+    draw the frame again, ``notify(title, body, error=True)`` a notice in the tab."""
+
+    index: Callable[[], int]
+    settings: Callable[[], Settings]
+    goto: Callable[[int], Any]
+    show: Callable[[], Any]
+    notify: Callable[..., None]

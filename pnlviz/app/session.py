@@ -22,10 +22,11 @@ from dataclasses import replace
 from pnlviz.app.drawing import Painter
 from pnlviz.app.editing import Editor
 from pnlviz.app.frameorder import FrameOrder, visible_order
+from pnlviz.app.host import TabHandle
 from pnlviz.app.modes import Filter, Mode, Sort, labels
 from pnlviz.app.pagesync import PageSync
 from pnlviz.app.panels import Panels
-from pnlviz.app.playback import ClipPlayer
+from pnlviz.app.playback import ClipPlayer, ClipWidgets
 from pnlviz.app.scene import OVERVIEW, Scene3D, behind_camera
 from pnlviz.app.state import SOURCES, FrameView, Settings
 from pnlviz.app.tabqueue import ActionGuard, TabQueue
@@ -54,7 +55,10 @@ class Session:
         self.painter = Painter(self)
         self.guard = ActionGuard(notify, self.show, lambda: self.painter.drawn)
         self.editor = Editor(self)
-        self.clip = ClipPlayer(self, st.clips)
+        handle = TabHandle(index=lambda: self.index, settings=lambda: self.settings, goto=self.goto, show=self.show,
+                           notify=notify)
+        self.clip = ClipPlayer(handle, st.clips, stems=st.stems, shots=st.shots, summaries=st.triage.lookup,
+                               queue=self.queue)
         #: where this tab's scene nodes live: a client's own scene, or (without a browser, on the
         #: server's shared scene) a branch of its own
         nodes = "/tab" if client is not None else f"/tab/session-{id(self):x}"
@@ -69,6 +73,8 @@ class Session:
         self.view_control.on_box = self.editor.select_in_box
         self.scene3d = Scene3D(scene, nodes)
         self.panels = Panels(self)
+        if self.panels.clip_text is not None:  # a dataset with clips: the panel shows the tab's clip
+            self.clip.widgets = ClipWidgets(self.panels.clip_text, self.panels.clip_strip, self.panels.clip_slider)
         self.panels.set_order(len(self.frames.order), self.index)
         self.queue.busy = self.panels.set_busy  # a cue over the image while an action takes long
         #: the image view as the page's bridge needs it (pans and zooms in the page: pnlviz.app.pagesync)
