@@ -404,6 +404,7 @@ def test_a_ctrl_drag_box_selects_the_keypoints_inside_it_and_o_occludes_them_all
     np.testing.assert_allclose(camera_state(session), camera_before)  # a box, not a pan or a turn of the camera
     assert not app.state.edits.get(stem).get("keypoints")  # nothing moved
     assert page.evaluate("document.getElementById('pnlviz-box') === null")  # the rectangle is gone
+    wait_until(lambda: f"{len(inside)} keypoints selected" in session.panels.selected.content)
     page.keyboard.press("o")
     wait_until(lambda: set(inside) <= set(app.state.edits.get(stem).get("occluded") or []))
     assert set(app.state.edits.get(stem).get("occluded")) == set(inside)

@@ -6,7 +6,7 @@ lines, the points list, the selected point, the review progress, the clip line, 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -148,8 +148,13 @@ def listed_id(row) -> int | None:
     return int(text) if text.isdigit() else None
 
 
-def selected_text(selected: Selection | None, overlay: Overlay | None, model, place_id: int) -> str:
-    """What is selected: its id and name (or line and index), residual, and where it is."""
+def selected_text(selected: Selection | None, overlay: Overlay | None, model, place_id: int,
+                  also: Sequence[int] = ()) -> str:
+    """What is selected: its id and name (or line and index), residual, and where it is; with
+    ``also`` (more selected keypoints: Ctrl+click, a Ctrl+drag box) how many and which."""
+    if selected is not None and also:
+        ids = ", ".join(str(k) for k in [selected.key, *also])
+        return f"**{1 + len(also)} keypoints selected** ({ids}) · **Del** hides them · **O** occluded · one undo step"
     if selected is None or overlay is None:
         return f"nothing selected · shift+click places **{place_id}** {keypoint_name(model, place_id)}"
     key = selected.key

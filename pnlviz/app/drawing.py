@@ -218,7 +218,8 @@ class Painter:
 
     def show_selected(self) -> None:
         tab = self.tab
-        text = cards.selected_text(tab.editor.selected, self.overlay, tab.state.model, tab.editor.place_id)
+        text = cards.selected_text(tab.editor.selected, self.overlay, tab.state.model, tab.editor.place_id,
+                                   [s.kid for s in tab.editor.also])
         update_changed(tab.panels.selected, content=text)
 
     def show_progress(self) -> None:
