@@ -126,23 +126,43 @@ class Painter:
         """The label-error finder's findings on ``view`` as marks to draw
         (:func:`pnlviz.calib.qa.finding_marks`; judged once per view, not at all when the background
         pass judged the same inputs clean): none when the findings layer is off, or for a frame
-        without an annotation."""
+        without an annotation. A frame not judged yet is drawn without them and judged right after,
+        on the tab's queue: its findings are drawn then (judging takes one to 26 calibrations,
+        which the frame does not wait for)."""
         if not self.layers.findings:
             return []
         if self._judged is None or self._judged[0] is not view:
-            from pnlviz.app.triage import judge_view
+            from pnlviz.app.triage import NOT_JUDGED, judge_view
             from pnlviz.calib.qa import finding_marks
 
             summary = self.tab.state.triage.lookup(view.stem, self.tab.settings)
             qa = None
             if summary is None or summary.suspect is None or summary.suspect >= 1.0:  # else: judged clean
                 try:
-                    qa = judge_view(view)
+                    qa = judge_view(view, judge=False)
                 except Exception:  # noqa: BLE001 - a bug in the finder must not stop the frame being shown
                     qa = None
+                if qa is NOT_JUDGED:
+                    self.tab.queue.enqueue(lambda: self._judge_shown(view))
+                    return []
             marks = finding_marks(qa, view.annotation or {}, view.size, self.tab.state.model) if qa else []
             self._judged = (view, marks)
         return self._judged[1]
+
+    def _judge_shown(self, view: FrameView) -> None:
+        """``view`` judged by the label-error finder, and its findings drawn when it is still the
+        frame shown (a frame left meanwhile is judged by the background pass in its turn)."""
+        from pnlviz.app.triage import judge_view
+
+        if self.shown is not view or self.tab.queue.closed:
+            return
+        try:
+            qa = judge_view(view)
+        except Exception:  # noqa: BLE001 - a bug in the finder must not stop the frame being shown
+            return
+        with self.tab.lock:
+            if self.shown is view and qa is not None and qa.findings:
+                self.show_overlay(view)
 
     def show_overlay(self, view: FrameView, preview: bool = False) -> None:
         """The overlays of ``view``; a ``preview`` (while a point is dragged) is not kept as the

@@ -94,12 +94,17 @@ def summarize(view, token: str, judge: bool = False) -> FrameSummary:
                         view.jac.get(5) if ok else None, token, suspect, note)
 
 
-def judge_view(view):
+#: what :func:`judge_view` returns, asked not to judge, for a frame not judged yet
+NOT_JUDGED = object()
+
+
+def judge_view(view, judge: bool = True):
     """The label-error finder's verdict on the frame's annotation (its edits applied) and its
     detections, exactly as ``pnlviz qa`` judges the frame with the same inputs
     (:func:`pnlviz.calib.qa.check_frame` with its own calibration, so a frame whose annotation
     gives no camera is judged too: a class that breaks it is found by leaving each out); None for
-    a frame without an annotation. Raises what the finder raises."""
+    a frame without an annotation. Without ``judge``, only a verdict already reached (else
+    :data:`NOT_JUDGED`: judging costs one to 26 calibrations). Raises what the finder raises."""
     from pnlviz.calib.qa import check_frame
 
     if not view.annotation:
@@ -108,6 +113,8 @@ def judge_view(view):
     with _JUDGED_LOCK:
         if key in _JUDGED:
             return _JUDGED[key]
+    if not judge:
+        return NOT_JUDGED
     qa = check_frame(view.annotation, tuple(view.size), view.detections)
     with _JUDGED_LOCK:
         _JUDGED[key] = qa
