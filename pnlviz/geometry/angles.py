@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 
+from pnlviz.geometry.shapes import as_array
+
 __all__ = ["look_at_rotation", "pan_tilt_roll_from_rotation", "rotation_from_pan_tilt_roll"]
 
 
@@ -42,8 +44,9 @@ def rotation_from_pan_tilt_roll(pan, tilt, roll) -> np.ndarray:
 
 def pan_tilt_roll_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
     """Inverse of :func:`rotation_from_pan_tilt_roll` (radians). Of the two decompositions, the one
-    with the smaller |roll| is returned, as the SoccerNet package does (operators avoid roll)."""
-    o = np.asarray(R, dtype=float).T  # orientation = Rz(pan) Rx(tilt) Rz(roll)
+    with the smaller |roll| is returned, as the SoccerNet package does (operators avoid roll).
+    ``R`` (3, 3); another shape: ArgumentError."""
+    o = as_array(R, (3, 3), "R").T  # orientation = Rz(pan) Rx(tilt) Rz(roll)
     first = math.acos(max(-1.0, min(1.0, o[2, 2])))
     solutions = []
     for tilt in (first, -first):
@@ -54,8 +57,9 @@ def pan_tilt_roll_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
 
 def look_at_rotation(position: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.ndarray:
     """World-to-camera rotation of a camera at ``position`` looking at ``target`` with the image
-    'up' as close as possible to world up (-z), then rolled by ``roll`` radians about the axis."""
-    z = np.asarray(target, float) - np.asarray(position, float)
+    'up' as close as possible to world up (-z), then rolled by ``roll`` radians about the axis.
+    ``position``, ``target``: (3,) each; another shape: ArgumentError."""
+    z = as_array(target, (3,), "target") - as_array(position, (3,), "position")
     z /= np.linalg.norm(z)
     down = np.array([0.0, 0.0, 1.0])
     x = np.cross(down, z)  # camera x points right when y points down

@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 
 from pnlviz.errors import ArgumentError
 from pnlviz.geometry.angles import look_at_rotation, pan_tilt_roll_from_rotation, rotation_from_pan_tilt_roll
+from pnlviz.geometry.shapes import as_points
 
 #: Points closer to the camera plane than this (metres along the optical axis) are not projected;
 #: the SoccerNet evaluator uses the same bound.
@@ -292,11 +293,12 @@ class Camera:
 
     # ------------------------------------------------------------------ projection
     def to_camera(self, X: np.ndarray) -> np.ndarray:
-        """World points (N, 3) -> camera coordinates (N, 3)."""
-        return (np.asarray(X, float).reshape(-1, 3) - self.C) @ self.R.T
+        """World points (N, 3) -> camera coordinates (N, 3); another shape: ArgumentError."""
+        return (as_points(X, 3, "X") - self.C) @ self.R.T
 
     def distort(self, xn: np.ndarray) -> np.ndarray:
-        """Apply the lens model to normalised image points (N, 2)."""
+        """Apply the lens model to normalised image points (N, 2); another shape: ArgumentError."""
+        xn = as_points(xn, 2, "xn")
         if self._lens == "none":
             return xn
         x, y = xn[:, 0], xn[:, 1]
@@ -313,8 +315,9 @@ class Camera:
 
     def undistort(self, xd: np.ndarray, iterations: int = 20) -> np.ndarray:
         """Normalised distorted points (N, 2) -> undistorted normalised points, by Newton's method
-        on :meth:`distort` (vectorised 2x2 solves; converges to ~1e-14 for broadcast lenses)."""
-        xd = np.asarray(xd, float).reshape(-1, 2)
+        on :meth:`distort` (vectorised 2x2 solves; converges to ~1e-14 for broadcast lenses).
+        Another shape: ArgumentError."""
+        xd = as_points(xd, 2, "xd")
         if not self.has_distortion:
             return xd
         x = xd.copy()
@@ -387,8 +390,9 @@ class Camera:
         return self.project(np.column_stack([arr, np.zeros(len(arr))]))
 
     def pixel_rays(self, uv: ArrayLike) -> np.ndarray:
-        """Unit world directions (N, 3) of the rays through pixels ``uv`` (N, 2), distortion removed."""
-        uv = np.asarray(uv, float).reshape(-1, 2)
+        """Unit world directions (N, 3) of the rays through pixels ``uv`` (N, 2), distortion removed
+        (another shape: ArgumentError)."""
+        uv = as_points(uv, 2, "uv", "pixels")
         xd = np.stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy], axis=1)
         xn = self.undistort(xd)
         d = np.hstack([xn, np.ones((len(xn), 1))]) @ self.R  # R^T applied to row vectors
@@ -433,8 +437,8 @@ class Camera:
         """(N,) whether the lens model maps a ray to each pixel of ``uv`` (N, 2) one way: the
         undistorted point distorts back to the pixel, and on the way from the image centre to it
         the distortion keeps moving outwards (beyond where it turns, the model folds back and the
-        same pixel has a second, wrong ray)."""
-        uv = np.asarray(uv, float).reshape(-1, 2)
+        same pixel has a second, wrong ray). Another shape: ArgumentError."""
+        uv = as_points(uv, 2, "uv", "pixels")
         if not self.has_distortion:
             return np.all(np.isfinite(uv), axis=1)
         xd = np.stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy], axis=1)

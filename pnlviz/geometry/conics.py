@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pnlviz.geometry.shapes import as_array, as_points
+
 
 class ConicError(ValueError):
     """Raised when no ellipse fits the points (too few or degenerate points)."""
@@ -28,8 +30,9 @@ def line_through(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def fit_line(points: np.ndarray) -> np.ndarray:
-    """Total-least-squares homogeneous line (a, b, c), a^2 + b^2 = 1, through 2D points (N >= 2)."""
-    pts = np.asarray(points, float).reshape(-1, 2)
+    """Total-least-squares homogeneous line (a, b, c), a^2 + b^2 = 1, through 2D points (N >= 2, 2)
+    (another shape: ArgumentError)."""
+    pts = as_points(points, 2, "points")
     mean = pts.mean(axis=0)
     _, _, vt = np.linalg.svd(pts - mean, full_matrices=False)
     normal = vt[-1]
@@ -37,8 +40,8 @@ def fit_line(points: np.ndarray) -> np.ndarray:
 
 
 def intersect_lines(l1: np.ndarray, l2: np.ndarray) -> np.ndarray | None:
-    """Intersection of two homogeneous lines as a 2D point, or None when they are parallel."""
-    x = np.cross(l1, l2)
+    """Intersection of two homogeneous lines (3,) as a 2D point, or None when they are parallel."""
+    x = np.cross(as_array(l1, (3,), "l1"), as_array(l2, (3,), "l2"))
     if abs(x[2]) < 1e-12 * max(1.0, np.abs(x[:2]).max()):
         return None
     return x[:2] / x[2]
@@ -137,8 +140,9 @@ class Conic:
 
 
 def fit_ellipse(points: np.ndarray) -> Conic:
-    """Direct least-squares ellipse through >= 5 points (Halir & Flusser). Raises ConicError."""
-    pts = np.asarray(points, float).reshape(-1, 2)
+    """Direct least-squares ellipse through >= 5 points (N, 2) (Halir & Flusser). Raises
+    ConicError; another shape: ArgumentError."""
+    pts = as_points(points, 2, "points")
     pts = pts[np.all(np.isfinite(pts), axis=1)]
     if len(pts) < 5:
         raise ConicError(f"an ellipse needs at least 5 points, got {len(pts)}")

@@ -6,6 +6,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pnlviz.errors import ArgumentError
+from pnlviz.geometry.shapes import as_points
+
 
 class Closest(NamedTuple):
     """Where each of M points is closest to a polyline of S vertices."""
@@ -24,10 +27,9 @@ def closest_on_polyline(pts: np.ndarray, poly: np.ndarray) -> Closest:
     >>> float(c.distance[0]), int(c.segment[0]), float(c.t[0])
     (2.0, 0, 0.25)
     """
-    pts, poly = np.asarray(pts, float), np.asarray(poly, float)
-    if pts.ndim != 2 or pts.shape[1] != 2 or poly.ndim != 2 or poly.shape[1] != 2 or len(poly) < 2:
-        raise ValueError(f"closest_on_polyline: points (M, 2) and a polyline (S >= 2, 2) expected, got "
-                         f"{pts.shape} and {poly.shape}")
+    pts, poly = as_points(pts, 2, "pts"), as_points(poly, 2, "poly", "a polyline")
+    if len(poly) < 2:
+        raise ArgumentError(f"poly: expected a polyline of 2 vertices or more, got {len(poly)}")
     return closest(pts, poly)
 
 

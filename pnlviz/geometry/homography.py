@@ -7,14 +7,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pnlviz.geometry.shapes import as_array, as_points
+
 if TYPE_CHECKING:  # imported at run time inside the function (camera imports this module's room)
     from pnlviz.geometry.camera import Camera
 
 
 def apply_homography(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Map 2D points (N, 2) through a 3x3 homography; points mapped to infinity become NaN."""
-    pts = np.asarray(pts, float).reshape(-1, 2)
-    h = np.hstack([pts, np.ones((len(pts), 1))]) @ np.asarray(H, float).T
+    """Map 2D points (N, 2) through a homography ``H`` (3, 3); points mapped to infinity become
+    NaN. Other shapes: ArgumentError naming the argument."""
+    pts = as_points(pts, 2, "pts")
+    h = np.hstack([pts, np.ones((len(pts), 1))]) @ as_array(H, (3, 3), "H").T
     with np.errstate(divide="ignore", invalid="ignore"):
         out = h[:, :2] / h[:, 2:]
     out[np.abs(h[:, 2]) < 1e-15] = np.nan
@@ -22,8 +25,9 @@ def apply_homography(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 
 def normalize_homography(H: np.ndarray) -> np.ndarray:
-    """Scale so that the Frobenius norm is 1 and H[2, 2] >= 0 (a canonical representative)."""
-    H = np.asarray(H, float)
+    """``H`` (3, 3) scaled so that its Frobenius norm is 1 and H[2, 2] >= 0 (a canonical
+    representative)."""
+    H = as_array(H, (3, 3), "H")
     H = H / np.linalg.norm(H)
     return -H if H[2, 2] < 0 else H
 
@@ -76,8 +80,8 @@ def camera_from_ground_homography(H_field_to_image: np.ndarray, width: float, he
     """
     from pnlviz.geometry.camera import Camera
 
-    H = np.asarray(H_field_to_image, dtype=float)
-    if H.shape != (3, 3) or not np.all(np.isfinite(H)):
+    H = as_array(H_field_to_image, (3, 3), "H_field_to_image")
+    if not np.all(np.isfinite(H)):
         return None
     cx, cy = width / 2.0, height / 2.0
     A = np.array([[1.0, 0.0, -cx], [0.0, 1.0, -cy], [0.0, 0.0, 1.0]]) @ H

@@ -21,6 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from pnlviz.geometry.camera import MIN_DEPTH, Camera
+from pnlviz.errors import ArgumentError
+from pnlviz.geometry.shapes import as_array, as_points
 
 
 def _project_like_evaluator(camera: Camera, X: np.ndarray, evaluator_precision: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -47,8 +49,10 @@ def _project_like_evaluator(camera: Camera, X: np.ndarray, evaluator_precision: 
 def segment_in_image(p: np.ndarray, q: np.ndarray, width: float, height: float) -> tuple[float, float] | None:
     """The part of segment p-q inside [0, W-1] x [0, H-1] as parameters (s0, s1) of p + s (q - p),
     0 <= s0 <= s1 <= 1 (Liang-Barsky); None when none of it is. Unlike :func:`clip_polyline` (which
-    follows the evaluator), a segment crossing the image between two outside ends is clipped too."""
-    d = np.asarray(q, float) - np.asarray(p, float)
+    follows the evaluator), a segment crossing the image between two outside ends is clipped too.
+    ``p``, ``q``: (2,) each; another shape: ArgumentError."""
+    p, q = as_array(p, (2,), "p"), as_array(q, (2,), "q")
+    d = q - p
     s0, s1 = 0.0, 1.0
     # p + s d inside the image, as inequalities P s <= Q
     for P, Q in ((-d[0], p[0]), (d[0], width - 1 - p[0]), (-d[1], p[1]), (d[1], height - 1 - p[1])):
@@ -79,8 +83,11 @@ def _border_crossing(cur: np.ndarray, prev: np.ndarray, width: float, height: fl
 
 
 def clip_polyline(uv: np.ndarray, valid: np.ndarray, width: float, height: float) -> np.ndarray:
-    """Visible part of one projected polyline, (M, 2) (possibly M = 0). ``valid`` marks points in
-    front of the camera."""
+    """Visible part of one projected polyline ``uv`` (N, 2), as (M, 2) (possibly M = 0). ``valid``
+    (N,) marks points in front of the camera. Other shapes: ArgumentError."""
+    uv = as_points(uv, 2, "uv", "pixels")
+    if np.shape(valid) != (len(uv),):
+        raise ArgumentError(f"valid: expected one flag per point ({len(uv)},), got shape {np.shape(valid)}")
     idx = np.flatnonzero(valid)  # the evaluator skips the others entirely
     pts = uv[idx]
     inside = (pts[:, 0] >= 0) & (pts[:, 0] < width) & (pts[:, 1] >= 0) & (pts[:, 1] < height)

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pnlviz.geometry.shapes import as_array, as_points
+
 #: depth (metres) at which points are clamped before dividing: behind the camera they get a huge,
 #: smooth residual instead of a sign flip
 CLAMP_DEPTH = 1e-6
@@ -19,16 +21,18 @@ N_CAMERA_PARAMS = 8
 
 
 def to_camera(X: np.ndarray, R: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """Camera coordinates (N, 3) of world points (N, 3); ``R`` is one rotation (3, 3) or one per
-    point (N, 3, 3) (the frames of a shot, each point with its frame's).
+    """Camera coordinates (N, 3) of world points ``X`` (N, 3), centre ``C`` (3,); ``R`` is one
+    rotation (3, 3) or one per point (N, 3, 3) (the frames of a shot, each point with its frame's).
+    Other shapes: ArgumentError naming the argument.
 
     >>> R = np.stack([np.eye(3), np.diag([1.0, -1.0, -1.0])])
     >>> to_camera(np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]]), R, np.zeros(3)).tolist()
     [[1.0, 2.0, 3.0], [1.0, -2.0, -3.0]]
     """
+    X, C = as_points(X, 3, "X"), as_array(C, (3,), "C")
     if R.ndim == 3:
-        return np.einsum("nij,nj->ni", R, X - C)
-    return (X - C) @ R.T
+        return np.einsum("nij,nj->ni", as_array(R, (len(X), 3, 3), "R"), X - C)
+    return (X - C) @ as_array(R, (3, 3), "R").T
 
 
 def project_k1(X: np.ndarray, R: np.ndarray, C: np.ndarray, f: float, aspect: float, cx: float, cy: float,
@@ -52,13 +56,15 @@ _DP_DW = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
 def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float | np.ndarray, aspect: float, cx: float, cy: float,
                      k1: float, jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """:func:`project_k1` from camera coordinates ``Xc`` (N, 3) (``R`` is needed for the
-    Jacobian only); points behind the camera are clamped to :data:`CLAMP_DEPTH`. ``f`` and ``R``
+    Jacobian only; another shape of ``Xc``: ArgumentError); points behind the camera are clamped to
+    :data:`CLAMP_DEPTH`. ``f`` and ``R``
     may be given per point, (N,) and (N, 3, 3) (the frames of a shot).
 
     >>> Xc = np.array([[1.0, 0.5, 10.0], [1.0, 0.5, 10.0]])
     >>> camera_to_pixels(Xc, np.eye(3), np.array([1000.0, 2000.0]), 1.0, 480.0, 270.0, 0.0)[0].tolist()
     [[580.0, 320.0], [680.0, 370.0]]
     """
+    Xc = as_points(Xc, 3, "Xc")
     z = np.where(Xc[:, 2] > CLAMP_DEPTH, Xc[:, 2], CLAMP_DEPTH)
     p = Xc[:, :2] / z[:, None]  # normalised (xn, yn)
     r2 = p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1]
@@ -99,6 +105,7 @@ def undistort_k1(pts: np.ndarray, f: float | np.ndarray, aspect: float, cx: floa
     >>> q.tolist()
     [[0.1, 0.05], [0.1, 0.05]]
     """
+    pts = as_points(pts, 2, "pts", "pixels")
     xd = np.empty((len(pts), 2))
     xd[:, 0] = (pts[:, 0] - cx) / f
     xd[:, 1] = (pts[:, 1] - cy) / (f * aspect)
@@ -123,7 +130,8 @@ def undistort_k1(pts: np.ndarray, f: float | np.ndarray, aspect: float, cx: floa
 
 def dehomogenize(xh: np.ndarray, jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """``(x / w, y / w)`` (N, 2) of homogeneous points (N, 3) and, with ``jac``, its derivative
-    with respect to ``(x, y, w)`` (N, 2, 3)."""
+    with respect to ``(x, y, w)`` (N, 2, 3). Another shape: ArgumentError."""
+    xh = as_points(xh, 3, "xh", "homogeneous points")
     w = xh[:, 2]
     p = xh[:, :2] / w[:, None]
     if not jac:

@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 
+from pnlviz.errors import ArgumentError
+
 
 def so3_exp(w: np.ndarray) -> np.ndarray:
     """Rotation matrix (3, 3) of the rotation vector ``w`` (3,), radians (Rodrigues' formula).
@@ -14,6 +16,8 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
     >>> bool(np.allclose(so3_exp(np.array([0.0, 0.0, np.pi / 2])) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]))
     True
     """
+    if np.shape(w) != (3,):
+        raise ArgumentError(f"w: expected a rotation vector (3,), got an array of shape {np.shape(w)}")
     x, y, z = float(w[0]), float(w[1]), float(w[2])
     theta = math.sqrt(x * x + y * y + z * z)
     K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
