@@ -6,8 +6,6 @@ order the browser sent them, and every value is checked by the action it reaches
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import cv2
 import numpy as np
 
@@ -103,10 +101,13 @@ def help_markdown() -> str:
 
 
 class Panels:
-    """The widgets of one tab's panel, bound to ``session``'s actions."""
+    """The widgets of one tab's panel (bound to the tab's parts by :func:`pnlviz.app.bindings.bind`):
+    made in ``gui`` (the tab's viser GUI), with the tab's ``queue`` (values set in order),
+    ``notify(title, body, error=True)``, the pitch ``model``, the dataset's ``clips`` and
+    ``splits``, the painter's ``layers`` and the tab's first ``settings`` and keypoint ``sources``."""
 
-    def __init__(self, session):
-        self.session, gui = session, session.gui
+    def __init__(self, gui, queue, notify, model, *, clips, splits, layers, settings, sources):
+        self.queue, self.notify, self.model, self.splits = queue, notify, model, splits
         gui.configure_theme(control_width="medium", show_share_button=False)
         gui.main_panel.dock_right()
         gui.main_panel.set_width(PANEL_WIDTH)
@@ -114,11 +115,11 @@ class Panels:
         self.keys = gui.add_markdown(keys_markdown())
         self.status = gui.add_markdown("")
         self._frame_folder(gui)
-        self._clip_folder(gui, session.clip.clips)
+        self._clip_folder(gui, clips)
         self._review_folder(gui)
         self._points_folder(gui)
-        self._view_folder(gui, session.painter.layers)
-        self._calibration_folder(gui, session.settings, session.sources)
+        self._view_folder(gui, layers)
+        self._calibration_folder(gui, settings, sources)
         with gui.add_folder("Help", expand_by_default=False):
             gui.add_markdown(help_markdown())
         self.background = gui.add_markdown("")
@@ -127,7 +128,6 @@ class Panels:
         self.bridge = gui.add_html(bridge_html(BRIDGE_FIELD, Mode.IMAGE))
         #: the busy flag the page shows as a cue over the image (an action slower than 150 ms)
         self.busy = gui.add_html(busy_html(False))
-        self._bind()
 
     def _frame_folder(self, gui) -> None:
         with gui.add_folder("Frame"):
@@ -135,7 +135,7 @@ class Panels:
             self.nav = gui.add_button_group("navigate", ("previous", "next"))
             self.jump = gui.add_text("jump to stem", initial_value="")
             self.filter = gui.add_dropdown("filter", labels(Filter), initial_value=Filter.ALL.value)
-            splits = self.session.state.ds.splits  # a dataset in split folders or zips
+            splits = self.splits  # a dataset in split folders or zips
             self.split = gui.add_dropdown("split", ("all", *splits), initial_value="all") if splits else None
             self.sort = gui.add_dropdown("sort", labels(Sort), initial_value=Sort.INDEX.value)
             self.filter_text = gui.add_markdown("")
@@ -169,7 +169,7 @@ class Panels:
             self.progress_text = gui.add_markdown("")
 
     def _points_folder(self, gui) -> None:
-        model = self.session.state.model
+        model = self.model
         self.kp_choices = keypoint_choices(model)
         self._maps: dict[int, np.ndarray] = {}
         with gui.add_folder("Points"):
@@ -225,87 +225,12 @@ class Panels:
     def set_mode(self, mode: Mode) -> None:
         self.bridge.content = bridge_html(BRIDGE_FIELD, mode)
 
-    # ------------------------------------------------------------------ bindings
-    def _bind(self) -> None:
-        s, on = self.session, self.session.queue.ordered
-        edit, view, painter = s.editor, s.view_control, s.painter
-        self.slider.on_update(on(lambda _: s.slider_moved(self.slider.value)))
-        self.nav.on_click(on(lambda e: s.step(-1 if e.target.value == "previous" else 1)
-                             if e.target.value in ("previous", "next") else None))
-        self.jump.on_update(on(lambda _: s.jump(self.jump.value)))
-        self.filter.on_update(on(lambda _: s.set_filter(self.filter.value)))
-        self.sort.on_update(on(lambda _: s.set_sort(self.sort.value)))
-        if self.split is not None:
-            split = self.split
-            split.on_update(on(lambda _: s.set_split(split.value)))
-        self.review.on_click(on(lambda e: edit.review(str(e.target.value).split(" (")[0], advance=self.advance.value)))
-        self.kp_id.on_update(on(lambda _: edit.set_place_id(self.kp_id.value)))
-        self.points.on_update(on(lambda _: edit.select_listed(self.points.value)))
-        self.hide.on_click(on(lambda _: edit.hide_selected()))
-        self.visibility.on_click(on(lambda _: edit.cycle_visibility()))
-        self.bulk_apply.on_click(on(lambda _: edit.bulk(self.bulk_action.value, self.bulk_scope.value,
-                                                        int(self.bulk_to.value))))
-        self.note.on_update(on(lambda _: edit.set_note(self.note.value)))
-        self.drag_mode.on_update(on(lambda _: edit.set_drag_mode(self.drag_mode.value)))
-        self.snap.on_update(on(lambda _: edit.set_snap(self.snap.value)))
-        self.history.on_click(on(lambda e: edit.undo() if e.target.value == "undo" else edit.redo()))
-        self.export.on_click(on(lambda _: s.export()))
-        self.view_buttons.on_click(on(lambda e: {"fit (0)": view.fit, "1:1 (1)": view.native, "3D (V)": s.toggle_mode}
-                                      .get(e.target.value, lambda: None)()))
-        self.opacity.on_update(on(lambda _: painter.set_opacity(self.opacity.value)))
-        for name, box in self.layer_boxes.items():
-            box.on_update(on(lambda _, name=name, box=box: painter.set_layer(name, box.value)))
-        self.pnl.on_update(on(lambda _: s.set_pnl(self.pnl.value)))
-        self.alpha.on_update(on(lambda _: s.set_alpha(self.alpha.value)))
-        self.source.on_update(on(lambda _: s.set_source(self.source.value)))
-        self.bridge_field.on_update(on(lambda _: view.bridge_message(self.bridge_field.value)))
-        if self.clip_slider is not None and self.clip_buttons is not None:  # made together
-            clip = s.clip
-            self.clip_slider.on_update(on(lambda _: clip.slider_moved(self.clip_slider.value)))
-            actions = {"play": clip.play, "pause": clip.pause, "worst": lambda: clip.jump_worst(restart=True),
-                       "next worst": clip.jump_worst}
-            self.clip_buttons.on_click(on(lambda e: actions.get(e.target.value, lambda: None)()))
-            box, buttons = self.shot_box, self.shot_buttons
-            if box is not None and buttons is not None:  # made with the clip slider
-                box.on_update(on(lambda _: clip.set_shot_model(box.value)))
-                shot_actions = {"accept shot": clip.accept_shot, "cut here": clip.toggle_cut}
-                buttons.on_click(on(lambda e: shot_actions.get(e.target.value, lambda: None)()))
-        self._bind_keys()
-
-    def _bind_keys(self) -> None:
-        s, gui = self.session, self.session.gui
-        edit, view = s.editor, s.view_control
-        keys: tuple[tuple[str, str, str | None, Callable[[], object]], ...]
-        keys = (("next frame", "N", None, lambda: s.step(1)),
-                ("previous frame", "P", None, lambda: s.step(-1)),
-                ("review: accepted, next", "G", None, lambda: edit.review("accepted", advance=self.advance.value)),
-                ("review: corrected, next", "C", None, lambda: edit.review("corrected", advance=self.advance.value)),
-                ("review: rejected, next", "R", None, lambda: edit.review("rejected", advance=self.advance.value)),
-                ("hide the flagged points of the frame reviewed last", "H", None, edit.hide_flagged),
-                ("apply the label-error finder's fix (suspects)", "F", None, edit.apply_fix),
-                ("undo", "Z", "cmd/ctrl", edit.undo),
-                ("redo", "Z", "cmd/ctrl+shift", edit.redo),
-                ("image view / 3D view", "V", None, s.toggle_mode),
-                ("fit the frame", "0", None, view.fit),
-                ("native resolution", "1", None, view.native),
-                ("selected point: visible, occluded, absent", "O", None, edit.cycle_visibility),
-                ("selected point not visible", "delete", None, edit.hide_selected),
-                ("selected point not visible ", "backspace", None, edit.hide_selected),
-                ("clear the selection", "escape", None, lambda: edit.select(None)))
-        if s.clip.clips:
-            keys += (("play / pause the clip", "space", None, s.clip.toggle),)
-        for label, key, modifier, action in keys:
-            prefix = modifier.replace("cmd/ctrl", "Ctrl").replace("+shift", "+Shift") + "+" if modifier else ""
-            description = prefix + key
-            command = gui.add_command(label, hotkey=key, modifier=modifier, description=description)
-            command.on_trigger(s.queue.ordered(lambda _, action=action: action()))
-
     # ------------------------------------------------------------------ the picker
     def map_of(self, kid: int | None) -> np.ndarray:
         """The keypoint map with ``kid`` highlighted (each drawn once per tab)."""
         key = -1 if kid is None else int(kid)
         if key not in self._maps:
-            self._maps[key] = picker_map(self.session.state.model, kid)
+            self._maps[key] = picker_map(self.model, kid)
         return self._maps[key]
 
     def choice_of(self, kid: int) -> str:
@@ -314,7 +239,7 @@ class Panels:
 
     def show_place_id(self, kid: int) -> None:
         """The picker and its map on ``kid``."""
-        self.session.queue.set_value(self.kp_id, self.choice_of(kid))
+        self.queue.set_value(self.kp_id, self.choice_of(kid))
         self.kp_map.image = self.map_of(kid)
 
     # ------------------------------------------------------------------ values from the browser
@@ -323,8 +248,8 @@ class Panels:
         value = handle.value
         if value in options:
             return value
-        self.session.notify("refused", f"{handle.label}: {str(value)[:40]!r} is not one of the options")
-        self.session.queue.set_value(handle, fallback)
+        self.notify("refused", f"{handle.label}: {str(value)[:40]!r} is not one of the options")
+        self.queue.set_value(handle, fallback)
         return fallback
 
     def set_order(self, n: int, pos: int) -> None:
@@ -332,4 +257,4 @@ class Panels:
         does (disabled when there is only one frame)."""
         self.slider.max = max(2, n)
         self.slider.disabled = n <= 1
-        self.session.queue.set_value(self.slider, int(np.clip(pos, 0, max(0, n - 1))) + 1)
+        self.queue.set_value(self.slider, int(np.clip(pos, 0, max(0, n - 1))) + 1)

@@ -20,6 +20,7 @@ import threading
 from dataclasses import replace
 
 from pnlviz.app.drawing import Painter
+from pnlviz.app.bindings import bind
 from pnlviz.app.editing import Editor
 from pnlviz.app.frameorder import FrameOrder, visible_order
 from pnlviz.app.host import TabHandle
@@ -72,7 +73,9 @@ class Session:
                                         self.queue.enqueue)
         self.view_control.on_box = self.editor.select_in_box
         self.scene3d = Scene3D(scene, nodes)
-        self.panels = Panels(self)
+        self.panels = Panels(gui, self.queue, notify, st.model, clips=st.clips, splits=st.ds.splits,
+                             layers=self.painter.layers, settings=self.settings, sources=self.sources)
+        bind(self)
         if self.panels.clip_text is not None:  # a dataset with clips: the panel shows the tab's clip
             self.clip.widgets = ClipWidgets(self.panels.clip_text, self.panels.clip_strip, self.panels.clip_slider)
         self.panels.set_order(len(self.frames.order), self.index)
