@@ -11,17 +11,30 @@ goes back to them.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from pnlviz.app.asking import ask_before_accepting, say_flagged, say_slip
 from pnlviz.app.cards import listed_id
+from pnlviz.app.host import TabHandle
 from pnlviz.app.modes import DragEvent, DragMode, DragPhase, PointKind, Selection, labels
 from pnlviz.app.panels import choice_id
 from pnlviz.app.state import REVIEW_STATES, EditError
 from pnlviz.app.trail import EditTrail
 from pnlviz.app.view2d import snap
+
+if TYPE_CHECKING:
+    from pnlviz.app.drawing import Painter
+    from pnlviz.app.frameorder import FrameOrder
+    from pnlviz.app.panels import Panels
+    from pnlviz.app.state import AppState
+    from pnlviz.app.tabqueue import ActionGuard, TabQueue
+    from pnlviz.app.viewcontrol import ViewControl
+    from pnlviz.app.workspace import Workspace
+    from pnlviz.pipeline import Settings
 
 SNAP_PX = 8.0  # screen pixels
 CLICK_REACH_PX = 12.0  # a click this close to a point (screen pixels) selects it
@@ -44,11 +57,62 @@ class Drag:
         return bool(np.hypot(*(self.uv - self.origin)) > 0.05)
 
 
-class Editor:
-    """The edits of one tab (``tab``: its :class:`pnlviz.app.session.Session`, for the frame
-    shown, the settings, the queue and the drawing)."""
+@dataclass(frozen=True)
+class EditorTab:
+    """What a tab's editor (:class:`pnlviz.app.editing.Editor`) uses of its tab, and nothing
+    else: the session's ``state`` (the edit door and the frames' views), the tab's ``queue``,
+    ``guard`` and frame ``order``, its frame and moves (``handle``), going on after a review
+    (``advance_from(stem)``) and the parts it shows its edits with, made after it (``parts()``:
+    the painter, the panel, the workspace and the view control)."""
 
-    def __init__(self, tab) -> None:
+    state: AppState
+    queue: TabQueue
+    guard: ActionGuard
+    frames: FrameOrder
+    handle: TabHandle
+    advance_from: Callable[[str], Any]
+    parts: Callable[[], tuple[Painter, Panels, Workspace, ViewControl]]
+
+    @property
+    def stem(self) -> str:
+        return self.state.stems[self.handle.index()]
+
+    @property
+    def settings(self) -> Settings:
+        return self.handle.settings()
+
+    def notify(self, title: str, body: str, error: bool = True) -> None:
+        self.handle.notify(title, body, error)
+
+    def show(self) -> Any:
+        return self.handle.show()
+
+    def goto(self, index: int) -> Any:
+        return self.handle.goto(index)
+
+    @property
+    def painter(self) -> Painter:
+        return self.parts()[0]
+
+    @property
+    def panels(self) -> Panels:
+        return self.parts()[1]
+
+    @property
+    def workspace(self) -> Workspace:
+        return self.parts()[2]
+
+    @property
+    def view_control(self) -> ViewControl:
+        return self.parts()[3]
+
+
+class Editor:
+    """The edits of one tab: ``tab`` is what it uses of the tab (:class:`EditorTab`:
+    the frame shown and its settings, the edit door, the queue, the parts it shows its edits with),
+    not the tab itself."""
+
+    def __init__(self, tab: EditorTab) -> None:
         self.tab = tab
         self.trail = EditTrail(tab.state, tab.guard)
         self.selected: Selection | None = None
@@ -287,7 +351,8 @@ class Editor:
             kid, uv = self.place_id, self._snapped(uv)
         else:
             self.place_id = int(kid)
-        self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, *uv, settings=self.tab.settings))
+        x, y = float(uv[0]), float(uv[1])
+        self.trail.act(stem, lambda: self.tab.state.move_keypoint(stem, kid, x, y, settings=self.tab.settings))
         self.tab.queue.enqueue(lambda: say_slip(self.tab, stem, kid))  # after the frame is drawn
         overlay = self.tab.painter.overlay
         if stem == self.tab.stem and overlay is not None and kid in overlay.keypoints.keys:
@@ -313,10 +378,11 @@ class Editor:
         state, settings = self.tab.state, self.tab.settings
 
         def edit() -> None:
+            x, y = float(uv[0]), float(uv[1])
             if point.kind is PointKind.LINE_POINTS:
-                state.move_line_point(stem, *point.line_point, *uv, settings=settings)
+                state.move_line_point(stem, *point.line_point, x, y, settings=settings)
             else:
-                state.move_keypoint(stem, point.kid, *uv, settings=settings, merge=merge)
+                state.move_keypoint(stem, point.kid, x, y, settings=settings, merge=merge)
             state.view(stem, settings)  # recalibrate now, to time it
             self.last_recalibration_ms = 1e3 * (time.perf_counter() - t0)
 

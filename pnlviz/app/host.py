@@ -64,3 +64,4 @@ class TabHandle:
     goto: Callable[[int], Any]
     show: Callable[[], Any]
     notify: Callable[..., None]
+

@@ -21,7 +21,7 @@ from dataclasses import replace
 
 from pnlviz.app.drawing import Painter
 from pnlviz.app.bindings import bind
-from pnlviz.app.editing import Editor
+from pnlviz.app.editing import Editor, EditorTab
 from pnlviz.app.frameorder import FrameOrder, visible_order
 from pnlviz.app.host import TabHandle
 from pnlviz.app.modes import Filter, Mode, Sort, labels
@@ -55,9 +55,10 @@ class Session:
         self.queue = TabQueue(notify, app.server.get_event_loop, app.state.activity)
         self.painter = Painter(self)
         self.guard = ActionGuard(notify, self.show, lambda: self.painter.drawn)
-        self.editor = Editor(self)
         handle = TabHandle(index=lambda: self.index, settings=lambda: self.settings, goto=self.goto, show=self.show,
                            notify=notify)
+        self.editor = Editor(EditorTab(st, self.queue, self.guard, self.frames, handle, self.advance_from,
+                                       lambda: (self.painter, self.panels, self.workspace, self.view_control)))
         self.clip = ClipPlayer(handle, st.clips, stems=st.stems, shots=st.shots, summaries=st.triage.lookup,
                                queue=self.queue)
         #: where this tab's scene nodes live: a client's own scene, or (without a browser, on the
