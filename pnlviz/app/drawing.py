@@ -7,6 +7,10 @@ panel's texts, and in the 3D view the camera over the pitch. Only what changed i
 from __future__ import annotations
 
 import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -18,7 +22,14 @@ from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
 from pnlviz.app.panels import LAYERS
 from pnlviz.app.state import FrameView
 from pnlviz.app.handles import update_changed
+from pnlviz.app.host import TabHandle
 from pnlviz.viz import blank_canvas, top_view
+
+if TYPE_CHECKING:
+    from pnlviz.app.frameorder import FrameOrder
+    from pnlviz.app.state import AppState
+    from pnlviz.app.tabqueue import TabQueue
+    from pnlviz.pipeline import Settings
 
 TOP_PX_PER_M = 3.0  # the bird's-eye view in the panel: about 350 px wide
 
@@ -26,12 +37,57 @@ TOP_PX_PER_M = 3.0  # the bird's-eye view in the panel: about 350 px wide
 #: marks the title for the page script, which pins it to the top of the scrolling panel
 TITLE_ANCHOR = '<span id="pnlviz-title"></span>'
 
-class Painter:
-    """What one tab shows (``tab``: its :class:`pnlviz.app.session.Session`): ``shown`` the view
-    drawn last, ``overlay`` its overlays, ``drawn`` how many times the tab was drawn; ``layers``
-    and ``opacity`` how the overlays are drawn."""
+def _part(i: int, doc: str) -> Any:
+    """A property of :class:`PainterTab`: part ``i`` of its ``parts()``."""
+    return property(lambda self: self.parts()[i], doc=doc)
 
-    def __init__(self, tab) -> None:
+
+@dataclass(frozen=True)
+class PainterTab:
+    """What a tab's painter uses of its tab, and nothing else: the session's ``state``, the tab's
+    ``queue``, ``lock`` and frame order (``frames``), its frame (``handle``), one message batch to
+    the tab's browser (``atomic()``), a frame's detector status (``detection_status(stem)``) and
+    the parts it draws for, made after it (``parts()``: the editor, the panel, the workspace, the
+    view control, the 3D view, the clip player and the action guard, in this order)."""
+
+    state: AppState
+    queue: TabQueue
+    lock: threading.RLock
+    frames: FrameOrder
+    handle: TabHandle
+    atomic: Callable[[], Any]
+    detection_status: Callable[[str], str | None]
+    parts: Callable[[], tuple]
+
+    editor = _part(0, "the tab's editor (its selection, place id and drag mode)")
+    panels = _part(1, "the tab's panel")
+    workspace = _part(2, "the image view's scene nodes")
+    view_control = _part(3, "the tab's camera")
+    scene3d = _part(4, "the 3D view")
+    clip = _part(5, "the clip player")
+    guard = _part(6, "the action guard (the last save error)")
+
+    @property
+    def stem(self) -> str:
+        """The stem of the frame the tab shows."""
+        return self.state.stems[self.handle.index()]
+
+    @property
+    def settings(self) -> Settings:
+        """The settings the tab shows its frame with."""
+        return self.handle.settings()
+
+    def show(self) -> Any:
+        """The tab's frame drawn again (as the tab decides: it may compute its view first)."""
+        return self.handle.show()
+
+
+class Painter:
+    """What one tab shows: ``shown`` the view drawn last, ``overlay`` its overlays, ``drawn`` how
+    many times the tab was drawn; ``layers`` and ``opacity`` how the overlays are drawn. ``tab``:
+    what it uses of its tab (:class:`PainterTab`), not the tab itself."""
+
+    def __init__(self, tab: PainterTab) -> None:
         self.tab = tab
         self.layers = Layers()
         self.opacity = 1.0
@@ -60,8 +116,7 @@ class Painter:
                                               findings=self.findings(view)))
 
     def _atomic(self):
-        tab = self.tab
-        return tab.client.atomic() if tab.client is not None else tab.app.server.atomic()
+        return self.tab.atomic()
 
     # ------------------------------------------------------------------ settings
     def set_layer(self, name: str, value) -> None:
@@ -204,7 +259,7 @@ class Painter:
         update_changed(p.title, content=cards.title_text(view, position, n, frames.outside_filter, flt, key)
                        + TITLE_ANCHOR)  # the page keeps the title at the top of the panel (bridge.js)
         update_changed(p.status, content=cards.status_line(view, st.edits.review(view.stem), st.edits.get(view.stem),
-                                                           tab.guard.save_error, tab.app.detection_status(view.stem)))
+                                                           tab.guard.save_error, tab.detection_status(view.stem)))
         update_changed(p.filter_text, content=cards.filter_text(view.stem, n, frames.outside_filter, flt))
         update_changed(p.card, content=cards.calibration_card(view, st) + cards.findings_text(self.findings(view)))
         note = st.edits.get(view.stem).get("note") or ""

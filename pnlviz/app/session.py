@@ -19,7 +19,7 @@ from __future__ import annotations
 import threading
 from dataclasses import replace
 
-from pnlviz.app.drawing import Painter
+from pnlviz.app.drawing import Painter, PainterTab
 from pnlviz.app.bindings import bind
 from pnlviz.app.editing import Editor, EditorTab
 from pnlviz.app.frameorder import FrameOrder, visible_order
@@ -53,10 +53,13 @@ class Session:
 
         self.frames = FrameOrder(len(st.stems), st.first_index)
         self.queue = TabQueue(notify, app.server.get_event_loop, app.state.activity)
-        self.painter = Painter(self)
-        self.guard = ActionGuard(notify, self.show, lambda: self.painter.drawn)
         handle = TabHandle(index=lambda: self.index, settings=lambda: self.settings, goto=self.goto, show=self.show,
                            notify=notify)
+        atomic = (lambda: client.atomic()) if client is not None else (lambda: app.server.atomic())
+        self.painter = Painter(PainterTab(st, self.queue, self.lock, self.frames, handle, atomic, app.detection_status,
+                                          lambda: (self.editor, self.panels, self.workspace, self.view_control,
+                                                   self.scene3d, self.clip, self.guard)))
+        self.guard = ActionGuard(notify, self.show, lambda: self.painter.drawn)
         self.editor = Editor(EditorTab(st, self.queue, self.guard, self.frames, handle, self.advance_from,
                                        lambda: (self.painter, self.panels, self.workspace, self.view_control)))
         self.clip = ClipPlayer(handle, st.clips, stems=st.stems, shots=st.shots, summaries=st.triage.lookup,

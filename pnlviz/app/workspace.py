@@ -12,7 +12,7 @@ select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from typing import Any
 
 import numpy as np
@@ -247,7 +247,7 @@ class Workspace:
     def __init__(self, scene, root: str, events: WorkspaceEvents):
         self.scene, self.root, self.events = scene, f"{root}/image_view", events
         self.plane: ImagePlane | None = None
-        self.image_key: tuple | None = None  # (stem, version) of the pixels on the plane
+        self.image_key: Hashable | None = None  # what the pixels on the plane are (the frame's stem)
         self.world_per_px = 0.01  # scene units per screen pixel at the current zoom
         self._slots: list[dict] = []  # image nodes: the frame shown, and frames sent ahead (hidden)
         self._clock = 0
@@ -267,7 +267,7 @@ class Workspace:
         self.on_points: Callable[[], None] | None = None  # the points or their grab size changed
 
     # ------------------------------------------------------------------ the frame
-    def show_image(self, key: tuple, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> bool:
+    def show_image(self, key: Hashable, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> bool:
         """Show the frame ``key`` (its pixels, or a function that reads them when they are not
         in the browser yet). A frame preloaded with :meth:`preload` is shown at once, with no
         image sent. True if anything changed."""
@@ -286,16 +286,16 @@ class Workspace:
         self.plane, self.image_key = slot["plane"], key
         return True
 
-    def holds(self, key: tuple) -> bool:
+    def holds(self, key: Hashable) -> bool:
         """Whether frame ``key``'s pixels are in the browser already (shown or sent ahead)."""
         return any(sl["key"] == key for sl in self._slots)
 
-    def preload(self, key: tuple, image_rgb: Callable[[], np.ndarray]) -> None:
+    def preload(self, key: Hashable, image_rgb: Callable[[], np.ndarray]) -> None:
         """Send frame ``key``'s pixels ahead, hidden, so that going there shows them at once."""
         if all(sl["key"] != key for sl in self._slots):
             self._load(key, image_rgb())
 
-    def _load(self, key: tuple, image_rgb: np.ndarray) -> dict:
+    def _load(self, key: Hashable, image_rgb: np.ndarray) -> dict:
         """Pixels into a hidden slot (a new one while there are fewer than :data:`FRAME_SLOTS`,
         else the one shown longest ago)."""
         H, W = image_rgb.shape[:2]
