@@ -89,3 +89,24 @@ def test_a_dataset_without_clips_has_no_clip_panel(tmp_path, serve):
     tab = app.session()
     assert tab.clip.clips == {} and tab.panels.clip_text is None
     tab.show()
+
+
+def test_no_part_of_a_tab_holds_the_session(tmp_path, serve):
+    """The tab's parts get what they use (a TabHandle, an EditorTab, a PainterTab, the panel's
+    widgets' needs), never the session: no attribute of a part, nor of what a part was given, is
+    the session."""
+    import dataclasses
+
+    from pnlviz import EXAMPLES_DIR
+
+    app = serve(EXAMPLES_DIR / "sample", edits=tmp_path / "edits")
+    tab = app.session()
+    parts = [tab.editor, tab.painter, tab.panels, tab.clip, tab.view_control, tab.workspace, tab.scene3d,
+             tab.queue, tab.guard, tab.editor.trail]
+    given = [v for part in parts for v in vars(part).values()]
+    given += [v for g in list(given) if dataclasses.is_dataclass(g) and not isinstance(g, type)
+              for v in vars(g).values()]
+    assert given and not any(v is tab for v in given)
+    # and each still reaches what it uses: the frame shown, through its handle
+    assert tab.editor.tab.stem == tab.painter.tab.stem == tab.stem
+    assert tab.clip.tab.index() == tab.index
