@@ -44,3 +44,34 @@ def test_suspects_filter_then_f_fixes_the_frame_and_ctrl_z_undoes_it(data, brows
     page.keyboard.press("Control+z")
     wait_until(lambda: "Circle left" in classes(), timeout=30)
     page.close()
+
+
+def test_a_frame_not_judged_yet_is_drawn_at_once_and_its_findings_follow(data, serve):  # noqa: F811
+    """Drawing a frame the label-error finder has not judged does not wait for it: the frame is
+    drawn without findings, judged right after on the tab's queue, and its findings then appear on
+    the image and in the panel's card."""
+    from pnlviz.app import triage
+
+    path = data / "00000.json"
+    ann = json.loads(path.read_text())
+    ann["Circle left"] = ann.pop("Circle right")
+    path.write_text(json.dumps(ann))
+    app = serve(data)
+    session = app.session()
+    session.flush()
+    view = app.state.view("00000")
+    with triage._JUDGED_LOCK:
+        triage._JUDGED.clear()  # not judged yet (the background pass may judge it again meanwhile)
+    if triage.judge_view(view, judge=False) is triage.NOT_JUDGED:
+        session.painter._judged = None
+        assert session.painter.findings(view) == []  # drawn without: the verdict is queued
+    session.queue.enqueue(lambda: session.goto(app.state.find("00000")))
+    session.flush()
+    session.flush()  # the verdict queued by the draw, and its redraw
+
+    def drawn(layer):
+        overlay = session.painter.overlay
+        return overlay is not None and len(overlay.segments.get(layer, ())) > 0
+
+    wait_until(lambda: drawn("finding_annotated") and "label errors" in session.panels.card.content)
+    assert "'Circle left' fits the pitch as 'Circle right'" in session.panels.card.content

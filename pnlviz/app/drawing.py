@@ -37,6 +37,7 @@ TOP_PX_PER_M = 3.0  # the bird's-eye view in the panel: about 350 px wide
 #: marks the title for the page script, which pins it to the top of the scrolling panel
 TITLE_ANCHOR = '<span id="pnlviz-title"></span>'
 
+
 def _part(i: int, doc: str) -> Any:
     """A property of :class:`PainterTab`: part ``i`` of its ``parts()``."""
     return property(lambda self: self.parts()[i], doc=doc)
@@ -217,7 +218,10 @@ class Painter:
             return
         with self.tab.lock:
             if self.shown is view and qa is not None and qa.findings:
-                self.show_overlay(view)
+                with self._atomic():
+                    self.show_overlay(view)
+                    update_changed(self.tab.panels.card, content=cards.calibration_card(view, self.tab.state)
+                                   + cards.findings_text(self.findings(view)))
 
     def show_overlay(self, view: FrameView, preview: bool = False) -> None:
         """The overlays of ``view``; a ``preview`` (while a point is dragged) is not kept as the
