@@ -22,14 +22,13 @@ from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
 from pnlviz.app.panels import LAYERS
 from pnlviz.app.state import FrameView
 from pnlviz.app.handles import update_changed
-from pnlviz.app.host import TabHandle
+from pnlviz.app.host import TabPart
 from pnlviz.viz import blank_canvas, top_view
 
 if TYPE_CHECKING:
     from pnlviz.app.frameorder import FrameOrder
     from pnlviz.app.state import AppState
     from pnlviz.app.tabqueue import TabQueue
-    from pnlviz.pipeline import Settings
 
 TOP_PX_PER_M = 3.0  # the bird's-eye view in the panel: about 350 px wide
 
@@ -44,7 +43,7 @@ def _part(i: int, doc: str) -> Any:
 
 
 @dataclass(frozen=True)
-class PainterTab:
+class PainterTab(TabPart):
     """What a tab's painter uses of its tab, and nothing else: the session's ``state``, the tab's
     ``queue``, ``lock`` and frame order (``frames``), its frame (``handle``), one message batch to
     the tab's browser (``atomic()``), a frame's detector status (``detection_status(stem)``) and
@@ -55,7 +54,6 @@ class PainterTab:
     queue: TabQueue
     lock: threading.RLock
     frames: FrameOrder
-    handle: TabHandle
     atomic: Callable[[], Any]
     detection_status: Callable[[str], str | None]
     parts: Callable[[], tuple]
@@ -67,20 +65,6 @@ class PainterTab:
     scene3d = _part(4, "the 3D view")
     clip = _part(5, "the clip player")
     guard = _part(6, "the action guard (the last save error)")
-
-    @property
-    def stem(self) -> str:
-        """The stem of the frame the tab shows."""
-        return self.state.stems[self.handle.index()]
-
-    @property
-    def settings(self) -> Settings:
-        """The settings the tab shows its frame with."""
-        return self.handle.settings()
-
-    def show(self) -> Any:
-        """The tab's frame drawn again (as the tab decides: it may compute its view first)."""
-        return self.handle.show()
 
 
 class Painter:

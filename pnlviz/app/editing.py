@@ -19,7 +19,7 @@ import numpy as np
 
 from pnlviz.app.asking import ask_before_accepting, say_flagged, say_slip
 from pnlviz.app.cards import listed_id
-from pnlviz.app.host import TabHandle
+from pnlviz.app.host import TabPart
 from pnlviz.app.modes import DragEvent, DragMode, DragPhase, PointKind, Selection, labels
 from pnlviz.app.panels import choice_id
 from pnlviz.app.state import REVIEW_STATES, EditError
@@ -34,7 +34,6 @@ if TYPE_CHECKING:
     from pnlviz.app.tabqueue import ActionGuard, TabQueue
     from pnlviz.app.viewcontrol import ViewControl
     from pnlviz.app.workspace import Workspace
-    from pnlviz.pipeline import Settings
 
 SNAP_PX = 8.0  # screen pixels
 CLICK_REACH_PX = 12.0  # a click this close to a point (screen pixels) selects it
@@ -58,7 +57,7 @@ class Drag:
 
 
 @dataclass(frozen=True)
-class EditorTab:
+class EditorTab(TabPart):
     """What a tab's editor (:class:`pnlviz.app.editing.Editor`) uses of its tab, and nothing
     else: the session's ``state`` (the edit door and the frames' views), the tab's ``queue``,
     ``guard`` and frame ``order``, its frame and moves (``handle``), going on after a review
@@ -69,23 +68,11 @@ class EditorTab:
     queue: TabQueue
     guard: ActionGuard
     frames: FrameOrder
-    handle: TabHandle
     advance_from: Callable[[str], Any]
     parts: Callable[[], tuple[Painter, Panels, Workspace, ViewControl]]
 
-    @property
-    def stem(self) -> str:
-        return self.state.stems[self.handle.index()]
-
-    @property
-    def settings(self) -> Settings:
-        return self.handle.settings()
-
     def notify(self, title: str, body: str, error: bool = True) -> None:
         self.handle.notify(title, body, error)
-
-    def show(self) -> Any:
-        return self.handle.show()
 
     def goto(self, index: int) -> Any:
         return self.handle.goto(index)

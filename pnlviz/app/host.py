@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from pnlviz.field.model import FieldModel
     from pnlviz.pipeline import FrameReader, FrameView, Settings
 
-__all__ = ["FrameHost", "TabHandle", "Write"]
+__all__ = ["FrameHost", "TabHandle", "TabPart", "Write"]
 
 #: the one door for a change to a frame's edit record: ``write(stem, change, *, corrected=True,
 #: settings=None, merge=None, snapshot=None) -> bool`` (:meth:`pnlviz.app.state.AppState.write`)
@@ -65,3 +65,26 @@ class TabHandle:
     show: Callable[[], Any]
     notify: Callable[..., None]
 
+
+@dataclass(frozen=True)
+class TabPart:
+    """The base of what a tab's part is given (:class:`pnlviz.app.editing.EditorTab`,
+    :class:`pnlviz.app.drawing.PainterTab`): the session's ``state`` and the tab's ``handle``,
+    with the frame the tab shows and its settings read from them."""
+
+    state: Any
+    handle: TabHandle
+
+    @property
+    def stem(self) -> str:
+        """The stem of the frame the tab shows."""
+        return self.state.stems[self.handle.index()]
+
+    @property
+    def settings(self) -> Settings:
+        """The settings the tab shows its frame with."""
+        return self.handle.settings()
+
+    def show(self) -> Any:
+        """The tab's frame drawn again (as the tab decides: it may compute its view first)."""
+        return self.handle.show()

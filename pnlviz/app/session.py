@@ -56,12 +56,15 @@ class Session:
         handle = TabHandle(index=lambda: self.index, settings=lambda: self.settings, goto=self.goto, show=self.show,
                            notify=notify)
         atomic = (lambda: client.atomic()) if client is not None else (lambda: app.server.atomic())
-        self.painter = Painter(PainterTab(st, self.queue, self.lock, self.frames, handle, atomic, app.detection_status,
-                                          lambda: (self.editor, self.panels, self.workspace, self.view_control,
-                                                   self.scene3d, self.clip, self.guard)))
+        self.painter = Painter(PainterTab(
+            state=st, handle=handle, queue=self.queue, lock=self.lock, frames=self.frames, atomic=atomic,
+            detection_status=app.detection_status,
+            parts=lambda: (self.editor, self.panels, self.workspace, self.view_control, self.scene3d, self.clip,
+                           self.guard)))
         self.guard = ActionGuard(notify, self.show, lambda: self.painter.drawn)
-        self.editor = Editor(EditorTab(st, self.queue, self.guard, self.frames, handle, self.advance_from,
-                                       lambda: (self.painter, self.panels, self.workspace, self.view_control)))
+        self.editor = Editor(EditorTab(
+            state=st, handle=handle, queue=self.queue, guard=self.guard, frames=self.frames,
+            advance_from=self.advance_from, parts=lambda: (self.painter, self.panels, self.workspace, self.view_control)))
         self.clip = ClipPlayer(handle, st.clips, stems=st.stems, shots=st.shots, summaries=st.triage.lookup,
                                queue=self.queue)
         #: where this tab's scene nodes live: a client's own scene, or (without a browser, on the
