@@ -310,7 +310,7 @@
       const point = pointAt(p);
       if (point === undefined) return;
       if (!plain) { // ctrl+press: on a point, viser's ctrl+click; elsewhere a box candidate
-        if (!point) state.boxPress = { id: event.pointerId, x0: event.clientX, y0: event.clientY, p0: p, el: null };
+        if (!point) state.boxPress = { id: event.pointerId, x0: event.clientX, y0: event.clientY, el: null };
         return;
       }
       if (point) {

@@ -10,7 +10,7 @@ import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import cv2
 import numpy as np
@@ -22,24 +22,24 @@ from pnlviz.app.overlay import Layers, Overlay, overlay_geometry, render
 from pnlviz.app.panels import LAYERS
 from pnlviz.app.state import FrameView
 from pnlviz.app.handles import update_changed
-from pnlviz.app.host import TabPart
+from pnlviz.app.host import Part, TabPart
 from pnlviz.viz import blank_canvas, top_view
 
 if TYPE_CHECKING:
     from pnlviz.app.frameorder import FrameOrder
+    from pnlviz.app.panels import Panels
+    from pnlviz.app.playback import ClipPlayer
+    from pnlviz.app.scene import Scene3D
     from pnlviz.app.state import AppState
-    from pnlviz.app.tabqueue import TabQueue
+    from pnlviz.app.tabqueue import ActionGuard, TabQueue
+    from pnlviz.app.viewcontrol import ViewControl
+    from pnlviz.app.workspace import Workspace
 
 TOP_PX_PER_M = 3.0  # the bird's-eye view in the panel: about 350 px wide
 
 
 #: marks the title for the page script, which pins it to the top of the scrolling panel
 TITLE_ANCHOR = '<span id="pnlviz-title"></span>'
-
-
-def _part(i: int, doc: str) -> Any:
-    """A property of :class:`PainterTab`: part ``i`` of its ``parts()``."""
-    return property(lambda self: self.parts()[i], doc=doc)
 
 
 @dataclass(frozen=True)
@@ -58,13 +58,13 @@ class PainterTab(TabPart):
     detection_status: Callable[[str], str | None]
     parts: Callable[[], tuple]
 
-    editor = _part(0, "the tab's editor (its selection, place id and drag mode)")
-    panels = _part(1, "the tab's panel")
-    workspace = _part(2, "the image view's scene nodes")
-    view_control = _part(3, "the tab's camera")
-    scene3d = _part(4, "the 3D view")
-    clip = _part(5, "the clip player")
-    guard = _part(6, "the action guard (the last save error)")
+    editor: ClassVar[Part[Any]] = Part(0)  # its selection, place id and drag mode (the editor's module imports this one)
+    panels: ClassVar[Part[Panels]] = Part(1)
+    workspace: ClassVar[Part[Workspace]] = Part(2)
+    view_control: ClassVar[Part[ViewControl]] = Part(3)
+    scene3d: ClassVar[Part[Scene3D]] = Part(4)
+    clip: ClassVar[Part[ClipPlayer]] = Part(5)
+    guard: ClassVar[Part[ActionGuard]] = Part(6)
 
 
 class Painter:
@@ -78,6 +78,7 @@ class Painter:
         self.opacity = 1.0
         self._top_key: tuple | None = None  # what the panel's bird's-eye view was drawn from
         self._judged: tuple[FrameView, list] | None = None  # the last view judged and its findings' marks
+        self._judging: FrameView | None = None  # a view whose verdict is queued
         self.shown: FrameView | None = None
         self.overlay: Overlay | None = None
         self.drawn = 0
@@ -151,7 +152,7 @@ class Painter:
             pixels = self.pixels(stem)
             with tab.lock:
                 if not tab.queue.closed:
-                    tab.workspace.preload(stem, lambda pixels=pixels: pixels)
+                    tab.workspace.preload(stem, lambda: pixels)  # read at once, inside preload
         if ahead is not None and not tab.queue.closed:
             # the next frame calibrated ahead too (the state keeps the view): "next" only draws it
             tab.state.view(ahead, settings)
@@ -173,7 +174,6 @@ class Painter:
             return []
         if self._judged is None or self._judged[0] is not view:
             from pnlviz.app.triage import NOT_JUDGED, judge_view
-            from pnlviz.calib.qa import finding_marks
 
             summary = self.tab.state.triage.lookup(view.stem, self.tab.settings)
             qa = None
@@ -183,17 +183,29 @@ class Painter:
                 except Exception:  # noqa: BLE001 - a bug in the finder must not stop the frame being shown
                     qa = None
                 if qa is NOT_JUDGED:
-                    self.tab.queue.enqueue(lambda: self._judge_shown(view))
+                    if self._judging is not view:  # once per view, however often it is asked meanwhile
+                        self._judging = view
+                        self.tab.queue.enqueue(lambda: self._judge_shown(view))
                     return []
-            marks = finding_marks(qa, view.annotation or {}, view.size, self.tab.state.model) if qa else []
-            self._judged = (view, marks)
+            self._remember(view, qa)
+        assert self._judged is not None  # remembered just now, or before for this view
         return self._judged[1]
+
+    def _remember(self, view: FrameView, qa) -> list:
+        """The marks of the finder's verdict ``qa`` on ``view`` (none without one), kept for it."""
+        from pnlviz.calib.qa import finding_marks
+
+        marks = finding_marks(qa, view.annotation or {}, view.size, self.tab.state.model) if qa else []
+        self._judged = (view, marks)
+        return marks
 
     def _judge_shown(self, view: FrameView) -> None:
         """``view`` judged by the label-error finder, and its findings drawn when it is still the
         frame shown (a frame left meanwhile is judged by the background pass in its turn)."""
         from pnlviz.app.triage import judge_view
 
+        if self._judging is view:
+            self._judging = None
         if self.shown is not view or self.tab.queue.closed:
             return
         try:
@@ -201,11 +213,12 @@ class Painter:
         except Exception:  # noqa: BLE001 - a bug in the finder must not stop the frame being shown
             return
         with self.tab.lock:
-            if self.shown is view and qa is not None and qa.findings:
+            if self.shown is not view:
+                return
+            if self._remember(view, qa):
                 with self._atomic():
                     self.show_overlay(view)
-                    update_changed(self.tab.panels.card, content=cards.calibration_card(view, self.tab.state)
-                                   + cards.findings_text(self.findings(view)))
+                    self.show_card(view)
 
     def show_overlay(self, view: FrameView, preview: bool = False) -> None:
         """The overlays of ``view``; a ``preview`` (while a point is dragged) is not kept as the
@@ -249,7 +262,7 @@ class Painter:
         update_changed(p.status, content=cards.status_line(view, st.edits.review(view.stem), st.edits.get(view.stem),
                                                            tab.guard.save_error, tab.detection_status(view.stem)))
         update_changed(p.filter_text, content=cards.filter_text(view.stem, n, frames.outside_filter, flt))
-        update_changed(p.card, content=cards.calibration_card(view, st) + cards.findings_text(self.findings(view)))
+        self.show_card(view)
         note = st.edits.get(view.stem).get("note") or ""
         if p.note.value != note:
             tab.queue.set_value(p.note, note)  # the frame's note (not an edit of it)
@@ -258,6 +271,11 @@ class Painter:
         self.show_progress()
         self.show_top_view(view)
         tab.clip.show()
+
+    def show_card(self, view: FrameView) -> None:
+        """The frame's calibration card, its label-error findings under it."""
+        update_changed(self.tab.panels.card, content=cards.calibration_card(view, self.tab.state)
+                       + cards.findings_text(self.findings(view)))
 
     def show_top_view(self, view: FrameView) -> None:
         """The bird's-eye view under the frame's card: its camera's footprint and its keypoints put

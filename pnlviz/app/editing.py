@@ -13,13 +13,13 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from pnlviz.app.asking import ask_before_accepting, say_flagged, say_slip
 from pnlviz.app.cards import listed_id
-from pnlviz.app.host import TabPart
+from pnlviz.app.host import Part, TabPart
 from pnlviz.app.modes import DragEvent, DragMode, DragPhase, PointKind, Selection, labels
 from pnlviz.app.panels import choice_id
 from pnlviz.app.state import REVIEW_STATES, EditError
@@ -77,21 +77,22 @@ class EditorTab(TabPart):
     def goto(self, index: int) -> Any:
         return self.handle.goto(index)
 
-    @property
-    def painter(self) -> Painter:
-        return self.parts()[0]
+    painter: ClassVar[Part[Painter]] = Part(0)
+    panels: ClassVar[Part[Panels]] = Part(1)
+    workspace: ClassVar[Part[Workspace]] = Part(2)
+    view_control: ClassVar[Part[ViewControl]] = Part(3)
 
-    @property
-    def panels(self) -> Panels:
-        return self.parts()[1]
 
-    @property
-    def workspace(self) -> Workspace:
-        return self.parts()[2]
+def _chosen(editor: Editor) -> list[Selection]:
+    """The keypoints ``editor`` has selected, the first selected first."""
+    return [s for s in [editor.selected, *editor.also] if s is not None and s.kind is PointKind.KEYPOINTS]
 
-    @property
-    def view_control(self) -> ViewControl:
-        return self.parts()[3]
+
+def _keep(editor: Editor, chosen: list[Selection]) -> None:
+    """``chosen`` keypoints as ``editor``'s selection, ringed and said in the panel."""
+    editor.selected, editor.also = (chosen[0], chosen[1:]) if chosen else (None, [])
+    editor.tab.workspace.select(editor.selected, editor.also)
+    editor.tab.painter.show_selected()  # the rings say what is selected (no notice over the image)
 
 
 class Editor:
@@ -132,12 +133,9 @@ class Editor:
         O then act on every selected keypoint at once, one undo step)."""
         if point.kind is not PointKind.KEYPOINTS:
             return
-        chosen = [s for s in [self.selected, *self.also] if s is not None and s.kind is PointKind.KEYPOINTS]
-        chosen = [s for s in chosen if s.key != point.key] if any(s.key == point.key for s in chosen) \
-            else [*chosen, point]
-        self.selected, self.also = (chosen[0], chosen[1:]) if chosen else (None, [])
-        self.tab.workspace.select(self.selected, self.also)
-        self.tab.painter.show_selected()  # the rings say what is selected (no notice over the image)
+        chosen = _chosen(self)
+        _keep(self, [s for s in chosen if s.key != point.key] if any(s.key == point.key for s in chosen)
+              else [*chosen, point])
 
     def select_in_box(self, lo, hi) -> None:
         """A box drawn with ctrl+drag (corners ``lo``, ``hi`` in image pixels): the keypoints the
@@ -147,17 +145,14 @@ class Editor:
             return
         uv = np.asarray(overlay.keypoints.uv, float)
         inside = np.all((uv >= np.minimum(lo, hi)) & (uv <= np.maximum(lo, hi)), axis=1)
-        chosen = [s for s in [self.selected, *self.also] if s is not None and s.kind is PointKind.KEYPOINTS]
+        chosen = _chosen(self)
         known = {s.key for s in chosen}
-        chosen += [Selection(PointKind.KEYPOINTS, int(k)) for k, ok in zip(overlay.keypoints.keys, inside)
-                   if ok and int(k) not in known]
-        self.selected, self.also = (chosen[0], chosen[1:]) if chosen else (None, [])
-        self.tab.workspace.select(self.selected, self.also)
-        self.tab.painter.show_selected()
+        _keep(self, chosen + [Selection(PointKind.KEYPOINTS, int(k)) for k, ok in zip(overlay.keypoints.keys, inside)
+                              if ok and int(k) not in known])
 
     def selected_ids(self) -> list[int]:
         """The ids of the selected keypoints (the first selected first)."""
-        return [s.kid for s in [self.selected, *self.also] if s is not None and s.kind is PointKind.KEYPOINTS]
+        return [s.kid for s in _chosen(self)]
 
     def choose_id(self, kid: int) -> None:
         """The id shift+click places."""

@@ -14,14 +14,16 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 if TYPE_CHECKING:
     from pnlviz.data.edits import EditsStore
     from pnlviz.field.model import FieldModel
     from pnlviz.pipeline import FrameReader, FrameView, Settings
 
-__all__ = ["FrameHost", "TabHandle", "TabPart", "Write"]
+__all__ = ["FrameHost", "Part", "TabHandle", "TabPart", "Write"]
+
+T = TypeVar("T")
 
 #: the one door for a change to a frame's edit record: ``write(stem, change, *, corrected=True,
 #: settings=None, merge=None, snapshot=None) -> bool`` (:meth:`pnlviz.app.state.AppState.write`)
@@ -64,6 +66,19 @@ class TabHandle:
     goto: Callable[[int], Any]
     show: Callable[[], Any]
     notify: Callable[..., None]
+
+
+class Part(Generic[T]):
+    """An attribute of a :class:`TabPart` that reads one of the tab's parts made after it:
+    ``parts()[index]`` (``painter: ClassVar[Part[Painter]] = Part(0)``: typed as the part it is)."""
+
+    def __init__(self, index: int):
+        self.index = index
+
+    def __get__(self, obj: Any, owner: Any = None) -> T:
+        if obj is None:  # read on the class (a dataclass looking for defaults): the descriptor
+            return self  # type: ignore[return-value]
+        return obj.parts()[self.index]
 
 
 @dataclass(frozen=True)

@@ -67,7 +67,7 @@ class ClipPlayer:
         """(errors, cuts, keyframes) of the clip under its shot model, None without one (yet)."""
         if not self.shot_model or not self.members():
             return None
-        return self.shots.strip(self.stems[self.tab.index()], self.tab.settings())
+        return self.shots.strip(self._stem(), self.tab.settings())
 
     def errors(self) -> list[float]:
         """Each clip frame's error under its shot model when it has one (its observations' median

@@ -12,6 +12,10 @@ __all__ = ["as_array", "as_points"]
 
 
 def _float_array(value, name: str) -> np.ndarray:
+    """``value`` as a float array (a float array as it is); ArgumentError naming ``name`` when it
+    is not numbers."""
+    if isinstance(value, np.ndarray) and value.dtype == float:
+        return value
     try:
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -28,7 +32,7 @@ def as_points(value, dims: int, name: str, what: str = "points") -> np.ndarray:
     ...
     pnlviz.ArgumentError: uv: expected points (N, 2), got an array of shape (4, 3)
     """
-    arr = value if isinstance(value, np.ndarray) and value.dtype == float else _float_array(value, name)
+    arr = _float_array(value, name)
     if arr.ndim != 2 or arr.shape[1] != dims:
         raise ArgumentError(f"{name}: expected {what} (N, {dims}), got an array of shape {arr.shape}")
     return arr
@@ -45,7 +49,7 @@ def as_array(value, shape: tuple[int | None, ...], name: str) -> np.ndarray:
     ...
     pnlviz.ArgumentError: C: expected an array of shape (3,), got (2,)
     """
-    arr = value if isinstance(value, np.ndarray) and value.dtype == float else _float_array(value, name)
+    arr = _float_array(value, name)
     if arr.ndim != len(shape) or any(s is not None and n != s for n, s in zip(arr.shape, shape)):
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
         raise ArgumentError(f"{name}: expected an array of shape {want}, got {arr.shape}")
