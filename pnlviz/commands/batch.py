@@ -149,11 +149,29 @@ def cluster_client(args) -> Iterator[Any]:
             yield client
         return
     try:
+        _knock(args.scheduler)
         client = Client(args.scheduler, timeout="20s")
     except (OSError, TimeoutError) as exc:
         raise SystemExit(f"error: --scheduler {args.scheduler}: cannot connect ({exc})") from None
     with client:
         yield client
+
+
+def _knock(address: str) -> None:
+    """Raise ``OSError`` at once when nothing listens at a ``tcp://HOST:PORT`` scheduler address
+    (dask's client would retry a refused connection for its whole timeout, 20 s); other addresses
+    are left to dask."""
+    import socket
+    from urllib.parse import urlsplit
+
+    where = urlsplit(address)
+    try:
+        port = where.port
+    except ValueError:  # not a port number: dask says what is wrong with the address
+        return
+    if where.scheme != "tcp" or not where.hostname or port is None:
+        return
+    socket.create_connection((where.hostname, port), timeout=5).close()
 
 
 def map_on_cluster(client, fn: Callable, shared: object, items: Sequence, chunk: int,
