@@ -161,7 +161,10 @@ def hand_slips(view, frame_settings, model: FieldModel | None = None, gate_px: f
     """The hand-placed keypoints of ``view`` (``kids``: these only) farther than the outlier gate
     (``gate_px`` at 960x540, scaled to the frame) from the camera the frame's other observations
     give, calibrated as the view was (``frame_settings``, :class:`pnlviz.calib.frame.FrameSettings`):
-    id -> px (:func:`pnlviz.calib.pins.slips`). One calibration per hand point judged."""
+    id -> px (:func:`pnlviz.calib.pins.slips`). One calibration per hand point judged, without
+    the search from broadcast priors: where the rest of the frame is too little for a homography,
+    a prior's camera is no evidence against the hand (and each search costs about 0.8 s, on every
+    release)."""
     from pnlviz.calib.calibrate import calibrate
     from pnlviz.calib.frame import calib_params
     from pnlviz.calib.pins import slips
@@ -170,7 +173,7 @@ def hand_slips(view, frame_settings, model: FieldModel | None = None, gate_px: f
     if obs is None or not obs.pins.any():
         return {}
     model = model or load_field_model()
-    params = calib_params(frame_settings, view.origin)
+    params = replace(calib_params(frame_settings, view.origin), prior_search=False)
 
     def fit(o):
         result = calibrate(o, params, model)
