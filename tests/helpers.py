@@ -30,6 +30,18 @@ def copy_sample_frames(dst: Path, n: int) -> Path:
     return dst
 
 
+def sn22_first(shared: Path, dst: Path, n: int) -> Path:
+    """A zip ``dst`` of the first ``n`` SN22 annotations of ``shared/data/sn22_test_subset`` (same
+    member names and bytes): for the batch tests that need a run of some length, not all 400."""
+    import zipfile
+
+    with zipfile.ZipFile(shared / "data" / "sn22_test_subset" / "annotations.zip") as src, \
+            zipfile.ZipFile(dst, "w") as out:
+        for name in sorted(m for m in src.namelist() if m.endswith(".json"))[:n]:
+            out.writestr(name, src.read(name))
+    return dst
+
+
 @contextlib.contextmanager
 def running_app(data, host: str = "127.0.0.1", **state_options):
     """The app serving ``data`` on a free port (``state_options``: those of ``AppState``, e.g.

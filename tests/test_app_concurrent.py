@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from pnlviz import EXAMPLES_DIR
-from test_app_browser import CHROMIUM, FLAGS, on_screen, open_page, settle, tab
+from test_app_browser import CHROMIUM, FLAGS, canvas_box, open_page, settle, tab, to_screen
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed "
                                 "(scripts/install_test_deps.sh installs it)")
@@ -59,17 +59,22 @@ def test_two_tabs_dragging_at_the_same_moment_lose_nothing(data, tmp_path, serve
             sessions = (a, b)
             assert a.stem == b.stem == "00000"
             moved: list[int] = []
+            boxes = [canvas_box(page) for page in pages]  # the canvas stays where it is on the page
             for r in range(ROUNDS):
                 for s in sessions:
                     settle(s, 0.1)
                 starts, keys = [], []
-                for page, s, offset in zip(pages, sessions, (0, 5)):
+                for page, s, box, offset in zip(pages, sessions, boxes, (0, 5)):
                     nodes = s.workspace.points["keypoints"]
+
+                    def at(k, s=s, box=box, nodes=nodes):
+                        x, y = to_screen(s, nodes.uv[nodes.keys.index(k)])
+                        return np.array([box["x"] + x, box["y"] + y])
+
                     order = [nodes.keys[(r + offset + j) % len(nodes.keys)] for j in range(len(nodes.keys))]
-                    k = next(k for k in order if k not in keys
-                             and _on_canvas(page, on_screen(page, s, nodes.uv[nodes.keys.index(k)])))
+                    k = next(k for k in order if k not in keys and _on_canvas(page, at(k)))
                     keys.append(k)
-                    starts.append(np.array(on_screen(page, s, nodes.uv[nodes.keys.index(k)])))
+                    starts.append(at(k))
                 before = dict(app.state.edits.get("00000").get("keypoints") or {})
                 steps = [np.array([0.0, 6.0 + r % 3]), np.array([6.0 + r % 2, 0.0])]
                 for page, start in zip(pages, starts):  # both pointers down, then both move, then both up

@@ -12,7 +12,7 @@ import pytest
 
 distributed = pytest.importorskip("distributed")
 
-from helpers import copy_sample_frames  # noqa: E402
+from helpers import copy_sample_frames, sn22_first  # noqa: E402
 
 from pnlviz.cli import main  # noqa: E402
 from pnlviz.data.zipwriter import journal_path  # noqa: E402
@@ -26,7 +26,7 @@ def cluster():
 
 
 def test_calibrate_on_the_cluster_writes_the_local_bytes(tmp_path, shared_dir, cluster):
-    gt = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
+    gt = sn22_first(shared_dir, tmp_path / "sn22.zip", 160)
     local, remote = tmp_path / "local.zip", tmp_path / "remote.zip"
     assert main(["calibrate", "--data", str(gt), "--out", str(local), "--no-progress"]) == 0
     assert main(["calibrate", "--data", str(gt), "--out", str(remote), "--no-progress",
@@ -47,7 +47,7 @@ def test_detect_on_the_cluster_writes_the_local_bytes(tmp_path, cluster):
 def test_a_worker_killed_mid_run_loses_no_frame(tmp_path, shared_dir):
     """One of two workers is killed (SIGKILL) once the first results are in: its tasks are redone
     elsewhere and the output is the local run's, frame for frame."""
-    gt = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
+    gt = sn22_first(shared_dir, tmp_path / "sn22.zip", 160)
     local, remote = tmp_path / "local.zip", tmp_path / "remote.zip"
     assert main(["calibrate", "--data", str(gt), "--out", str(local), "--no-progress"]) == 0
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",

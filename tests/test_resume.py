@@ -12,7 +12,7 @@ import zipfile
 
 import pytest
 
-from helpers import copy_sample_frames
+from helpers import copy_sample_frames, sn22_first
 from pnlviz.cli import main
 from pnlviz.data.zipwriter import ZipStream, journal_path, resume_members
 
@@ -41,8 +41,12 @@ def _members(path):
         return {n: z.read(n) for n in z.namelist()}
 
 
+#: frames of the SN22 runs that are stopped and resumed (the first of the 400: enough to stop one midway)
+RUN = 200
+
+
 def test_calibrate_killed_then_resumed_does_only_the_missing_frames(tmp_path, shared_dir):
-    gt = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
+    gt = sn22_first(shared_dir, tmp_path / "sn22.zip", RUN)
     full, out = tmp_path / "full.zip", tmp_path / "cams.zip"
     assert main(["calibrate", "--data", str(gt), "--out", str(full), "--no-progress"]) == 0
     cmd = [sys.executable, "-m", "pnlviz", "calibrate", "--data", str(gt), "--out", str(out), "--no-progress"]
@@ -60,18 +64,18 @@ def test_calibrate_killed_then_resumed_does_only_the_missing_frames(tmp_path, sh
     assert 40 <= partial < len(_members(full))
     r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert f"resuming: {partial} of 400 frames already in cams.zip, {400 - partial} to calibrate" in r.stdout
+    assert f"resuming: {partial} of {RUN} frames already in cams.zip, {RUN - partial} to calibrate" in r.stdout
     assert _members(out) == _members(full)  # the same cameras, in the same order
     assert not journal_path(out).exists() and not list(tmp_path.glob(".cams.zip.*.tmp"))
     # resuming a finished run only retries the frames that got no camera
     n = len(_members(full))
     r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=300)
-    assert f"resuming: {n} of 400 frames already in cams.zip, {400 - n} to calibrate" in r.stdout
+    assert f"resuming: {n} of {RUN} frames already in cams.zip, {RUN - n} to calibrate" in r.stdout
     assert _members(out) == _members(full)
 
 
 def test_calibrate_stopped_by_ctrl_c_resumes_from_its_output(tmp_path, shared_dir):
-    gt = shared_dir / "data" / "sn22_test_subset" / "annotations.zip"
+    gt = sn22_first(shared_dir, tmp_path / "sn22.zip", RUN)
     out = tmp_path / "cams.zip"
     cmd = [sys.executable, "-m", "pnlviz", "calibrate", "--data", str(gt), "--out", str(out), "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -85,9 +89,9 @@ def test_calibrate_stopped_by_ctrl_c_resumes_from_its_output(tmp_path, shared_di
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130 and "interrupted: kept" in err
     kept = len(_members(out))
-    assert 20 <= kept < 400 and not journal_path(out).exists()
+    assert 20 <= kept < RUN and not journal_path(out).exists()
     r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0 and f"resuming: {kept} of 400" in r.stdout
+    assert r.returncode == 0 and f"resuming: {kept} of {RUN}" in r.stdout
     assert len(_members(out)) > kept
     assert main(["calibrate", "--data", str(gt), "--out", str(out), "--resume", "--temporal"]) == 2
 
