@@ -188,3 +188,30 @@ def test_observations_refuse_arrays_of_another_length_than_their_keypoints():
         Observations(960, 540, ids, xy, xyz, sets, main, kp_pinned=np.array([True, False]))
     with pytest.raises(ValueError, match="kp_xy"):
         Observations(960, 540, ids, np.zeros((2, 2)), xyz, sets, main)
+
+
+def test_a_refit_from_the_frames_camera_finds_the_slip_and_no_other():
+    """The slip check refits the frame's own camera without each hand point (one solve, not a new
+    vote): of three hand points, the one 30 px off is flagged, at the distance a whole new
+    calibration without it gives; the exact clicks are not (a new vote without each, the check
+    before, flags one of them too)."""
+    from pnlviz.calib.calibrate import refit
+    from pnlviz.calib.pins import slips
+
+    rng = np.random.default_rng(3)
+    true = truth_uv()
+    det = {k: p + rng.normal(0, 1.0, 2) for k, p in true.items()}
+    hand = sorted(det)[:3]
+    edits = {str(k): list(true[k] + (np.array([30.0, 0.0]) if k == hand[0] else 0.0)) for k in hand}
+    obs = apply_keypoint_edits(Observations.from_keypoints(W, H, det, model=MODEL), edits, MODEL)
+    assert obs.pins.sum() == 3
+    res = calibrate(obs, CalibParams(), MODEL)
+    assert res.ok
+
+    def by(fit):
+        return slips(obs, lambda o: (lambda r: r.camera if r.ok else None)(fit(o)), 10.0)
+
+    refitted = by(lambda o: refit(o, res.camera, CalibParams(), MODEL))
+    voted = by(lambda o: calibrate(o, CalibParams(), MODEL))
+    assert list(refitted) == [hand[0]] and hand[0] in voted  # a new vote flags an exact click too here
+    assert 25 < refitted[hand[0]] < 35 and abs(refitted[hand[0]] - voted[hand[0]]) < 1.0

@@ -39,7 +39,7 @@ import numpy as np
 
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.pins import PinFailure, pin_camera
-from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_frame, plane_masks
+from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_frame, plane_masks, refit_with
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.refine import CameraProblem, RefineParams
 from pnlviz.calib.voting import SUBSETS, subset_mask
@@ -367,3 +367,11 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
         if isinstance(why, PinFailure):
             result.failure, result.failure_code, result.pin_condition = why.message, "pins", why.condition.value
     return result
+
+
+def refit(obs: Observations, start: Camera, params: CalibParams = CalibParams(),
+          model: FieldModel | None = None) -> CalibrationResult:
+    """``start`` (a camera of this frame, e.g. fitted with one more point) refined on ``obs``
+    and judged as :func:`calibrate` judges its own (:func:`pnlviz.calib.pipeline.refit_with`):
+    the one solve a leave-one-out check needs, not a new vote."""
+    return refit_with(CameraKind(FrameData.build(obs, model or load_field_model()), params), params, start)

@@ -219,7 +219,6 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
 def calibrate_with(kind: Kind[ResultT], params) -> ResultT:
     """The whole frame (steps 1-4), as ``kind.new_result()``. Never raises on bad geometry:
     failures come back with a reason."""
-    obs = kind.data.obs
     result = kind.new_result()
     why = kind.too_few()
     if why:
@@ -239,12 +238,43 @@ def calibrate_with(kind: Kind[ResultT], params) -> ResultT:
     if winner is None:
         result.failure, result.failure_code = kind.degenerate(), "degenerate"
         return result
-    result.estimate = result.initial_estimate = estimate = winner.estimate
     result.subset, result.threshold, result.plane, result.inliers = winner.subset, winner.threshold, winner.plane, \
         winner.inliers
+    _finish(result, winner.estimate, kind, params)
+    return result
+
+
+def refit_with(kind: Kind[ResultT], params, start) -> ResultT:
+    """Steps 3-4 alone, from ``start`` (an estimate the caller has: the frame's own, fitted
+    with one more point), as ``kind.new_result()``: the keypoints within the largest RANSAC
+    threshold of ``start`` (and the pinned ones) are its inliers, then PnL and the verdict as
+    :func:`calibrate_with` does them. One solve where a calibration makes and votes on dozens of
+    candidates: for leave-one-out checks (:func:`pnlviz.calib.pins.slips`). A frame too few for
+    :func:`calibrate_with` is a failure here too."""
+    obs = kind.data.obs
+    result = kind.new_result()
+    why = kind.too_few()
+    if why:
+        result.failure, result.failure_code = why, "too_few_keypoints"
+        return result
+    errors = kind.point_errors(start)
+    reach = params.px(params.ransac_thresholds[-1], obs.width)
+    near = np.array([errors.get(int(i), np.inf) < reach for i in obs.kp_ids], bool).reshape(-1) | obs.pins
+    result.subset, result.threshold, result.plane, result.inliers = "start", float(params.ransac_thresholds[-1]), \
+        "start", obs.kp_ids[near]
+    _finish(result, start, kind, params, solve=True)
+    return result
+
+
+def _finish(result: FrameResult, estimate, kind: Kind, params, solve: bool = False) -> None:
+    """Steps 3 and 4 on ``result`` from ``estimate``, the voted (or given) model; the solve runs
+    with PnL and something to refine against, or always with ``solve`` (a given model is not
+    fitted to these observations yet)."""
+    obs = kind.data.obs
+    result.estimate = result.initial_estimate = estimate
     result.point_residuals_initial = kind.point_errors(estimate)
     result.line_residuals_initial = kind.class_errors(estimate)
-    if params.pnl and (obs.lines or obs.circles):
+    if solve or (params.pnl and (obs.lines or obs.circles)):
         estimate, result.pnl_lines = pnl_refine(estimate, kind, params, result.line_residuals_initial,
                                                 result.point_residuals_initial)
     result.estimate = estimate
@@ -255,7 +285,6 @@ def calibrate_with(kind: Kind[ResultT], params) -> ResultT:
         limit = params.px(getattr(params, "pin_flag_px", 10.0), obs.width)
         result.flagged = flagged_pins(obs, result.point_residuals, limit)
     _verdict(result, obs, params)
-    return result
 
 
 def _verdict(result: FrameResult, obs: Observations, params) -> None:

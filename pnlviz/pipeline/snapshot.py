@@ -161,11 +161,11 @@ def hand_slips(view, frame_settings, model: FieldModel | None = None, gate_px: f
     """The hand-placed keypoints of ``view`` (``kids``: these only) farther than the outlier gate
     (``gate_px`` at 960x540, scaled to the frame) from the camera the frame's other observations
     give, calibrated as the view was (``frame_settings``, :class:`pnlviz.calib.frame.FrameSettings`):
-    id -> px (:func:`pnlviz.calib.pins.slips`). One calibration per hand point judged, without
-    the search from broadcast priors: where the rest of the frame is too little for a homography,
-    a prior's camera is no evidence against the hand (and each search costs about 0.8 s, on every
-    release)."""
-    from pnlviz.calib.calibrate import calibrate
+    id -> px (:func:`pnlviz.calib.pins.slips`). Per hand point judged, one solve from the view's
+    camera without that point (:func:`pnlviz.calib.calibrate.refit`; a calibration, without the
+    search from broadcast priors, where the view has no camera: a prior's camera is no evidence
+    against the hand, and each search costs about 0.8 s, on every release)."""
+    from pnlviz.calib.calibrate import calibrate, refit
     from pnlviz.calib.frame import calib_params
     from pnlviz.calib.pins import slips
 
@@ -175,8 +175,10 @@ def hand_slips(view, frame_settings, model: FieldModel | None = None, gate_px: f
     model = model or load_field_model()
     params = replace(calib_params(frame_settings, view.origin), prior_search=False)
 
-    def fit(o):
-        result = calibrate(o, params, model)
+    full = view.result.camera if view.result is not None and view.result.ok else None
+
+    def fit(o):  # from the frame's own camera when it has one: one solve, not a calibration
+        result = calibrate(o, params, model) if full is None else refit(o, full, params, model)
         return result.camera if result.ok else None
 
     return slips(obs, fit, gate_threshold(tuple(view.size), gate_px), kids)
