@@ -352,9 +352,9 @@ def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_
     """Another tab's edit can reorder the points after this browser picked instance i: the point
     where the pointer hit wins over the instance number."""
     from pnlviz.app.modes import PointKind
-    from pnlviz.app.workspace import GRAB_PX, _PointNodes
+    from pnlviz.app.points import GRAB_PX, PointNodes
 
-    nodes = _PointNodes(None, "/t", PointKind.KEYPOINTS, "keypoints")
+    nodes = PointNodes(None, "/t", PointKind.KEYPOINTS, "keypoints")
     nodes.plane = ImagePlane(960, 540)
     nodes.world_per_px = nodes.plane.scale  # 1 screen pixel per image pixel
     nodes.keys, nodes.uv = [11, 40, 57], np.array([[100.0, 100.0], [300.0, 200.0], [305.0, 260.0]])
@@ -368,13 +368,15 @@ def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_
 
 def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     """Tab B's release adds a point to the frame tab A is dragging on: A's grab mesh is made anew
-    (more instances). A's drag lives on the old mesh: it stays until A's release, then goes."""
+    (more instances). A's drag lives on the old mesh: it stays until A's release, then goes. And
+    a press the browser's pick gave the image (a mesh made anew, not mounted yet: seen under load,
+    the drag was taken for a pan and lost) drags the point under it all the same."""
     import asyncio
     from types import SimpleNamespace
 
     from pnlviz.app.modes import PointKind
     from pnlviz.app.overlay import Markers
-    from pnlviz.app.workspace import _PointNodes
+    from pnlviz.app.points import PointNodes
 
     class Node:
         def __init__(self, name, positions, scales):
@@ -406,7 +408,7 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     dragged = []
     events = SimpleNamespace(drag=dragged.append, screen_to_pixel=lambda xy: np.asarray(xy, float))
     scene = Scene()
-    nodes = _PointNodes(scene, "/t", PointKind.KEYPOINTS, "keypoints", events=events)
+    nodes = PointNodes(scene, "/t", PointKind.KEYPOINTS, "keypoints", events=events)
     plane = ImagePlane(960, 540)
     uv = np.array([[100.0 + 50 * i, 200.0] for i in range(8)])
     nodes.show(Markers(list(range(1, 9)), uv, np.zeros((8, 3), np.uint8)), plane, plane.scale)
@@ -426,3 +428,15 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     asyncio.run(first.handlers["drag"](event("end", uv[0] + [9.0, 0.0])))
     assert [e.key for e in dragged] == [1, 1, 1] and np.allclose(dragged[-1].uv, uv[0] + [9.0, 0.0])
     assert first.removed and not nodes.grab.removed and not nodes.dragging
+
+    def on_image(phase, at):  # what viser reports of a drag on the image plane: no instance
+        xyz = plane.world(np.asarray(at, float).reshape(1, 2))[0]  # on the plane itself
+        return SimpleNamespace(phase=phase, start_position=xyz, end_position=xyz, instance_index=None,
+                               end_screen_pos=(0.0, 0.0))
+
+    dragged.clear()
+    assert not nodes.drag(on_image("start", [400.0, 300.0]))  # nowhere near a point: the image's (a pan)
+    assert dragged == [] and not nodes.dragging
+    assert nodes.drag(on_image("start", more[3] + [2.0, 1.0])) and nodes.dragging
+    assert nodes.drag(on_image("end", more[3] + [8.0, 1.0]))
+    assert [e.key for e in dragged] == [4, 4] and np.allclose(dragged[-1].uv, more[3] + [6.0, 0.0])

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from pnlviz.app.view2d import MAX_ZOOM, MIN_ZOOM_OF_FIT, View2D
-from pnlviz.app.workspace import GRAB_PX
+from pnlviz.app.points import GRAB_PX
 
 
 def page_data(version: int, answer: int, applied: bool, view: View2D | None, canvas: tuple[int, int],

@@ -18,14 +18,14 @@ from typing import Any
 import numpy as np
 
 from pnlviz.app.handles import update_changed
-from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection, WorkspaceEvents
+from pnlviz.app.modes import DragPhase, PointKind, Selection, WorkspaceEvents
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
+from pnlviz.app.points import PointNodes
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
 from pnlviz.viz import ring
 
-#: screen pixels: the radius of a point's disc, of its black rim, of the area that grabs it, and
-#: of the selection ring
-DISC_PX, RIM_PX, GRAB_PX, RING_PX = 4.5, 6.0, 8.0, 11.0
+#: screen pixels: the radius of the selection ring
+RING_PX = 11.0
 PIN_BOX_PX = 8.5  #: screen pixels: half the side of the box around a pinned keypoint
 #: screen thickness of each layer's lines
 THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
@@ -35,210 +35,6 @@ BACKDROP_MARGIN = 6.0  # the dark frame around the image: this many image widths
 FRAME_SLOTS = 3  # frames whose pixels are kept in the browser: the one shown and two sent ahead
 SELECTED_RGB = (255, 255, 255)
 LABEL_MIN_GAP_PX = 16.0  # ids closer than this on screen: only the first one shows
-
-
-def _disc(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
-    """A unit disc in the xy plane (a fan of ``n`` triangles), facing both ways."""
-    a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
-    vertices = np.vstack([[0.0, 0.0, 0.0], np.stack([np.cos(a), np.sin(a), np.zeros(n)], 1)])
-    faces = np.array([[0, 1 + i, 1 + (i + 1) % n] for i in range(n)])
-    return vertices, faces
-
-
-class _PointNodes:
-    """The points of one kind, drawn as flat discs with a black rim (two point clouds: unlit, so
-    the colours are the legend's) over an invisible batched mesh that takes the pointer, so every
-    point of a frame is grabbed directly; ``keys[i]`` says what instance ``i`` is.
-
-    The browser finds what the pointer hits on a batched mesh where its instances were when it
-    was made: once they are moved or resized in place, a press on a point reports no instance
-    and no position, and viser then sends no drag update until the release (the point would not
-    follow the hand on any frame but the first). So the grab mesh is made anew, under a new name,
-    whenever its instances change, except while one of its points is dragged: then it is
-    changed in place (the drag follows the pointer on a plane, not by hitting the mesh), and it
-    holds a few spare instances (parked out of sight) so that a point more or less does not
-    re-create it under the hand. One case remains: a press on the very point just dropped, even
-    on a mesh made anew, reports no instance in Chromium (cause not found); that drag lands by
-    the pointer's screen position, as before, but without the live preview."""
-
-    def __init__(self, scene, path: str, kind: PointKind, layer: str, opacity: float = 1.0,
-                 events: WorkspaceEvents | None = None):
-        self.scene, self.path, self.kind, self.layer, self.opacity = scene, path, kind, layer, opacity
-        self.events = events
-        self.keys: list = []
-        self.uv = np.zeros((0, 2))
-        self.colors = np.zeros((0, 3), np.uint8)
-        self.plane: ImagePlane | None = None
-        self.world_per_px = 0.01
-        self.disc = self.rim = self.grab = None
-        self.dragging = False  # one of these points is being dragged: the grab mesh stays
-        self._grab_made: tuple[np.ndarray, np.ndarray] | None = None  # its instances as made
-        self._grabs_made = 0
-        self._retired: list = []  # grab meshes replaced during a drag, removed at its release
-
-    def show(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
-        self.keys, self.plane, self.world_per_px = list(markers.keys), plane, world_per_px
-        self.uv = np.asarray(markers.uv, float).reshape(-1, 2).copy()
-        self.colors = np.asarray(markers.colors, np.uint8).reshape(-1, 3)
-        if not self.keys and self.grab is None:
-            return
-        self._draw()
-        capacity = max(8, 1 << max(0, len(self.keys) - 1).bit_length())
-        self._set_grab(*self._grab_layout(capacity))
-
-    def _set_grab(self, pos: np.ndarray, scales: np.ndarray) -> None:
-        """The grab mesh's instances: made anew when they changed (see the class docstring), in
-        place while a point is dragged and the capacity holds."""
-        made = self._grab_made  # None once changed in place: the browser's picking is stale
-        if made is not None and made[0].shape == pos.shape and np.array_equal(made[0], pos) \
-                and np.array_equal(made[1], scales):
-            return
-        if self.grab is not None and self.dragging and len(self.grab.batched_positions) == len(pos):
-            update_changed(self.grab, batched_positions=pos, batched_scales=scales)
-            self._grab_made = None
-            return
-        if self.grab is not None and self.dragging:
-            self._retired.append(self.grab)  # the drag lives on it until its release
-        elif self.grab is not None:
-            self.grab.remove()
-        self._grabs_made += 1
-        vertices, faces = _disc()
-        self.grab = self.scene.add_batched_meshes_simple(
-            f"{self.path}/grab{self._grabs_made}", vertices, faces, np.tile([1.0, 0.0, 0.0, 0.0], (len(pos), 1)),
-            pos, batched_scales=scales, batched_colors=(255, 255, 255), opacity=0.0, side="double",
-            cast_shadow=False, receive_shadow=False, lod="off")
-        self._grab_made = (pos.copy(), scales.copy())
-        assert self.events is not None  # the workspace's, given when there are points to grab
-        self._bind(self.grab, self.events)
-
-    def _draw(self) -> None:
-        """The visible discs and rims, where ``uv`` says (none: hidden)."""
-        if not self.keys:
-            for node in (self.disc, self.rim):
-                if node is not None:
-                    update_changed(node, visible=False)
-            return
-        pos = placed(self.plane).world(self.uv, self.layer).astype(np.float32)
-        rim_pos = pos + np.array([0.0, 0.0, 0.0002], np.float32)
-        if self.disc is None:
-            common = {"point_shape": "circle", "point_shading": "flat", "precision": "float32"}
-            self.rim = self.scene.add_point_cloud(f"{self.path}/rim", rim_pos, np.zeros_like(self.colors),
-                                                  point_size=RIM_PX * self.world_per_px, **common)
-            self.disc = self.scene.add_point_cloud(f"{self.path}/disc", pos, self._shade(self.colors),
-                                                   point_size=DISC_PX * self.world_per_px, **common)
-            return
-        update_changed(self.rim, points=rim_pos, colors=np.zeros_like(self.colors), visible=True)
-        update_changed(self.disc, points=pos, colors=self._shade(self.colors), visible=True)
-
-    def _shade(self, colors: np.ndarray) -> np.ndarray:
-        """Colours at this kind's opacity (ghosts: mixed with grey)."""
-        if self.opacity >= 1.0:
-            return colors
-        return (self.opacity * colors + (1 - self.opacity) * 90).astype(np.uint8)
-
-    def _grab_layout(self, capacity: int) -> tuple[np.ndarray, np.ndarray]:
-        """Positions and scales of the grab mesh's instances: the points, then the spares."""
-        n = len(self.keys)
-        pos = np.zeros((capacity, 3))
-        pos[:, 2] = PLANE_Z + 5.0  # spares: behind the image, tiny (a zero scale has no inverse)
-        scales = np.full(capacity, 1e-6)
-        if n:
-            pos[:n] = placed(self.plane).world(self.uv, "grab")
-            scales[:n] = GRAB_PX * self.world_per_px
-        return pos, scales
-
-    def rescale(self, world_per_px: float) -> None:
-        self.world_per_px = world_per_px
-        if self.disc is not None:
-            self.disc.point_size, self.rim.point_size = DISC_PX * world_per_px, RIM_PX * world_per_px
-        if self.grab is not None and self.keys:
-            self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
-
-    def move(self, index: int, uv) -> None:
-        """Put point ``index`` at pixel ``uv`` (while it is dragged)."""
-        if not 0 <= index < len(self.keys):
-            return
-        self.uv[index] = uv
-        self._draw()
-        if self.grab is not None:
-            self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
-
-    def _instance(self, index: int | None, at_uv) -> int | None:
-        """The point an event is about: the instance viser reports if that point is where the
-        pointer hit, else the point nearest the hit within reach. (The browser picks among the
-        instances it drew; when another tab's edit reorders the points, instance ``i`` there can
-        be another point here. viser also reports no instance at times for a mesh whose
-        instances moved.)"""
-        if at_uv is None or not np.all(np.isfinite(at_uv)):
-            return index if index is not None and 0 <= index < len(self.keys) else None
-        if not self.keys:
-            return None
-        reach = 1.5 * GRAB_PX * self.world_per_px / placed(self.plane).scale  # image pixels
-        d = np.hypot(*(self.uv - at_uv).T)
-        if index is not None and 0 <= index < len(self.keys) and d[index] <= reach:
-            return index
-        i = int(np.argmin(d))
-        return i if d[i] <= reach else None
-
-    def _bind(self, node, events: WorkspaceEvents) -> None:
-        grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
-
-        def hit(event):
-            """(the point clicked or None, the pixel the click's ray meets the image at)."""
-            o = np.asarray(event.ray_origin, float)
-            at = placed(self.plane).pixel_on_ray(o, o + np.asarray(event.ray_direction))
-            return self._instance(event.instance_index, at), at
-
-        @node.on_click
-        async def _(event) -> None:
-            i = hit(event)[0]
-            if i is not None:
-                events.pick(Selection(self.kind, self.keys[i]))
-
-        @node.on_click(modifier="cmd/ctrl")
-        async def _(event) -> None:  # Ctrl+click: the point joins the selection (or leaves it)
-            i = hit(event)[0]
-            if i is not None:
-                events.pick_more(Selection(self.kind, self.keys[i]))
-
-        # Shift+click on a point places, as on the frame: on a ghost, that keypoint where the camera
-        # puts it (the ghost becomes a keypoint); on another point, the chosen id there
-        @node.on_click(modifier="shift")
-        async def _(event) -> None:
-            i, at = hit(event)
-            if i is not None and self.kind is PointKind.GHOSTS:
-                events.place(self.uv[i].copy(), self.keys[i])
-            elif at is not None and np.all(np.isfinite(at)):
-                events.place(np.asarray(at, float))
-
-        @node.on_drag
-        async def _(event) -> None:
-            phase = DragPhase(event.phase)
-            if phase is DragPhase.START:
-                at = placed(self.plane).pixel(event.start_position)
-                exact = bool(np.all(np.isfinite(at)))
-                if not exact:  # viser lost the instance it hit: where the pointer is, on screen
-                    at = events.screen_to_pixel(np.asarray(event.end_screen_pos, float))
-                i = self._instance(event.instance_index, at)
-                if i is None:
-                    return
-                grabbed.update(key=self.keys[i], index=i, at=at, uv=self.uv[i].copy(), exact=exact)
-                self.dragging = True
-            if "key" not in grabbed:
-                return
-            # the point follows the pointer by as many image pixels as the pointer moved
-            pointer = (placed(self.plane).pixel(event.end_position) if grabbed["exact"]
-                       else events.screen_to_pixel(np.asarray(event.end_screen_pos, float)))
-            now = grabbed["uv"] + pointer - grabbed["at"]
-            if phase is not DragPhase.START and self.keys[grabbed["index"]:grabbed["index"] + 1] == [grabbed["key"]]:
-                self.move(grabbed["index"], now)
-            key = grabbed["key"]
-            if phase is DragPhase.END:  # before the release is handled: it makes the grab mesh anew
-                grabbed.clear()
-                self.dragging = False
-                while self._retired:
-                    self._retired.pop().remove()
-            events.drag(DragEvent(self.kind, key, phase, now))
 
 
 class Workspace:
@@ -255,7 +51,7 @@ class Workspace:
         self._ring = self._pin_boxes = None
         self.pins: tuple[dict, Markers] = ({}, Markers())  # pinned id -> flagged, and where the keypoints are
         self._lines: dict[str, object] = {}
-        self.points = {kind: _PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity, events)
+        self.points = {kind: PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity, events)
                        for kind, layer, opacity in ((PointKind.KEYPOINTS, "keypoints", 1.0),
                                                     (PointKind.GHOSTS, "ghosts", 0.55),
                                                     (PointKind.LINE_POINTS, "keypoints", 1.0))}
@@ -354,14 +150,22 @@ class Workspace:
         self._bind_pan(node)
 
     def _bind_pan(self, node) -> None:
+        """A drag of the image (or of the backdrop) pans the view, unless it starts on a point:
+        the page leaves a press near a point to viser, whose pick can miss a grab mesh made anew
+        (another tab's edit redraws the points) and find the image: the point is dragged all the
+        same (a pan there lost the drag)."""
         start: dict = {}
 
         @node.on_drag
         async def _(event) -> None:
             phase = DragPhase(event.phase)
             if phase is DragPhase.START:
+                start.clear()
+                start["points"] = next((p for p in self.points.values() if p.keys and p.drag(event)), None)
                 start["at"] = np.array(event.start_screen_pos, float)
-            if "at" in start:
+            elif start.get("points") is not None:
+                start["points"].drag(event)
+            if start.get("points") is None and "at" in start:
                 self.events.pan(phase, start["at"], np.array(event.end_screen_pos, float))
 
     def _clicked(self, event) -> np.ndarray | None:
