@@ -115,9 +115,11 @@ def test_targets_have_the_network_output_size(tiny_cache):
 
 def test_training_smoke_loss_drops_and_detector_loads(tiny_cache, tmp_path):
     cfg = TrainConfig(frames=8, size=SMOKE_SIZE, input_size=SMOKE_SIZE, epochs=25, batch_size=4, lr=3e-3,
-                      lr_final=1e-3, seed=1)
+                      lr_final=1e-3, seed=1, threads=1)  # one thread: two spin-wait under load (12x slower)
+    before = torch.get_num_threads()
     out = tmp_path / "light.pt"
     res = train(cfg, out, progress=False, log=None, cache=tiny_cache)  # 50 steps, no time bound: load-independent
+    assert torch.get_num_threads() == before  # the process's own setting back
     assert len(res.history) >= 5
     first, last = res.history[0], res.history[-1]
     assert last < 0.5 * first, res.history

@@ -251,13 +251,15 @@ def train(config: TrainConfig, out: str | Path, *, minutes: float | None = None,
     ``init`` (or ``config.init``): a LightNet checkpoint to start from."""
     out = Path(out)
     log = log or (lambda s: None)
+    threads = torch.get_num_threads()
     if config.threads:
         torch.set_num_threads(int(config.threads))
     torch.set_flush_denormal(True)  # tiny heatmap gradients otherwise hit slow denormal arithmetic
     try:
         return _train(config, out, minutes, progress, cache_dir, log, cache, init)
-    finally:
-        torch.set_flush_denormal(False)  # back to torch's default for the rest of the process, whatever happened
+    finally:  # the process's own settings back, whatever happened
+        torch.set_flush_denormal(False)
+        torch.set_num_threads(threads)
 
 
 def _train(config: TrainConfig, out: Path, minutes, progress, cache_dir, log, cache, init) -> TrainResult:
