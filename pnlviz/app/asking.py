@@ -20,13 +20,16 @@ def distances_text(found: dict[int, float]) -> str:
 def say_slip(tab, stem: str, kid: int) -> None:
     """After a keypoint was placed or moved by hand: when the rest of the frame puts it farther
     than the outlier gate from where it was put (:func:`pnlviz.pipeline.snapshot.hand_slips`),
-    say so at once; the point stays where the hand put it."""
-    from pnlviz.pipeline.snapshot import hand_slips
+    say so at once; the point stays where the hand put it. A reviewed frame's snapshot, taken
+    with the edit, has judged them already: read there, not judged twice."""
+    from pnlviz.pipeline.snapshot import hand_slips, recorded_slips
 
     state, settings = tab.state, tab.settings
     try:
-        view = state.view(stem, settings)
-        found = hand_slips(view, state.reader.frame_settings(view.settings), state.model, kids=[kid])
+        found = recorded_slips(state.edits.get(stem), settings)
+        if found is None:
+            view = state.view(stem, settings)
+            found = hand_slips(view, state.reader.frame_settings(view.settings), state.model, kids=[kid])
     except EditError:
         return
     if kid not in found:

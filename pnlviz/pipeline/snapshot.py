@@ -184,6 +184,17 @@ def hand_slips(view, frame_settings, model: FieldModel | None = None, gate_px: f
     return slips(obs, fit, gate_threshold(tuple(view.size), gate_px), kids)
 
 
+def recorded_slips(record: Mapping, settings) -> dict[int, float] | None:
+    """The slips a reviewed frame's snapshot already judged (id -> px, ``inf`` off camera) when it
+    was taken of these edits under these settings (:class:`pnlviz.pipeline.settings.Settings`) from
+    the frame's own view; None when it was not (judge them: :func:`hand_slips`)."""
+    snap = record.get("snapshot")
+    if snap is None or snap.get("shot") is not None or snap.get("edits") != edits_digest(record) \
+            or snap.get("settings") != {"source": settings.source, "pnl": settings.pnl, "alpha": settings.alpha}:
+        return None
+    return {int(k): float("inf") if v is None else float(v) for k, v in (snap.get("slips") or {}).items()}
+
+
 def _from_snapshot(snap: Mapping) -> FrameLabels:
     labels = {int(k): Label(v["x"], v["y"], v["set"], v["provenance"], v["residual"])
               for k, v in snap["labels"].items()}
