@@ -6,6 +6,8 @@ found the mesh or only the image under it."""
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable, Iterable
 
 import numpy as np
 
@@ -16,6 +18,12 @@ from pnlviz.app.view2d import PLANE_Z, ImagePlane, placed
 
 #: screen pixels: the radius of a point's disc, of its black rim, and of the area that grabs it
 DISC_PX, RIM_PX, GRAB_PX = 4.5, 6.0, 8.0
+#: seconds a replaced grab mesh still takes presses (see :class:`PointNodes`)
+GRACE_S = 3.0
+#: scene units each grab mesh made floats in front of those still kept (the browser's pick takes
+#: the nearest hit; of hits at one depth, the mesh made first), up to ``MAX_LIFT`` (then it starts
+#: again from its layer: far under the next layer, 0.0003 in front)
+LIFT, MAX_LIFT = 1e-6, 1e-4
 
 
 def _disc(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
@@ -38,9 +46,16 @@ class PointNodes:
     whenever its instances change, except while one of its points is dragged: then it is
     changed in place (the drag follows the pointer on a plane, not by hitting the mesh), and it
     holds a few spare instances (parked out of sight) so that a point more or less does not
-    re-create it under the hand. One case remains: a press on the very point just dropped, even
-    on a mesh made anew, reports no instance in Chromium (cause not found); that drag lands by
-    the pointer's screen position, as before, but without the live preview."""
+    re-create it under the hand. A replaced grab mesh stays (invisible, as every grab mesh) for
+    :data:`GRACE_S` seconds, and after that until the next one is made: a press the browser
+    took on it before the server's redraw reached the page (another tab's edit, under load) is
+    still a press on the points (removed at once, such a press was lost: no drag, no pan). A
+    press on any grab mesh takes the point nearest the pointer; with none within reach, the
+    press is the image's (a click, a pan). Each mesh made floats a hair in front of those kept
+    (:data:`LIFT`), so the browser picks the newest one it has mounted: a kept one takes only the
+    presses that come before that, and is not under the pointer when it goes. One case remains: a press on the very point just
+    dropped, even on a mesh made anew, reports no instance in Chromium (cause not found); that
+    drag lands by the pointer's screen position, as before, but without the live preview."""
 
     def __init__(self, scene, path: str, kind: PointKind, layer: str, opacity: float = 1.0,
                  events: WorkspaceEvents | None = None):
@@ -55,7 +70,9 @@ class PointNodes:
         self.dragging = False  # one of these points is being dragged: the grab mesh stays
         self._grab_made: tuple[np.ndarray, np.ndarray] | None = None  # its instances as made
         self._grabs_made = 0
-        self._retired: list = []  # grab meshes replaced during a drag, removed at its release
+        self._retired: list = []  # grab meshes replaced during a drag, kept until its release
+        self._stale: list = []  # (grab mesh replaced, when): removed after the grace period
+        self._lift = 0.0  # how far the grab mesh floats in front of its layer (see LIFT)
         self._grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
 
     def show(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
@@ -82,7 +99,11 @@ class PointNodes:
         if self.grab is not None and self.dragging:
             self._retired.append(self.grab)  # the drag lives on it until its release
         elif self.grab is not None:
-            self.grab.remove()
+            self._retire([self.grab])
+        lift = self._lift + LIFT if (self._retired or self._stale) and self._lift < MAX_LIFT else 0.0
+        if lift != self._lift:
+            self._lift = lift
+            pos, scales = self._grab_layout(len(pos))
         self._grabs_made += 1
         vertices, faces = _disc()
         self.grab = self.scene.add_batched_meshes_simple(
@@ -92,6 +113,16 @@ class PointNodes:
         self._grab_made = (pos.copy(), scales.copy())
         assert self.events is not None  # the workspace's, given when there are points to grab
         self._bind(self.grab, self.events)
+
+    def _retire(self, meshes: list) -> None:
+        """``meshes`` replaced now: they take presses for the grace period; those replaced
+        longer ago go."""
+        now = time.monotonic()
+        keep = [(m, t) for m, t in self._stale if now - t < GRACE_S]
+        for m, _ in self._stale:
+            if all(m is not k for k, _ in keep):
+                m.remove()
+        self._stale = keep + [(m, now) for m in meshes]
 
     def _draw(self) -> None:
         """The visible discs and rims, where ``uv`` says (none: hidden)."""
@@ -126,6 +157,7 @@ class PointNodes:
         scales = np.full(capacity, 1e-6)
         if n:
             pos[:n] = placed(self.plane).world(self.uv, "grab")
+            pos[:n, 2] -= self._lift
             scales[:n] = GRAB_PX * self.world_per_px
         return pos, scales
 
@@ -146,19 +178,18 @@ class PointNodes:
             self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
 
     def _instance(self, index: int | None, at_uv) -> int | None:
-        """The point an event is about: the instance viser reports if that point is where the
-        pointer hit, else the point nearest the hit within reach. (The browser picks among the
-        instances it drew; when another tab's edit reorders the points, instance ``i`` there can
-        be another point here. viser also reports no instance at times for a mesh whose
-        instances moved.)"""
+        """The point an event is about: the point nearest where the pointer hit, within reach;
+        the instance viser reports only when it gives no hit position. (The browser picks among
+        the instances it drew: when another tab's edit reorders the points, instance ``i`` there
+        can be another point here; where two points' grab discs overlap, it names either one,
+        and a press on one point's centre grabbed its neighbour. viser also reports no instance
+        at times for a mesh whose instances moved.)"""
         if at_uv is None or not np.all(np.isfinite(at_uv)):
             return index if index is not None and 0 <= index < len(self.keys) else None
         if not self.keys:
             return None
         reach = 1.5 * GRAB_PX * self.world_per_px / placed(self.plane).scale  # image pixels
         d = np.hypot(*(self.uv - at_uv).T)
-        if index is not None and 0 <= index < len(self.keys) and d[index] <= reach:
-            return index
         i = int(np.argmin(d))
         return i if d[i] <= reach else None
 
@@ -171,9 +202,11 @@ class PointNodes:
 
         @node.on_click
         async def _(event) -> None:
-            i = hit(event)[0]
+            i, at = hit(event)
             if i is not None:
                 events.pick(Selection(self.kind, self.keys[i]))
+            elif at is not None and np.all(np.isfinite(at)):  # no point there now: the frame's
+                events.click(np.asarray(at, float))
 
         @node.on_click(modifier="cmd/ctrl")
         async def _(event) -> None:  # Ctrl+click: the point joins the selection (or leaves it)
@@ -191,9 +224,11 @@ class PointNodes:
             elif at is not None and np.all(np.isfinite(at)):
                 events.place(np.asarray(at, float))
 
+        route = DragRoute(lambda: (self,), events.pan)
+
         @node.on_drag
         async def _(event) -> None:
-            self.drag(event)
+            route(event)
 
     def drag(self, event) -> bool:
         """A drag event of viser's on one of these points (on the grab mesh; or on the image
@@ -227,7 +262,29 @@ class PointNodes:
         if phase is DragPhase.END:  # before the release is handled: it makes the grab mesh anew
             grabbed.clear()
             self.dragging = False
-            while self._retired:
-                self._retired.pop().remove()
+            self._retire(self._retired)
+            self._retired = []
         events.drag(DragEvent(self.kind, key, phase, now))
         return True
+
+
+class DragRoute:
+    """One gesture at a time on a node that points lie on (the image, its backdrop, a grab mesh):
+    it drags the first of ``candidates()`` with a point within reach of the press, else it pans
+    the view (``pan(phase, start, now)``, screen fractions of the canvas)."""
+
+    def __init__(self, candidates: Callable[[], Iterable[PointNodes]],
+                 pan: Callable[[DragPhase, np.ndarray, np.ndarray], None]) -> None:
+        self.candidates, self.pan = candidates, pan
+        self.points: PointNodes | None = None
+        self.at: np.ndarray | None = None  # where the gesture started, when it pans
+
+    def __call__(self, event) -> None:
+        phase = DragPhase(event.phase)
+        if phase is DragPhase.START:
+            self.points = next((p for p in self.candidates() if p.keys and p.drag(event)), None)
+            self.at = None if self.points is not None else np.array(event.start_screen_pos, float)
+        elif self.points is not None:
+            self.points.drag(event)
+        if self.at is not None:
+            self.pan(phase, self.at, np.array(event.end_screen_pos, float))

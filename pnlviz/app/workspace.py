@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 
 from pnlviz.app.handles import update_changed
-from pnlviz.app.modes import DragPhase, PointKind, Selection, WorkspaceEvents
+from pnlviz.app.modes import PointKind, Selection, WorkspaceEvents
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
-from pnlviz.app.points import PointNodes
+from pnlviz.app.points import DragRoute, PointNodes
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
 from pnlviz.viz import ring
 
@@ -154,19 +154,11 @@ class Workspace:
         the page leaves a press near a point to viser, whose pick can miss a grab mesh made anew
         (another tab's edit redraws the points) and find the image: the point is dragged all the
         same (a pan there lost the drag)."""
-        start: dict = {}
+        route = DragRoute(lambda: self.points.values(), self.events.pan)
 
         @node.on_drag
         async def _(event) -> None:
-            phase = DragPhase(event.phase)
-            if phase is DragPhase.START:
-                start.clear()
-                start["points"] = next((p for p in self.points.values() if p.keys and p.drag(event)), None)
-                start["at"] = np.array(event.start_screen_pos, float)
-            elif start.get("points") is not None:
-                start["points"].drag(event)
-            if start.get("points") is None and "at" in start:
-                self.events.pan(phase, start["at"], np.array(event.end_screen_pos, float))
+            route(event)
 
     def _clicked(self, event) -> np.ndarray | None:
         if self.plane is None:
