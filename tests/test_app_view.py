@@ -434,12 +434,14 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     more = np.vstack([uv, [[700.0, 400.0]]])  # the other tab's point: 9 points, more than the 8 made
     nodes.show(Markers(list(range(1, 10)), more, np.zeros((9, 3), np.uint8)), plane, plane.scale)
     assert nodes.grab is not first and not first.removed  # the drag's mesh lives on
-    # the new mesh floats in front of the kept one: the browser picks it once it has it
-    assert nodes.grab.batched_positions[0, 2] < first.batched_positions[0, 2]
+    # the drag's mesh is changed in place until its release (the drag lives on it)
+    assert np.allclose(first.batched_positions[0, 2], nodes.grab.batched_positions[0, 2])
     asyncio.run(first.handlers["drag"](event("update", uv[0] + [5.0, 0.0])))
     asyncio.run(first.handlers["drag"](event("end", uv[0] + [9.0, 0.0])))
     assert [e.key for e in dragged] == [1, 1, 1] and np.allclose(dragged[-1].uv, uv[0] + [9.0, 0.0])
     assert not first.removed and not nodes.grab.removed and not nodes.dragging  # in its grace period
+    # ... sunk behind the mesh in use (the browser picks the nearer: the new one, once it has it)
+    assert first.batched_positions[0, 2] > nodes.grab.batched_positions[0, 2]
     # a press that reached the replaced mesh after its replacement: the nearest point is dragged ...
     dragged.clear()
     asyncio.run(first.handlers["drag"](event("start", more[2] + [1.0, 0.0])))

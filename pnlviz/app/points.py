@@ -20,10 +20,10 @@ from pnlviz.app.view2d import PLANE_Z, ImagePlane, placed
 DISC_PX, RIM_PX, GRAB_PX = 4.5, 6.0, 8.0
 #: seconds a replaced grab mesh still takes presses (see :class:`PointNodes`)
 GRACE_S = 3.0
-#: scene units each grab mesh made floats in front of those still kept (the browser's pick takes
-#: the nearest hit; of hits at one depth, the mesh made first), up to ``MAX_LIFT`` (then it starts
-#: again from its layer: far under the next layer, 0.0003 in front)
-LIFT, MAX_LIFT = 1e-6, 1e-4
+#: scene units a replaced grab mesh sinks towards the image (0.0005 -> 0.0002 in front of it: five
+#: float32 steps behind the grab mesh in use at z 1000, where the browser compares depths; of hits
+#: at one depth, its pick takes the mesh made first)
+SINK = 0.0003
 
 
 def _disc(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
@@ -51,9 +51,10 @@ class PointNodes:
     took on it before the server's redraw reached the page (another tab's edit, under load) is
     still a press on the points (removed at once, such a press was lost: no drag, no pan). A
     press on any grab mesh takes the point nearest the pointer; with none within reach, the
-    press is the image's (a click, a pan). Each mesh made floats a hair in front of those kept
-    (:data:`LIFT`), so the browser picks the newest one it has mounted: a kept one takes only the
-    presses that come before that, and is not under the pointer when it goes. One case remains: a press on the very point just
+    press is the image's (a click, a pan). A kept mesh sinks behind the one in use
+    (:data:`SINK`, in the message batch that makes the new one), so the browser picks the new one
+    once it has it: a kept one takes only the presses that come before that, and is not under
+    the pointer when it goes. One case remains: a press on the very point just
     dropped, even on a mesh made anew, reports no instance in Chromium (cause not found); that
     drag lands by the pointer's screen position, as before, but without the live preview."""
 
@@ -72,7 +73,6 @@ class PointNodes:
         self._grabs_made = 0
         self._retired: list = []  # grab meshes replaced during a drag, kept until its release
         self._stale: list = []  # (grab mesh replaced, when): removed after the grace period
-        self._lift = 0.0  # how far the grab mesh floats in front of its layer (see LIFT)
         self._grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
 
     def show(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
@@ -100,10 +100,6 @@ class PointNodes:
             self._retired.append(self.grab)  # the drag lives on it until its release
         elif self.grab is not None:
             self._retire([self.grab])
-        lift = self._lift + LIFT if (self._retired or self._stale) and self._lift < MAX_LIFT else 0.0
-        if lift != self._lift:
-            self._lift = lift
-            pos, scales = self._grab_layout(len(pos))
         self._grabs_made += 1
         vertices, faces = _disc()
         self.grab = self.scene.add_batched_meshes_simple(
@@ -115,8 +111,12 @@ class PointNodes:
         self._bind(self.grab, self.events)
 
     def _retire(self, meshes: list) -> None:
-        """``meshes`` replaced now: they take presses for the grace period; those replaced
-        longer ago go."""
+        """``meshes`` replaced now: they sink behind the mesh in use and take presses for the
+        grace period; those replaced longer ago go."""
+        for m in meshes:
+            sunk = np.array(m.batched_positions, float)
+            sunk[:, 2] += SINK
+            update_changed(m, batched_positions=sunk)
         now = time.monotonic()
         keep = [(m, t) for m, t in self._stale if now - t < GRACE_S]
         for m, _ in self._stale:
@@ -157,7 +157,6 @@ class PointNodes:
         scales = np.full(capacity, 1e-6)
         if n:
             pos[:n] = placed(self.plane).world(self.uv, "grab")
-            pos[:n, 2] -= self._lift
             scales[:n] = GRAB_PX * self.world_per_px
         return pos, scales
 
