@@ -118,9 +118,11 @@ class PointNodes:
             sunk[:, 2] += SINK
             update_changed(m, batched_positions=sunk)
         now = time.monotonic()
-        keep = [(m, t) for m, t in self._stale if now - t < GRACE_S]
-        for m, _ in self._stale:
-            if all(m is not k for k, _ in keep):
+        keep = []
+        for m, t in self._stale:
+            if now - t < GRACE_S:
+                keep.append((m, t))
+            else:
                 m.remove()
         self._stale = keep + [(m, now) for m in meshes]
 

@@ -129,7 +129,7 @@ def review_snapshot(record: Mapping, labels: Mapping[int, Label], camera: Camera
     digest is kept); ``labels``: what an export writes; ``camera`` (None: ``failure`` says why);
     ``settings``: the app's :class:`pnlviz.pipeline.settings.Settings`; ``detections``: the ones
     the labels used (None: none); ``shot``: where a shot-reviewed frame's shot is."""
-    snap = {"settings": {"source": settings.source, "pnl": settings.pnl, "alpha": settings.alpha},
+    snap = {"settings": _settings_key(settings),
             "detection_settings": dict(detection_settings), "size": [int(v) for v in size],
             "detections": predictions_to_json(detections) if detections is not None else None,
             "edits": edits_digest(record),
@@ -184,13 +184,18 @@ def hand_slips(view, frame_settings, model: FieldModel | None = None, gate_px: f
     return slips(obs, fit, gate_threshold(tuple(view.size), gate_px), kids)
 
 
+def _settings_key(settings) -> dict:
+    """What a snapshot records of the settings it was taken under."""
+    return {"source": settings.source, "pnl": settings.pnl, "alpha": settings.alpha}
+
+
 def recorded_slips(record: Mapping, settings) -> dict[int, float] | None:
     """The slips a reviewed frame's snapshot already judged (id -> px, ``inf`` off camera) when it
     was taken of these edits under these settings (:class:`pnlviz.pipeline.settings.Settings`) from
     the frame's own view; None when it was not (judge them: :func:`hand_slips`)."""
     snap = record.get("snapshot")
     if snap is None or snap.get("shot") is not None or snap.get("edits") != edits_digest(record) \
-            or snap.get("settings") != {"source": settings.source, "pnl": settings.pnl, "alpha": settings.alpha}:
+            or snap.get("settings") != _settings_key(settings):
         return None
     return {int(k): float("inf") if v is None else float(v) for k, v in (snap.get("slips") or {}).items()}
 
