@@ -288,3 +288,39 @@ def test_calibrate_cli_writes_an_evaluator_ready_zip_and_a_report(tmp_path):
 
     summary = evaluate_dataset(EXAMPLES_DIR / "sample", out, progress=False)
     assert summary.jac(5) > 0.9
+
+
+def test_tightening_pulls_classes_in_and_never_leaves_more_beyond(shared_dir):
+    """``CameraProblem.tighten`` on real SN22 frames (every 8th, from their annotations): from the
+    least-squares camera, never more classes or keypoints beyond the tolerance; on some frames
+    fewer, and those frames score higher at JaC@5 against their annotations (the evaluator counts
+    a class right only when all its points are within 5 px)."""
+    from pnlviz.calib.calibrate import pin_settings
+    from pnlviz.calib.problem import FrameData
+    from pnlviz.data import open_dataset
+    from pnlviz.metrics.soccernet import evaluate_frame
+
+    ds = open_dataset(shared_dir / "data" / "sn22_test_subset" / "annotations.zip")
+    loose = CalibParams(class_tolerance_px=0.0)
+    model = load_field_model()
+    fewer, gains = 0, []
+    for stem in ds.stems[::8]:
+        obs, _ = observations_from_annotation(ds.annotation(stem), 960, 540)
+        res = calibrate(obs, loose)
+        if not res.ok:
+            continue
+        data = FrameData.build(obs, model)
+        prob = CameraProblem(res.camera, data, RefineParams(alpha=loose.alpha, refine_focal=True, refine_k1=True,
+                                                            **pin_settings(loose, 960, obs)))
+        before = prob.beyond(res.camera, 4.0)
+        tight = prob.tighten(res.camera, 4.0)
+        after = prob.beyond(tight, 4.0)
+        assert len(after) <= len(before), stem
+        if tight is res.camera:
+            assert after == before
+            continue
+        fewer += 1
+        gains.append(evaluate_frame(tight, ds.annotation(stem)).accuracy(5.0)
+                     - evaluate_frame(res.camera, ds.annotation(stem)).accuracy(5.0))
+    assert fewer >= 5, fewer
+    assert np.mean(gains) > 0 and sum(g > 0 for g in gains) > sum(g < 0 for g in gains)
