@@ -227,7 +227,7 @@ def test_detection_probabilities_outside_0_1_are_refused(p):
     ({"alpha": 7.5}, "'alpha'"), ({"refine_k1": "maybe"}, "'refine_k1' must be true or false"),
     ({"no_such": 1}, "unknown calibration setting"), ({"final_loss": "l0"}, "'final_loss'"),
     ({"ransac_thresholds": [5, "x"]}, "'ransac_thresholds'"), ({"min_points": 2.5}, "'min_points'"),
-    ({"max_rms": float("nan")}, "'max_rms'"),
+    ({"max_rms": float("nan")}, "'max_rms'"), ({"class_tolerance_px": -1.0}, "'class_tolerance_px'"),
 ])
 def test_detector_settings_are_checked_by_name_type_and_range(settings, match):
     from pnlviz.pipeline.settings import check_settings
@@ -236,6 +236,7 @@ def test_detector_settings_are_checked_by_name_type_and_range(settings, match):
         check_settings(settings, "preds.json")
     shipped = json.loads((EXAMPLES_DIR.parent / "assets" / "models" / "light.json").read_text())
     assert check_settings(shipped.get("calibration", {}), "light.json") == shipped.get("calibration", {})
+    assert check_settings({"class_tolerance_px": 0.0}, "preds.json") == {"class_tolerance_px": 0.0}  # 0: off
 
 
 def test_a_bad_sidecar_is_one_line_in_calibrate_and_export(tmp_path, capsys):
