@@ -109,10 +109,9 @@ class CameraProblem:
         """``cam`` (a solution of this problem) with the classes that end beyond ``tolerance`` px
         pulled in: the rows of each such class weigh ``gain`` times more, the problem is solved
         again from there (at most ``TIGHTEN_ITERATIONS`` steps), up to ``rounds`` times (weights
-        compound while a class stays out). A
-        least-squares fit spreads its error over every point; the evaluator counts a class right
-        only when *all* its points are within the threshold, so a class 6 px off at one end is
-        lost while others sit at 1 px. Returns the camera that leaves the fewest classes beyond
+        compound while a class stays out). A least-squares fit spreads its error over every point;
+        the evaluator counts a class right only when *all* its points are within the threshold, so
+        a class 6 px off at one end is lost while others sit at 1 px. Returns the camera that leaves the fewest classes beyond
         ``tolerance``, keypoints counted too (``cam`` itself unless one leaves fewer)."""
         bad = self.beyond(cam, tolerance)
         best, n_best = cam, len(bad)
