@@ -207,8 +207,22 @@ class Problem:
     def residuals(self, state) -> np.ndarray:
         return self.evaluate(state)[0]
 
+    def class_rows(self) -> dict[str, np.ndarray]:
+        """The residual rows of each line and circle class: a line's perpendicular distances then
+        its overshoots (as many of each as it has points), a circle's distances."""
+        K, L = len(self.kp_xy), len(self.line_pts)
+        rows = {name: np.r_[2 * K + np.arange(s.start, s.stop), 2 * K + L + np.arange(s.start, s.stop)]
+                for name, s in self.line_slices.items()}
+        at = 2 * K + 2 * L
+        for name, _, pts in self.circle_items:
+            rows[name] = np.arange(at, at + len(pts))
+            at += len(pts)
+        return rows
+
     def class_distances(self, state) -> dict[str, np.ndarray]:
-        """Unweighted distances (px) of each line and circle class's observed points at ``state``."""
+        """Unweighted distances (px) of each line and circle class's observed points at ``state``
+        (rows as :meth:`class_rows` lays them out, read here in one pass: the vote calls this for
+        every candidate)."""
         r = self.residuals(state)
         start = 2 * len(self.kp_xy)
         n = len(self.line_pts)

@@ -80,18 +80,6 @@ class CameraProblem:
         """Unweighted distances (px) of each line/circle class's points at ``cam``."""
         return self.problem.class_distances(self.model.start(cam))
 
-    def class_rows(self) -> dict[str, np.ndarray]:
-        """The residual rows of each line and circle class (see :class:`pnlviz.calib.problem.Problem`)."""
-        P = self.problem
-        K, L = len(P.kp_xy), len(P.line_pts)
-        rows = {name: np.r_[2 * K + np.arange(s.start, s.stop), 2 * K + L + np.arange(s.start, s.stop)]
-                for name, s in P.line_slices.items()}
-        at = 2 * K + 2 * L
-        for name, _, pts in P.circle_items:
-            rows[name] = np.arange(at, at + len(pts))
-            at += len(pts)
-        return rows
-
     def beyond(self, cam: Camera, tolerance: float) -> set[str]:
         """What ``cam`` leaves farther than ``tolerance`` px: the line and circle classes with a
         point that far from their projection, and the keypoints (``"kp <id>"``) that far from
@@ -111,11 +99,12 @@ class CameraProblem:
         again from there (at most ``TIGHTEN_ITERATIONS`` steps), up to ``rounds`` times (weights
         compound while a class stays out). A least-squares fit spreads its error over every point;
         the evaluator counts a class right only when *all* its points are within the threshold, so
-        a class 6 px off at one end is lost while others sit at 1 px. Returns the camera that leaves the fewest classes beyond
-        ``tolerance``, keypoints counted too (``cam`` itself unless one leaves fewer)."""
+        a class 6 px off at one end is lost while others sit at 1 px. Returns the camera that
+        leaves the fewest classes beyond ``tolerance``, keypoints counted too (``cam`` itself
+        unless one leaves fewer)."""
         bad = self.beyond(cam, tolerance)
         best, n_best = cam, len(bad)
-        rows, w = self.class_rows(), np.ones(self.n_res)
+        rows, w = self.problem.class_rows(), np.ones(self.n_res)
 
         def weighted(state, jac: bool = False):
             r, J = self.problem.evaluate(state, jac)
