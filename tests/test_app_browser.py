@@ -546,6 +546,11 @@ def test_the_title_stays_in_view_no_webgl_notice_covers_the_image_and_a_slow_act
     assert box is not None and 0 <= box["y"] < 120, box  # still at the top of the panel
     # an action slower than 150 ms shows the busy cue over the image until it is done
     session = tab(app)
+    said: list[bool] = []  # what the server asked the page to show from here on
+    tell = session.queue.busy
+    assert tell is not None
+    session.queue.busy = lambda busy: (said.append(busy), tell(busy))[-1]
+    before = page.evaluate("() => window.__pnlvizBridge.busyShown || 0")
     session.queue.enqueue(lambda: time.sleep(1.5))
     cue = page.locator("#pnlviz-busy-cue")
     cue.wait_for(state="visible", timeout=5000)
@@ -553,10 +558,14 @@ def test_the_title_stays_in_view_no_webgl_notice_covers_the_image_and_a_slow_act
     at = cue.bounding_box()
     assert canvas["x"] <= at["x"] < canvas["x"] + 100 and canvas["y"] <= at["y"] < canvas["y"] + 100
     cue.wait_for(state="hidden", timeout=10000)
-    session.queue.enqueue(lambda: time.sleep(0.01))  # a quick one: no cue
+    session.queue.enqueue(lambda: time.sleep(0.01))  # a quick one: no cue of its own
     session.queue.flush()
     time.sleep(0.5)
-    assert page.evaluate("() => window.__pnlvizBridge.busyShown") == 1
+    shown = page.evaluate("() => window.__pnlvizBridge.busyShown") - before
+    # the page shows the slow action's cue and none the server did not ask for (on a loaded machine
+    # another action of the tab can cross 150 ms too: the server then asks, and the page may show it)
+    assert said[:1] == [True] and 1 <= shown <= said.count(True), (shown, said)
+    assert said.count(True) == said.count(False) and not cue.is_visible()  # every cue ended
     page.close()
 
 
