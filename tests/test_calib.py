@@ -349,7 +349,7 @@ def test_border_points_aimed_inside_score_higher_and_residuals_stay_as_observed(
     border), more frames gain than lose; the residuals the result reports are against the points
     as observed, not the aimed ones."""
     from pnlviz.calib.calibrate import line_residuals
-    from pnlviz.calib.problem import FrameData
+    from pnlviz.calib.problem import FrameData, aim_inside
     from pnlviz.data import open_dataset
     from pnlviz.metrics.soccernet import evaluate_frame
 
@@ -359,9 +359,7 @@ def test_border_points_aimed_inside_score_higher_and_residuals_stay_as_observed(
     gains, frames = [], 0
     for stem in ds.stems:
         obs, _ = observations_from_annotation(ds.annotation(stem), 960, 540)
-        on_border = [p for pts in obs.lines.values() for p in pts
-                     if min(p[0], p[1], 959 - p[0], 539 - p[1]) <= 1.5]
-        if not on_border:
+        if not any((aim_inside(pts, 960, 540, 2.0) != pts).any() for pts in obs.lines.values()):
             continue
         frames += 1
         if frames % 4:

@@ -299,10 +299,9 @@ class CameraKind:
     @classmethod
     def of(cls, obs: Observations, params: CalibParams, model: FieldModel | None = None) -> "CameraKind":
         """The camera kind of a frame's observations, built as ``params`` say."""
-        model = model or load_field_model()
+        observed = FrameData.build(obs, model or load_field_model())
         aim = params.px(params.border_aim_px, obs.width)
-        observed = FrameData.build(obs, model)
-        return cls(FrameData.build(obs, model, aim) if aim > 0 else observed, params, observed)
+        return cls(observed.aimed_inside(aim) if aim > 0 else observed, params, observed)
 
     @staticmethod
     def new_result() -> CalibrationResult:

@@ -60,15 +60,11 @@ class FrameData:
     _layouts: dict = field(default_factory=dict)
 
     @classmethod
-    def build(cls, obs: Observations, model: FieldModel, border_aim_px: float = 0.0) -> FrameData:
-        """``border_aim_px``: the line points on the image border are aimed this far inside
-        (:func:`aim_inside`; 0: as observed)."""
+    def build(cls, obs: Observations, model: FieldModel) -> FrameData:
         names = list(obs.lines)
         ends_a, ends_b, pts = [], [], []
         for name in names:
             seg, p = model.lines[name], np.asarray(obs.lines[name], float).reshape(-1, 2)
-            if border_aim_px > 0:
-                p = aim_inside(p, obs.width, obs.height, border_aim_px)
             ends_a.append(np.repeat(seg.start[None], len(p), 0))
             ends_b.append(np.repeat(seg.end[None], len(p), 0))
             pts.append(p)
@@ -77,6 +73,13 @@ class FrameData:
         bounds = np.cumsum([0] + [len(p) for p in pts])
         rows = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
         return cls(obs, names, stack(ends_a, 3), stack(ends_b, 3), stack(pts, 2), rows, ground, model)
+
+    def aimed_inside(self, inset: float) -> FrameData:
+        """This frame with its line points on the image border aimed ``inset`` px inside
+        (:func:`aim_inside`), a new FrameData sharing everything else (its own caches)."""
+        return FrameData(self.obs, self.line_names, self.line_a, self.line_b,
+                         aim_inside(self.line_pts, self.obs.width, self.obs.height, inset), self.line_rows,
+                         self.line_ground, self.model)
 
     def layout(self, lift, keypoints=None, lines=None, circles=None, ground_only: bool = False,
                circle_step: float = 0.5) -> Layout:
