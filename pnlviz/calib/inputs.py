@@ -57,7 +57,8 @@ def observations_from_predictions(pred: Detections, width: int, height: int, *, 
     ``width`` x ``height`` image (x_px = x * W). Keypoints use PnLCalib's positions (id 52 at
     x = 9.0, where its networks were trained). Lines are the two detected extremities of each
     line whose both ends pass ``line_threshold``; the intersections of detected line pairs add
-    auxiliary keypoints where the network found none (the paper's augmentation)."""
+    auxiliary keypoints where the network found none (the paper's augmentation; marked
+    ``kp_derived``)."""
     model = model or load_field_model()
     kps = {}
     for kid, (x, y, p) in pred.keypoints.items():
@@ -73,14 +74,16 @@ def observations_from_predictions(pred: Detections, width: int, height: int, *, 
         kps.update(aux)
         sets.update({k: "Kpe" for k in aux})
     obs = Observations.from_keypoints(width, height, kps, sets, lines=lines, pnlcalib_positions=True, model=model)
+    obs.kp_derived = np.isin(obs.kp_ids, list(aux)) if auxiliary else np.zeros(obs.n_keypoints, bool)
     return obs
 
 
 def observations_from_annotation(annotation: Mapping[str, np.ndarray], width: int, height: int, *,
                                  label_params=None, model: FieldModel | None = None):
     """Observations from a SoccerNet annotation (normalised, x_px = x (W - 1)): the keypoint
-    labels of every set (:func:`pnlviz.labels.keypoints_from_annotation`) and the annotated points
-    of every straight class and circle. Returns ``(observations, labels)``."""
+    labels of every set (:func:`pnlviz.labels.keypoints_from_annotation`, all ``kp_derived``: they
+    are computed from the lines) and the annotated points of every straight class and circle.
+    Returns ``(observations, labels)``."""
     from pnlviz.labels import LabelParams, keypoints_from_annotation
 
     model = model or load_field_model()
@@ -91,4 +94,5 @@ def observations_from_annotation(annotation: Mapping[str, np.ndarray], width: in
     kps = {k: (lab.x, lab.y) for k, lab in labels.keypoints.items()}
     sets = {k: lab.set for k, lab in labels.keypoints.items()}
     obs = Observations.from_keypoints(width, height, kps, sets, lines=lines, circles=circles, model=model)
+    obs.kp_derived = np.ones(obs.n_keypoints, bool)  # every label is computed from the annotated lines
     return obs, labels

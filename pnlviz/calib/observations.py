@@ -24,6 +24,11 @@ class Observations:
     * ``kp_pinned`` (N,) True for keypoints a hand placed or moved (pinned: the camera is fitted
       to them above the others and never drops them; see :mod:`pnlviz.calib.pins`). Empty means
       none.
+    * ``kp_derived`` (N,) True for keypoints computed from this frame's own line and circle
+      observations (the keypoint labels of an annotation, the intersections of detected lines):
+      they repeat what those observations say, so the final refinement leaves them out where the
+      lines and circles alone determine the camera (``CalibParams.lines_alone_classes``). Empty
+      means none (detected and hand-placed keypoints are measurements of their own).
 
     Shapes are checked when made: a keypoint array of another length than ``kp_ids`` (a pin mask
     of the wrong length would silently mean "no pins") is a ValueError naming it.
@@ -39,6 +44,7 @@ class Observations:
     lines: dict[str, np.ndarray] = field(default_factory=dict)
     circles: dict[str, np.ndarray] = field(default_factory=dict)
     kp_pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    kp_derived: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     def __post_init__(self) -> None:
         n = len(np.asarray(self.kp_ids))
@@ -47,9 +53,10 @@ class Observations:
             got = np.shape(getattr(self, name))
             if got != shape and not (n == 0 and np.size(getattr(self, name)) == 0):
                 raise ValueError(f"Observations.{name}: expected shape {shape} for {n} keypoints, got {got}")
-        pinned = np.shape(self.kp_pinned)
-        if pinned not in ((n,), (0,)):
-            raise ValueError(f"Observations.kp_pinned: expected ({n},) or empty, got {pinned}")
+        for name in ("kp_pinned", "kp_derived"):
+            got = np.shape(getattr(self, name))
+            if got not in ((n,), (0,)):
+                raise ValueError(f"Observations.{name}: expected ({n},) or empty, got {got}")
 
     @classmethod
     def from_keypoints(cls, width: int, height: int, keypoints: dict[int, tuple[float, float]],
@@ -80,7 +87,14 @@ class Observations:
         pinned = np.asarray(self.kp_pinned, bool)
         return pinned if pinned.shape == (self.n_keypoints,) else np.zeros(self.n_keypoints, bool)
 
+    @property
+    def derived(self) -> np.ndarray:
+        """Mask (N,) of the keypoints computed from this frame's lines and circles (never a pinned one)."""
+        derived = np.asarray(self.kp_derived, bool)
+        return (derived & ~self.pins) if derived.shape == (self.n_keypoints,) else np.zeros(self.n_keypoints, bool)
+
     def subset(self, mask: np.ndarray) -> "Observations":
         """The same observations with only the keypoints in ``mask``."""
         return Observations(self.width, self.height, self.kp_ids[mask], self.kp_xy[mask], self.kp_xyz[mask],
-                            self.kp_sets[mask], self.kp_main[mask], self.lines, self.circles, self.pins[mask])
+                            self.kp_sets[mask], self.kp_main[mask], self.lines, self.circles, self.pins[mask],
+                            self.derived[mask])

@@ -9,7 +9,8 @@
    ``sum(min(r^2, tau^2))``; the best ``refine_top`` are refined on their inliers and scored
    again; the lowest score wins, ``full`` on ties;
 3. **PnL**: lines, circles and keypoints gated by the voted model, then the model refined against
-   ``alpha * lines + (1 - alpha) * points`` (:mod:`pnlviz.calib.problem`, the one solver);
+   ``alpha * lines + (1 - alpha) * points`` (:mod:`pnlviz.calib.problem`, the one solver); gated
+   again at the refined model and refined again while that lets other classes through;
 4. the evidence (residuals before and after, the candidates) and the verdict: a model whose
    inlier keypoints are farther than ``max_rms`` (RMS) is a failure.
 
@@ -27,6 +28,7 @@ Without pins every step is what it was.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
@@ -74,6 +76,9 @@ class FrameResult:
     pinned: list[int] = field(default_factory=list)  #: ids of the pinned (hand-placed) keypoints
     flagged: dict[int, float] = field(default_factory=dict)  #: pinned ids the camera cannot agree with -> residual px
     pin_condition: str | None = None  #: the :class:`pnlviz.calib.pins.PinCondition` that failed, if one did
+    #: ids of the derived keypoints the final fit left out (all of them, when its lines and circles
+    #: fix the model alone: :func:`lines_alone`); the verdict judges the other inliers if any
+    lines_alone: list[int] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -198,22 +203,54 @@ def vote(cands: list[Candidate], kind: Kind, params) -> Candidate | None:
     return best(cands)
 
 
-def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
-               point_errors: dict[int, float]) -> tuple[Any, list[str]]:
-    """Step 3: a line or circle joins when all its observed points are within ``line_gate_px``
-    of its image by ``estimate`` (``line_errors``: their farthest), a keypoint when within
-    ``point_gate_px``; then ``kind.pnl_solve``. Returns the estimate and the classes used (the
-    estimate unchanged and none when the solve had too little to go on or failed)."""
-    obs = kind.data.obs
+def _gated(obs: Observations, params, line_errors: Mapping[str, float],
+           point_errors: Mapping[int, float]) -> tuple[np.ndarray, list[str], list[str]]:
+    """The keypoints (mask), lines and circles that pass PnL's gates at these residuals: a line
+    or circle when all its observed points are within ``line_gate_px`` (``line_errors``: their
+    farthest), a keypoint when within ``point_gate_px``; pinned keypoints always."""
     gate_l = params.px(params.line_gate_px, obs.width)
     gate_p = params.px(params.point_gate_px, obs.width)
     lines = [k for k in obs.lines if line_errors.get(k, np.inf) < gate_l]
     circles = [k for k in obs.circles if line_errors.get(k, np.inf) < gate_l]
     kp_ok = (np.array([point_errors.get(int(i), np.inf) for i in obs.kp_ids]).reshape(-1) < gate_p) | obs.pins
-    new = kind.pnl_solve(estimate, kp_ok, lines, circles)
+    return kp_ok, lines, circles
+
+
+def lines_alone(obs: Observations, params, keypoints: np.ndarray, lines: list[str], circles: list[str]) -> np.ndarray:
+    """The keypoints PnL fits, of those that passed the gates: without the derived ones
+    (``Observations.kp_derived``, computed from the frame's own lines) when at least
+    ``params.lines_alone_classes`` line and circle classes are in it: they repeat those classes
+    (computed from them as straight lines under a pinhole, where the fit has the lens), and the
+    classes alone fix the model's eight parameters."""
+    if params.lines_alone_classes and len(lines) + len(circles) >= params.lines_alone_classes:
+        return keypoints & ~obs.derived
+    return keypoints
+
+
+def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
+               point_errors: dict[int, float]) -> tuple[Any, list[str], np.ndarray]:
+    """Step 3: the lines, circles and keypoints that pass the gates at ``estimate`` (:func:`_gated`,
+    :func:`lines_alone`), then ``kind.pnl_solve``. The voted estimate can be several pixels off,
+    so a class it gates out may be within the gate of the refined one: the gates are applied
+    again at the refined estimate and, when what passes them changed, solved again from there, up
+    to ``params.regate_rounds`` times. Returns the estimate, the classes used and the mask of the
+    derived keypoints the final fit left out (:func:`lines_alone`: all of them, or none; the
+    estimate unchanged, no class and none left out when the solve had too little to go on or
+    failed)."""
+    obs = kind.data.obs
+    kp_ok, lines, circles = _gated(obs, params, line_errors, point_errors)
+    new = kind.pnl_solve(estimate, lines_alone(obs, params, kp_ok, lines, circles), lines, circles)
     if new is None:
-        return estimate, []
-    return new, sorted(lines + circles)
+        return estimate, [], np.zeros(obs.n_keypoints, bool)
+    for _ in range(params.regate_rounds):
+        again = _gated(obs, params, kind.class_errors(new), kind.point_errors(new))
+        if np.array_equal(again[0], kp_ok) and again[1:] == (lines, circles):
+            break
+        newer = kind.pnl_solve(new, lines_alone(obs, params, *again), again[1], again[2])
+        if newer is None:
+            break
+        new, (kp_ok, lines, circles) = newer, again
+    return new, sorted(lines + circles), obs.derived & ~lines_alone(obs, params, obs.derived, lines, circles)
 
 
 def calibrate_with(kind: Kind[ResultT], params) -> ResultT:
@@ -275,8 +312,9 @@ def _finish(result: FrameResult, estimate, kind: Kind, params, solve: bool = Fal
     result.point_residuals_initial = kind.point_errors(estimate)
     result.line_residuals_initial = kind.class_errors(estimate)
     if solve or (params.pnl and (obs.lines or obs.circles)):
-        estimate, result.pnl_lines = pnl_refine(estimate, kind, params, result.line_residuals_initial,
-                                                result.point_residuals_initial)
+        estimate, result.pnl_lines, left_out = pnl_refine(estimate, kind, params, result.line_residuals_initial,
+                                                          result.point_residuals_initial)
+        result.lines_alone = [int(i) for i in obs.kp_ids[left_out]]
     result.estimate = estimate
     result.point_residuals = kind.point_errors(estimate)
     result.line_residuals = kind.class_errors(estimate)
@@ -288,9 +326,13 @@ def _finish(result: FrameResult, estimate, kind: Kind, params, solve: bool = Fal
 
 
 def _verdict(result: FrameResult, obs: Observations, params) -> None:
-    """Step 4: no estimate when no inlier keypoint has a residual, or their RMS is above ``max_rms``."""
-    inlier_residuals = [result.point_residuals[int(i)] for i in obs.kp_ids[np.isin(obs.kp_ids, result.inliers)]
-                        if int(i) in result.point_residuals and int(i) not in result.flagged]
+    """Step 4: no estimate when no inlier keypoint has a residual, or their RMS is above ``max_rms``.
+    The inliers judged are those that are not derived keypoints the final fit left out
+    (:func:`lines_alone`: they are not measurements) when any remain, else all of them."""
+    inlier_ids = [int(i) for i in obs.kp_ids[np.isin(obs.kp_ids, result.inliers)]
+                  if int(i) in result.point_residuals and int(i) not in result.flagged]
+    fitted = [i for i in inlier_ids if i not in result.lines_alone]
+    inlier_residuals = [result.point_residuals[i] for i in (fitted or inlier_ids)]
     if not inlier_residuals:
         result.estimate, result.failure_code = None, "no_inliers"
         result.failure = "no keypoint agrees with the camera (no inliers)"

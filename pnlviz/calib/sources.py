@@ -35,7 +35,8 @@ def mirrored(det: Observations, model: FieldModel) -> Observations:
     mirror = mirror_ids(model)
     ids = np.array([mirror.get(int(i), int(i)) for i in det.kp_ids], int)
     return Observations(det.width, det.height, ids, det.kp_xy, model.keypoint_xyz(ids, pnlcalib=True), det.kp_sets,
-                        det.kp_main, {MIRROR[k]: v for k, v in det.lines.items()}, det.circles)
+                        det.kp_main, {MIRROR[k]: v for k, v in det.lines.items()}, det.circles, det.pins,
+                        det.derived)
 
 
 def aligned_detections(ann: Observations, det: Observations, model: FieldModel) -> Observations:
@@ -65,7 +66,7 @@ def merge_observations(ann: Observations, det: Observations, model: FieldModel) 
                         np.vstack([ann.kp_xy, det.kp_xy[keep]]), np.vstack([ann.kp_xyz, det.kp_xyz[keep]]),
                         np.concatenate([ann.kp_sets, det.kp_sets[keep]]),
                         np.concatenate([ann.kp_main, det.kp_main[keep]]), {**det.lines, **ann.lines}, ann.circles,
-                        np.concatenate([ann.pins, det.pins[keep]]))
+                        np.concatenate([ann.pins, det.pins[keep]]), np.concatenate([ann.derived, det.derived[keep]]))
 
 
 def apply_keypoint_edits(obs: Observations, edits: Mapping[str, KeypointEdit], model: FieldModel) -> Observations:
@@ -73,12 +74,12 @@ def apply_keypoint_edits(obs: Observations, edits: Mapping[str, KeypointEdit], m
     the catalogue position; a hand put it there, so it is pinned), ``{"id": None}`` removes it
     (not visible)."""
     ids, xy = list(obs.kp_ids), [tuple(p) for p in obs.kp_xy]
-    sets, main, pinned = list(obs.kp_sets), list(obs.kp_main), list(obs.pins)
+    sets, main, pinned, derived = list(obs.kp_sets), list(obs.kp_main), list(obs.pins), list(obs.derived)
     for key, value in edits.items():
         kid = int(key)
         if kid in ids:
             i = ids.index(kid)
-            for lst in (ids, xy, sets, main, pinned):
+            for lst in (ids, xy, sets, main, pinned, derived):
                 lst.pop(i)
         if value is not None:
             ids.append(kid)
@@ -87,7 +88,8 @@ def apply_keypoint_edits(obs: Observations, edits: Mapping[str, KeypointEdit], m
             sets.append(group)
             main.append(group == "Kp")
             pinned.append(True)
+            derived.append(False)
     ids_arr = np.array(ids, int)
     return Observations(obs.width, obs.height, ids_arr, np.array(xy, float).reshape(-1, 2), model.keypoint_xyz(ids_arr),
                         np.array(sets, dtype="<U3"), np.array(main, bool), obs.lines, obs.circles,
-                        np.array(pinned, bool))
+                        np.array(pinned, bool), np.array(derived, bool))
