@@ -142,3 +142,40 @@ def test_border_points_aimed_inside_raise_both_development_sets(sn22, wc14):
     default = CalibParams()
     for gt, observations in ((sn22[0], sn22[2]), (wc14[0], wc14[1])):
         assert _fs(gt, observations, default) > _fs(gt, observations, replace(default, border_aim_px=0.0)), gt
+
+
+def test_the_second_gate_adds_what_the_refined_model_lets_through_and_drops_nothing():
+    """``pnl_refine`` with a model whose first solve moves one line out of the gate and brings
+    another in: the second solve keeps the first line and adds the second; a third round is not
+    run when nothing changes, and the rounds stop at ``regate_rounds``."""
+    from types import SimpleNamespace
+
+    from pnlviz.calib.pipeline import pnl_refine
+
+    lines = {name: np.zeros((2, 2)) for name in ("Side line top", "Middle line", "Side line left")}
+    obs = Observations(960, 540, np.array([1, 2]), np.zeros((2, 2)), np.zeros((2, 3)), np.array(["Kp", "Kp"]),
+                       np.ones(2, bool), lines)
+    calls = []
+    errors = {0: {"Side line top": 3.0, "Middle line": 3.0, "Side line left": 50.0},
+              1: {"Side line top": 3.0, "Middle line": 40.0, "Side line left": 5.0},  # after the first solve
+              2: {"Side line top": 3.0, "Middle line": 40.0, "Side line left": 5.0}}
+
+    class Kind:
+        data = SimpleNamespace(obs=obs)
+
+        def pnl_solve(self, estimate, keypoints, lines, circles):
+            calls.append((estimate, list(lines)))
+            return estimate + 1
+
+        def class_errors(self, estimate):
+            return errors[estimate]
+
+        def point_errors(self, estimate):
+            return {1: 1.0, 2: 60.0 if estimate else 1.0}
+
+    new, used, left_out = pnl_refine(0, Kind(), CalibParams(), errors[0], Kind().point_errors(0))
+    assert calls == [(0, ["Side line top", "Middle line"]), (1, ["Side line top", "Middle line", "Side line left"])]
+    assert new == 2 and used == sorted(lines) and not left_out.any()
+    calls.clear()
+    pnl_refine(0, Kind(), replace(CalibParams(), regate_rounds=0), errors[0], Kind().point_errors(0))
+    assert len(calls) == 1

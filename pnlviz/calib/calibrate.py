@@ -101,8 +101,8 @@ class CalibParams:
     #: from annotations 0.918 -> 0.928, WC14 from published detections 0.922 -> 0.940 (3: SN22 CR
     #: 0.990; 5: WC14 0.938)
     lines_alone_classes: int = 4
-    #: after PnL, the gates are applied again at the refined camera and, when the classes and
-    #: keypoints that pass them changed, PnL runs again from there, up to this many times
+    #: after PnL, the gates are applied again at the refined camera and, when they let more classes
+    #: or keypoints through, PnL runs again from there with them, up to this many times
     #: (:func:`pnlviz.calib.pipeline.pnl_refine`). Alone: SN22 0.918 -> 0.923, WC14 0.922 -> 0.922;
     #: with the one above: SN22 0.933, WC14 0.939
     regate_rounds: int = 2

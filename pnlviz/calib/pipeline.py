@@ -10,7 +10,7 @@
    again; the lowest score wins, ``full`` on ties;
 3. **PnL**: lines, circles and keypoints gated by the voted model, then the model refined against
    ``alpha * lines + (1 - alpha) * points`` (:mod:`pnlviz.calib.problem`, the one solver); gated
-   again at the refined model and refined again while that lets other classes through;
+   again at the refined model and refined again while that lets more through;
 4. the evidence (residuals before and after, the candidates) and the verdict: a model whose
    inlier keypoints are farther than ``max_rms`` (RMS) is a failure.
 
@@ -232,8 +232,10 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
     """Step 3: the lines, circles and keypoints that pass the gates at ``estimate`` (:func:`_gated`,
     :func:`lines_alone`), then ``kind.pnl_solve``. The voted estimate can be several pixels off,
     so a class it gates out may be within the gate of the refined one: the gates are applied
-    again at the refined estimate and, when what passes them changed, solved again from there, up
-    to ``params.regate_rounds`` times. Returns the estimate, the classes used and the mask of the
+    again at the refined estimate and, when they let something more through, solved again from
+    there with it, up to ``params.regate_rounds`` times. Nothing that passed is dropped (on a frame
+    with four keypoints and two lines, dropping one that the refined model moved away from let the
+    next solve drift: three synthetic frames lost their camera). Returns the estimate, the classes used and the mask of the
     derived keypoints the final fit left out (:func:`lines_alone`: all of them, or none; the
     estimate unchanged, no class and none left out when the solve had too little to go on or
     failed)."""
@@ -243,7 +245,9 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
     if new is None:
         return estimate, [], np.zeros(obs.n_keypoints, bool)
     for _ in range(params.regate_rounds):
-        again = _gated(obs, params, kind.class_errors(new), kind.point_errors(new))
+        gated = _gated(obs, params, kind.class_errors(new), kind.point_errors(new))
+        again = (kp_ok | gated[0], [k for k in obs.lines if k in lines or k in gated[1]],
+                 [k for k in obs.circles if k in circles or k in gated[2]])
         if np.array_equal(again[0], kp_ok) and again[1:] == (lines, circles):
             break
         newer = kind.pnl_solve(new, lines_alone(obs, params, *again), again[1], again[2])
