@@ -284,6 +284,12 @@ def test_calibrate_cli_writes_an_evaluator_ready_zip_and_a_report(tmp_path):
     rows = [json.loads(line) for line in report.read_text().splitlines()]
     assert len(rows) == 32 and len(names) >= 30
     assert all("point_residuals" in r for r in rows if r["stem"] in {n[7:-5] for n in names})
+    # the sample's keypoints come from its annotations, derived from its lines: where a frame's
+    # PnL holds 4 classes or more the report lists them as left out of the fit
+    calibrated = [r for r in rows if r["stem"] in {n[7:-5] for n in names}]
+    assert all((set(r["lines_alone"]) <= set(map(int, r["point_residuals"]))) for r in calibrated)
+    assert any(r["lines_alone"] for r in calibrated if len(r["pnl_lines"]) >= 4)
+    assert not any(r["lines_alone"] for r in calibrated if len(r["pnl_lines"]) < 4)
     # synthetic frames: the cameras agree with the ground truth
     from pnlviz.metrics.soccernet import evaluate_dataset
 

@@ -54,7 +54,9 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         lines.append(view.shot_note)
     if res.subset != SHOT_SUBSET:
         lines.append(f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, "
-                     f"{len(res.inliers)} inliers; PnL set: {len(res.pnl_lines)} lines/circles")
+                     f"{len(res.inliers)} inliers; PnL set: {len(res.pnl_lines)} lines/circles"
+                     + (f", fitted without the {len(res.lines_alone)} keypoints derived from them"
+                        if res.lines_alone else ""))
     lines += pin_lines(res)
     if view.jac:
         lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))
