@@ -69,7 +69,7 @@ class HomographyParams:
     alpha: float = DEFAULT_ALPHA  #: PnL weight of lines vs points (paper: 0.6)
     line_gate_px: float = 20.0  #: a line/circle joins PnL when all its points are this close to its mapping
     point_gate_px: float = 20.0  #: a keypoint joins PnL when this close to its initial mapping
-    regate_rounds: int = 2  #: PnL again while the gates at its result let other classes through (as the camera's)
+    regate_rounds: int = 2  #: PnL again while the gates at its result let more through (as the camera's)
     lines_alone_classes: int = 4  #: PnL without the derived keypoints from this many classes on (as the camera's)
     circles: bool = True  #: ground circles take part in voting and PnL
     circle_step: float = 0.25  #: metres between samples of mapped circles

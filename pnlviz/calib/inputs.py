@@ -4,6 +4,7 @@ line annotations (through the keypoint labels of :mod:`pnlviz.labels`)."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Set
+from dataclasses import replace
 from typing import Protocol
 
 import numpy as np
@@ -69,13 +70,12 @@ def observations_from_predictions(pred: Detections, width: int, height: int, *, 
         if p1 >= line_threshold and p2 >= line_threshold and (x1, y1) != (x2, y2):
             lines[LINE_ID_TO_CLASS[int(lid)]] = np.array([[x1 * width, y1 * height], [x2 * width, y2 * height]])
     sets = {k: model.keypoints[k].group for k in kps}
-    if auxiliary:
-        aux = auxiliary_keypoints(lines, width, height, model, skip=set(kps))
+    aux = auxiliary_keypoints(lines, width, height, model, skip=set(kps)) if auxiliary else {}
+    if aux:
         kps.update(aux)
         sets.update({k: "Kpe" for k in aux})
     obs = Observations.from_keypoints(width, height, kps, sets, lines=lines, pnlcalib_positions=True, model=model)
-    obs.kp_derived = np.isin(obs.kp_ids, list(aux)) if auxiliary else np.zeros(obs.n_keypoints, bool)
-    return obs
+    return replace(obs, kp_derived=np.isin(obs.kp_ids, list(aux)))
 
 
 def observations_from_annotation(annotation: Mapping[str, np.ndarray], width: int, height: int, *,
@@ -94,5 +94,4 @@ def observations_from_annotation(annotation: Mapping[str, np.ndarray], width: in
     kps = {k: (lab.x, lab.y) for k, lab in labels.keypoints.items()}
     sets = {k: lab.set for k, lab in labels.keypoints.items()}
     obs = Observations.from_keypoints(width, height, kps, sets, lines=lines, circles=circles, model=model)
-    obs.kp_derived = np.ones(obs.n_keypoints, bool)  # every label is computed from the annotated lines
-    return obs, labels
+    return replace(obs, kp_derived=np.ones(obs.n_keypoints, bool)), labels  # every label comes from the lines

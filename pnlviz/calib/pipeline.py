@@ -235,10 +235,11 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
     again at the refined estimate and, when they let something more through, solved again from
     there with it, up to ``params.regate_rounds`` times. Nothing that passed is dropped (on a frame
     with four keypoints and two lines, dropping one that the refined model moved away from let the
-    next solve drift: three synthetic frames lost their camera). Returns the estimate, the classes used and the mask of the
-    derived keypoints the final fit left out (:func:`lines_alone`: all of them, or none; the
-    estimate unchanged, no class and none left out when the solve had too little to go on or
-    failed)."""
+    next solve drift: three synthetic frames lost their camera).
+
+    Returns the estimate, the classes used and the mask of the derived keypoints the final fit
+    left out (:func:`lines_alone`: all of them, or none; the estimate unchanged, no class and none
+    left out when the solve had too little to go on or failed)."""
     obs = kind.data.obs
     kp_ok, lines, circles = _gated(obs, params, line_errors, point_errors)
     new = kind.pnl_solve(estimate, lines_alone(obs, params, kp_ok, lines, circles), lines, circles)
