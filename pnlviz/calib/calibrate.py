@@ -83,17 +83,6 @@ class CalibParams:
     alpha: float = DEFAULT_ALPHA  #: PnL weight of lines vs points (paper: 0.6)
     line_gate_px: float = 20.0  #: a line/circle joins PnL when all its points are this close to its projection
     point_gate_px: float = 20.0  #: a keypoint joins PnL when this close to its initial projection
-    refine_focal: bool = True  #: PnL refines the focal length with the pose (the paper keeps K fixed)
-    refine_k1: bool = True  #: PnL refines radial distortion k1 too (+3 JaC@5 on SN22 and WC14)
-    final_loss: str = "linear"  #: loss of PnL with intrinsics; soft_l1 and a quartic loss scored lower on SN22
-    final_f_scale: float = 2.0  #: px where a robust final loss bends
-    #: after PnL with intrinsics, a class with a point farther than this (px) is pulled in
-    #: (:meth:`CameraProblem.tighten`; 0: off): SN22 from annotations FS@5 0.901 -> 0.913
-    class_tolerance_px: float = 4.0
-    #: observed line points on the image border are aimed this far (px) inside while fitting
-    #: (:func:`pnlviz.calib.problem.aim_inside`; 0: off; residuals are reported against the points
-    #: as observed): SN22 from annotations FS@5 0.913 -> 0.918, WC14 0.918 -> 0.922
-    border_aim_px: float = 2.0
     #: a PnL holding at least this many line and circle classes (each fixes two of the camera's
     #: eight parameters at least) leaves out the keypoints derived from them
     #: (``Observations.kp_derived``: they repeat the lines, computed from them as straight lines
@@ -106,6 +95,17 @@ class CalibParams:
     #: (:func:`pnlviz.calib.pipeline.pnl_refine`). Alone: SN22 0.918 -> 0.923, WC14 0.922 -> 0.922;
     #: with the one above: SN22 0.933, WC14 0.939
     regate_rounds: int = 2
+    refine_focal: bool = True  #: PnL refines the focal length with the pose (the paper keeps K fixed)
+    refine_k1: bool = True  #: PnL refines radial distortion k1 too (+3 JaC@5 on SN22 and WC14)
+    final_loss: str = "linear"  #: loss of PnL with intrinsics; soft_l1 and a quartic loss scored lower on SN22
+    final_f_scale: float = 2.0  #: px where a robust final loss bends
+    #: after PnL with intrinsics, a class with a point farther than this (px) is pulled in
+    #: (:meth:`CameraProblem.tighten`; 0: off): SN22 from annotations FS@5 0.901 -> 0.913
+    class_tolerance_px: float = 4.0
+    #: observed line points on the image border are aimed this far (px) inside while fitting
+    #: (:func:`pnlviz.calib.problem.aim_inside`; 0: off; residuals are reported against the points
+    #: as observed): SN22 from annotations FS@5 0.913 -> 0.918, WC14 0.918 -> 0.922
+    border_aim_px: float = 2.0
     prior_search: bool = True  #: with too few keypoints for a homography, start from broadcast priors
     refine_top: int = 3  #: candidates refined (focal + pose) after the first vote
     tol: float = 1e-6  #: refinements stop when the cost drops by less than this fraction
