@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, overload
 
@@ -86,7 +86,8 @@ class Calibration:
     failed, and then ``reason`` says why (``reason_code``: a short code); ``point_residuals``
     ``{id: px}`` and ``line_residuals`` ``{class: px}`` (its farthest point) under the camera;
     ``inliers``: the keypoint ids the voted camera agreed with; ``pnl_lines``: the lines and circles
-    the PnL refinement used.
+    the PnL refinement used; ``lines_alone``: the keypoints derived from the lines (not given) that
+    it left out, its lines and circles fixing the camera alone.
 
     >>> import pnlviz
     >>> lines = {"Side line top": [(0, 100), (960, 120)], "Middle line": [(470, 100), (440, 540)]}
@@ -102,6 +103,7 @@ class Calibration:
     line_residuals: dict[str, float] = field(default_factory=dict)
     inliers: tuple[int, ...] = ()
     pnl_lines: tuple[str, ...] = ()
+    lines_alone: tuple[int, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -217,7 +219,8 @@ def calibrate(keypoints: Mapping[int, Sequence[float]] | None = None,
     obs = _observations(keypoints, lines, w, h, model)
     res = calibrate_frame(obs, _params(pnl, alpha), model)
     return Calibration(res.camera, res.failure, res.failure_code, dict(res.point_residuals),
-                       dict(res.line_residuals), tuple(int(k) for k in res.inliers), tuple(res.pnl_lines))
+                       dict(res.line_residuals), tuple(int(k) for k in res.inliers), tuple(res.pnl_lines),
+                       tuple(res.lines_alone))
 
 
 def _params(pnl, alpha):
@@ -247,7 +250,9 @@ def _observations(keypoints, lines, w: int, h: int, model, where: str = ""):
     points.update(kps)  # a keypoint given wins over one derived from the lines
     for k in kps:
         sets.pop(k, None)
-    return Observations.from_keypoints(w, h, points, sets, lines=derived.lines, circles=derived.circles, model=model)
+    obs = Observations.from_keypoints(w, h, points, sets, lines=derived.lines, circles=derived.circles, model=model)
+    from_lines = [int(k) for k in derived.kp_ids if int(k) not in kps]
+    return replace(obs, kp_derived=np.isin(obs.kp_ids, from_lines))  # the given ones are measurements
 
 
 @dataclass(frozen=True)

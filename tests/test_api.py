@@ -73,6 +73,13 @@ def test_calibrate_from_lines_alone():
     res = pnlviz.calibrate(lines=model_lines, image_size=(1920, 1080))
     assert res.ok, res.reason
     assert np.linalg.norm(res.camera.C - cam.C) < 0.5
+    # the keypoints derived from those lines repeat them: with 4 classes or more they are left out
+    assert len(res.pnl_lines) >= 4 and res.lines_alone and set(res.lines_alone) <= set(res.point_residuals)
+    # a keypoint given is a measurement: never left out, while the others still are
+    given = res.lines_alone[0]
+    again = pnlviz.calibrate({given: cam.project(np.array([pnlviz.keypoints()[given]]))[0]}, model_lines,
+                             image_size=(1920, 1080))
+    assert again.ok and given not in again.lines_alone and set(again.lines_alone) == set(res.lines_alone) - {given}
 
 
 def test_a_frame_that_cannot_be_calibrated_says_why():
