@@ -216,15 +216,18 @@ def _gated(obs: Observations, params, line_errors: Mapping[str, float],
     return kp_ok, lines, circles
 
 
+def _classes_fix_it(params, lines: list[str], circles: list[str]) -> bool:
+    """At least ``params.lines_alone_classes`` line and circle classes (0: never)."""
+    return bool(params.lines_alone_classes) and len(lines) + len(circles) >= params.lines_alone_classes
+
+
 def lines_alone(obs: Observations, params, keypoints: np.ndarray, lines: list[str], circles: list[str]) -> np.ndarray:
     """The keypoints PnL fits, of those that passed the gates: without the derived ones
     (``Observations.kp_derived``, computed from the frame's own lines) when at least
     ``params.lines_alone_classes`` line and circle classes are in it: they repeat those classes
     (computed from them as straight lines under a pinhole, where the fit has the lens), and the
     classes alone fix the model's eight parameters."""
-    if params.lines_alone_classes and len(lines) + len(circles) >= params.lines_alone_classes:
-        return keypoints & ~obs.derived
-    return keypoints
+    return keypoints & ~obs.derived if _classes_fix_it(params, lines, circles) else keypoints
 
 
 def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
@@ -255,7 +258,8 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
         if newer is None:
             break
         new, (kp_ok, lines, circles) = newer, again
-    return new, sorted(lines + circles), obs.derived & ~lines_alone(obs, params, obs.derived, lines, circles)
+    left_out = obs.derived if _classes_fix_it(params, lines, circles) else np.zeros(obs.n_keypoints, bool)
+    return new, sorted(lines + circles), left_out
 
 
 def calibrate_with(kind: Kind[ResultT], params) -> ResultT:

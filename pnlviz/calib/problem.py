@@ -18,7 +18,7 @@ import numpy as np
 
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.residuals import Block, point_block, polyline_block, segment_block
-from pnlviz.conventions import DEFAULT_ALPHA
+from pnlviz.conventions import DEFAULT_ALPHA, EVAL_WIDTH
 from pnlviz.field.model import FieldModel
 
 #: the residual of each point of a circle seen from behind (no arc in front to measure against)
@@ -35,7 +35,7 @@ def aim_inside(points: np.ndarray, width: int, height: int, inset: float) -> np.
     fitted line reaches the border at the point; a line crossing the border steeply only moves
     along itself."""
     p = np.array(points, dtype=float).reshape(-1, 2)
-    near = 1.5 * width / 960
+    near = 1.5 * width / EVAL_WIDTH
     for axis, last in ((0, width - 1), (1, height - 1)):
         v = p[:, axis]
         v[v <= near] += inset
