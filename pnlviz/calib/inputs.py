@@ -27,8 +27,6 @@ class Detections(Protocol):
 
 #: Keypoint ids PnLCalib's published networks predict (1..57; 58-73 are not predicted).
 PREDICTED_KEYPOINTS = range(1, 58)
-
-
 def auxiliary_keypoints(lines: dict[str, np.ndarray], width: int, height: int, model: FieldModel,
                         skip: Set[int] = frozenset(), beyond: float = 0.5) -> dict[int, tuple[float, float]]:
     """Keypoints at the intersections of pairs of observed straight lines (catalogue ``line_line``
@@ -59,7 +57,10 @@ def observations_from_predictions(pred: Detections, width: int, height: int, *, 
     x = 9.0, where its networks were trained). Lines are the two detected extremities of each
     line whose both ends pass ``line_threshold``; the intersections of detected line pairs add
     auxiliary keypoints where the network found none (the paper's augmentation; marked
-    ``kp_derived``)."""
+    ``kp_derived``). A detected point of a line or circle where nothing painted marks it
+    (:meth:`FieldModel.unmarked_points`) is also a point of that line or circle, and its keypoint is marked
+    ``kp_derived``: where the lines and circles fix the camera, the refinement holds it to its
+    marking only (across it, where the paint is), not to its place along it."""
     model = model or load_field_model()
     kps = {}
     for kid, (x, y, p) in pred.keypoints.items():
@@ -71,11 +72,17 @@ def observations_from_predictions(pred: Detections, width: int, height: int, *, 
             lines[LINE_ID_TO_CLASS[int(lid)]] = np.array([[x1 * width, y1 * height], [x2 * width, y2 * height]])
     sets = {k: model.keypoints[k].group for k in kps}
     aux = auxiliary_keypoints(lines, width, height, model, skip=set(kps)) if auxiliary else {}
+    unmarked = {k: c for k, c in model.unmarked_points().items() if k in kps}
+    circles: dict[str, np.ndarray] = {}
+    for kid, cls in sorted(unmarked.items()):
+        marking = circles if cls in model.circles else lines
+        marking[cls] = np.vstack([marking.get(cls, np.zeros((0, 2))), [kps[kid]]])
     if aux:
         kps.update(aux)
         sets.update({k: "Kpe" for k in aux})
-    obs = Observations.from_keypoints(width, height, kps, sets, lines=lines, pnlcalib_positions=True, model=model)
-    return replace(obs, kp_derived=np.isin(obs.kp_ids, list(aux)))
+    obs = Observations.from_keypoints(width, height, kps, sets, lines=lines, circles=circles, pnlcalib_positions=True,
+                                      model=model)
+    return replace(obs, kp_derived=np.isin(obs.kp_ids, [*aux, *unmarked]))
 
 
 def observations_from_annotation(annotation: Mapping[str, np.ndarray], width: int, height: int, *,

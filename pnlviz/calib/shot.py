@@ -90,6 +90,8 @@ class Selection:
     keypoints: np.ndarray
     lines: tuple[str, ...]
     circles: tuple[str, ...]
+    #: derived keypoints within the gates left out because the lines and circles fix the camera
+    left_out: int = 0
 
     @classmethod
     def everything(cls, obs: Observations) -> Selection:
@@ -116,11 +118,16 @@ class FrameDistances:
     rss: float = 0.0
     n: int = 0
 
-    def selection(self, obs: Observations, point_gate: float, line_gate: float) -> Selection:
-        """The observations within the gates (and every pin)."""
+    def selection(self, obs: Observations, point_gate: float, line_gate: float, lines_alone: int = 0) -> Selection:
+        """The observations within the gates (and every pin); with at least ``lines_alone`` (> 0)
+        line and circle classes in, without the keypoints derived from them (``kp_derived``:
+        the frame pipeline's rule, :func:`pnlviz.calib.pipeline.lines_alone`)."""
         kp = (self.keypoints <= point_gate) | obs.pins
-        return Selection(kp, tuple(k for k in obs.lines if self.classes.get(k, math.inf) <= line_gate),
-                         tuple(k for k in obs.circles if self.classes.get(k, math.inf) <= line_gate))
+        lines = tuple(k for k in obs.lines if self.classes.get(k, math.inf) <= line_gate)
+        circles = tuple(k for k in obs.circles if self.classes.get(k, math.inf) <= line_gate)
+        if lines_alone and len(lines) + len(circles) >= lines_alone:
+            return Selection(kp & ~obs.derived, lines, circles, int((kp & obs.derived).sum()))
+        return Selection(kp, lines, circles)
 
     def kept(self, sel: Selection) -> np.ndarray:
         """The distances of the selected observations (keypoints, then classes)."""

@@ -96,6 +96,11 @@ class FieldModel:
         """A distinct name in words for every keypoint id (see :func:`keypoint_names`)."""
         return keypoint_names(self)
 
+    def unmarked_points(self) -> dict[int, str]:
+        """``{id: line or circle class}`` of the keypoints on a marking where nothing painted
+        crosses it (see :func:`unmarked_points`)."""
+        return unmarked_points(self)
+
     def keypoints_in_group(self, group: str) -> list[int]:
         return [k.id for k in self.keypoints.values() if k.group == group]
 
@@ -268,6 +273,35 @@ def keypoint_names(model: FieldModel) -> dict[int, str]:
             out[kid] = f"{name} ({' '.join(side)})" if side else name
     if len(set(out.values())) != len(out):
         raise FieldModelError("two keypoints of the catalogue have the same definition and position")
+    return dict(sorted(out.items()))
+
+
+#: The unpainted directions the catalogue places points with (``additional`` keypoints where a
+#: marking meets the pitch's long axis or a diagonal).
+UNPAINTED = frozenset({"axis", "diagonal"})
+
+
+@lru_cache(maxsize=4)
+def unmarked_points(model: FieldModel) -> dict[int, str]:
+    """``{keypoint id: line or circle class}`` of the catalogue points that lie on a painted
+    marking where nothing painted crosses it: the tangent points of the circles, and where the
+    long axis or a diagonal meets a circle or a box's main line (not the centre of the pitch,
+    where the centre mark is painted). A picture shows the marking
+    there, not the point: a network places such a point along its marking from the context (the
+    light model on a synthetic clip: 1-4 px off along the centre circle, the same way through a
+    shot), while across the marking it sees the paint.
+
+    >>> sorted(load_field_model().unmarked_points().items())[:2]
+    [(37, 'Circle left'), (38, 'Circle central')]
+    """
+    out = {}
+    for kp in model.keypoints.values():
+        d = kp.definition
+        if d["kind"] == "tangent":
+            out[int(kp.id)] = str(d["circle"])
+        elif (d["kind"] == "additional" and (d["on"][0] in model.circles or d["on"][0] in model.lines)
+              and set(d["on"][1:]) <= UNPAINTED and np.linalg.norm(np.asarray(kp.xyz)[:2]) > 0.5):
+            out[int(kp.id)] = str(d["on"][0])
     return dict(sorted(out.items()))
 
 
