@@ -33,9 +33,9 @@ held-out halves are measured elsewhere, with this same script. One setting for e
 CalibParams() as written in pnlviz/calib/calibrate.py (the rows below switch PnL, focal and k1
 only), no threshold per dataset. Looked at while tuning: every frame of both sets. The engine's
 settings (alpha, the gates, the k1 cap, the final loss, the prior search, the class tolerance,
-the border aim, the classes that fit without the derived keypoints, the second gate) were chosen
-on these figures, and benchmarks/misses.py reads their misses frame by frame: these are
-development figures, not held-out ones."""
+the border aim, the classes that fit without the derived keypoints, the second gate, the points
+no paint marks held to their marking) were chosen on these figures, and benchmarks/misses.py
+reads their misses frame by frame: these are development figures, not held-out ones."""
 
 SETTINGS = {
     "no PnL": replace(CalibParams(), pnl=False, refine_focal=False, refine_k1=False),

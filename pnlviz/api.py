@@ -195,7 +195,10 @@ def calibrate(keypoints: Mapping[int, Sequence[float]] | None = None,
     scored under :data:`KEYPOINT_SCORE_THRESHOLD` is left out, as the command line's calibration
     from detections does; the fit weighs the others alike). ``lines``: ``{SoccerNet class name: (M, 2) pixels on it}`` (straight lines
     and circles, e.g. ``"Side line top"``, ``"Circle central"``); keypoints where annotated lines
-    meet are derived from them, as PnLCalib does. ``image_size``: (width, height) of the image
+    meet are derived from them, as PnLCalib does. A keypoint on a marking where no paint marks it
+    (a circle's tangent point, where the long axis or a diagonal meets a circle or a box's main
+    line: :meth:`FieldModel.unmarked_points`) is also a point of that marking, and where the lines
+    and circles fix the camera it is held to the marking only, as from a detector. ``image_size``: (width, height) of the image
     the pixels are in. ``pnl``: the point-and-line refinement; ``alpha``: its weight of lines
     against points (default the paper's). Never raises on geometry: a frame that cannot be
     calibrated comes back with ``camera`` None and the reason.
@@ -235,7 +238,7 @@ def _params(pnl, alpha):
 def _observations(keypoints, lines, w: int, h: int, model, where: str = ""):
     """The observations of a frame from the API's ``keypoints`` and ``lines`` (checked; ``where``
     prefixes the argument names in errors, e.g. ``frames[3].``)."""
-    from pnlviz.calib.inputs import observations_from_annotation
+    from pnlviz.calib.inputs import observations_from_annotation, on_their_markings
     from pnlviz.calib.observations import Observations
 
     try:
@@ -250,9 +253,11 @@ def _observations(keypoints, lines, w: int, h: int, model, where: str = ""):
     points.update(kps)  # a keypoint given wins over one derived from the lines
     for k in kps:
         sets.pop(k, None)
-    obs = Observations.from_keypoints(w, h, points, sets, lines=derived.lines, circles=derived.circles, model=model)
+    # a given keypoint no paint marks is also a point of its marking (as from detections)
+    lines, circles, unmarked = on_their_markings(kps, derived.lines, derived.circles, model)
+    obs = Observations.from_keypoints(w, h, points, sets, lines=lines, circles=circles, model=model)
     from_lines = [int(k) for k in derived.kp_ids if int(k) not in kps]
-    return replace(obs, kp_derived=np.isin(obs.kp_ids, from_lines))  # the given ones are measurements
+    return replace(obs, kp_derived=np.isin(obs.kp_ids, from_lines + unmarked))  # the given ones are measurements
 
 
 @dataclass(frozen=True)

@@ -128,3 +128,37 @@ def test_on_the_wc14_detections_the_rule_gains(shared_dir, model, monkeypatch):
     monkeypatch.setattr(FieldModel, "unmarked_points", lambda self: {})
     without = fs()
     assert with_rule > without + 0.005
+
+
+def test_the_shot_finds_each_circle_points_closest_segment_as_a_full_search_does(model):
+    """The shot's coarse-to-fine search (two coarse chords, then the segments around each) against
+    every segment, on random views of the centre circle with points 1-30 px off it."""
+    from pnlviz.calib.shot_circles import _closest_segments, _distances
+    from pnlviz.geometry.camera import Camera
+
+    arc, rng = model.circles["Circle central"], np.random.default_rng(5)
+    for trial in range(60):
+        cam = Camera.from_look_at((rng.uniform(-20, 20), rng.uniform(35, 70), -rng.uniform(8, 25)),
+                                  (rng.uniform(-10, 10), rng.uniform(-5, 5), 0.0), hfov_deg=rng.uniform(10, 50),
+                                  width=W, height=H)
+        poly = cam.project(arc.point_at(np.linspace(0.0, 2 * np.pi, 116)))
+        pts = poly[rng.integers(0, 115, 40)] + rng.normal(0.0, [1.0, 5.0, 30.0][trial % 3], (40, 2))
+        item = np.zeros(40, int)
+        j, t, off = _closest_segments(poly[None], item, pts)
+        _, _, d2 = _distances(poly[None], item, pts, np.zeros(40, int), 115)
+        np.testing.assert_allclose(np.hypot(*off.T), np.sqrt(d2.min(axis=1)), atol=1e-9)
+        np.testing.assert_allclose(poly[j] + t[:, None] * (poly[j + 1] - poly[j]) + off, pts, atol=1e-9)
+
+
+def test_a_point_exactly_on_a_circle_is_measured_on_it(model):
+    """The samples of a projected circle include the catalogue points on it: a camera seen only
+    through exact keypoints (ten of them on the centre circle) is found again exactly."""
+    import pnlviz
+
+    cam = pnlviz.Camera.from_look_at((0, 50, -20), (0, 0, 0), hfov_deg=40, width=W, height=H)
+    kps = pnlviz.keypoints()
+    seen = {k: tuple(uv) for k, uv in zip(kps, cam.project(list(kps.values()))) if cam.in_image([uv])[0]}
+    assert len(set(seen) & set(model.unmarked_points())) >= 10
+    result = pnlviz.calibrate(seen, image_size=(W, H))
+    assert result.camera.hfov_deg == pytest.approx(40.0, abs=1e-4)
+    assert np.allclose(result.camera.C, cam.C, atol=1e-3)

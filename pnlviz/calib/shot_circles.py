@@ -103,15 +103,8 @@ def circle_residuals(g: CircleGroup, R: np.ndarray, C: np.ndarray, f: np.ndarray
     flat = Xc.reshape(-1, 3)
     uv, _ = camera_to_pixels(flat, np.repeat(Rf, S, 0), np.repeat(ff, S), 1.0, cx, cy, k1)
     poly = uv.reshape(n, S, 2)
-    a, ab = poly[item, :-1], poly[item, 1:] - poly[item, :-1]  # (m, S - 1, 2)
-    ap = pts[:, None, :] - a
-    L2 = np.maximum(np.einsum("msk,msk->ms", ab, ab), 1e-18)
-    t = np.clip(np.einsum("msk,msk->ms", ap, ab) / L2, 0.0, 1.0)
-    d = ap - t[..., None] * ab
-    d2 = np.einsum("msk,msk->ms", d, d)
-    j = np.argmin(d2, axis=1)
-    m = np.arange(len(pts))
-    dist, off, tj = np.sqrt(d2[m, j]), d[m, j], t[m, j]
+    j, tj, off = _closest_segments(poly, item, pts)
+    dist = np.hypot(off[:, 0], off[:, 1])
     r[rows] = dist
     if J is not None:
         ends = np.concatenate([item * S + j, item * S + j + 1])  # the closest segment's two vertices
@@ -123,3 +116,42 @@ def circle_residuals(g: CircleGroup, R: np.ndarray, C: np.ndarray, f: np.ndarray
         Jc = (1 - tj)[:, None, None] * Ja + tj[:, None, None] * Jb
         J[rows] = -np.einsum("nk,nkj->nj", unit, Jc)
     return Block(r, J)
+
+
+#: the coarse stride of the closest-segment search (samples)
+_STRIDE = 8
+
+
+def _distances(poly: np.ndarray, item: np.ndarray, pts: np.ndarray, start: np.ndarray, n: int):
+    """Each point against the ``n`` segments from vertex ``start`` of its item's polyline:
+    (t (m, n), offsets (m, n, 2), squared distances (m, n))."""
+    v = poly[item[:, None], start[:, None] + np.arange(n + 1)]  # (m, n + 1, 2)
+    a, ab = v[:, :-1], v[:, 1:] - v[:, :-1]
+    ap = pts[:, None, :] - a
+    L2 = np.maximum(np.einsum("msk,msk->ms", ab, ab), 1e-18)
+    t = np.clip(np.einsum("msk,msk->ms", ap, ab) / L2, 0.0, 1.0)
+    d = ap - t[..., None] * ab
+    return t, d, np.einsum("msk,msk->ms", d, d)
+
+
+def _closest_segments(poly: np.ndarray, item: np.ndarray, pts: np.ndarray):
+    """The closest segment ``j`` of each point on its item's polyline (``poly`` (n, S, 2)), where
+    on it (``t``) and the point minus that closest point. Coarse to fine (a shot has thousands of
+    circle points, and M x S pairs were most of its solve): the two closest chords of every
+    ``_STRIDE``-th vertex, then the ``3 _STRIDE`` segments around each (two, for the two sides of
+    a thin far ellipse and the seam of a closed circle; the same segments as a full search on
+    random views of the centre circle, points 1-30 px off it: tests/test_calib_unmarked.py)."""
+    S, m = poly.shape[1], len(pts)
+    if S <= 6 * _STRIDE:
+        t, d, d2 = _distances(poly, item, pts, np.zeros(m, int), S - 1)
+        k = np.argmin(d2, axis=1)
+        return k, t[np.arange(m), k], d[np.arange(m), k]
+    every = np.r_[np.arange(0, S - 1, _STRIDE), S - 1]
+    _, _, dc = _distances(poly[:, every], item, pts, np.zeros(m, int), len(every) - 1)
+    width = 3 * _STRIDE
+    starts = np.clip(every[np.argsort(dc, axis=1)[:, :2]] - _STRIDE, 0, S - 1 - width)  # (m, 2)
+    t, d, d2 = (np.concatenate(x, axis=1) for x in zip(*(_distances(poly, item, pts, starts[:, i], width)
+                                                          for i in range(2))))
+    k = np.argmin(d2, axis=1)
+    rows = np.arange(m)
+    return starts[rows, k // width] + k % width, t[rows, k], d[rows, k]
