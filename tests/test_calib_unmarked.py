@@ -162,3 +162,14 @@ def test_a_point_exactly_on_a_circle_is_measured_on_it(model):
     result = pnlviz.calibrate(seen, image_size=(W, H))
     assert result.camera.hfov_deg == pytest.approx(40.0, abs=1e-4)
     assert np.allclose(result.camera.C, cam.C, atol=1e-3)
+
+
+def test_the_card_names_the_points_held_to_their_marking(model):
+    from pnlviz.app.cards import _left_out
+
+    unmarked = model.unmarked_points()
+    assert _left_out([3, 4, 37, 46], unmarked) == (", fitted without the 2 keypoints derived from them and 2 that no "
+                                                   "paint marks (37, 46: held to their marking only)")
+    assert _left_out([37], unmarked) == ", fitted without 1 that no paint marks (37: held to their marking only)"
+    assert _left_out([3], unmarked) == ", fitted without the 1 keypoint derived from them"
+    assert _left_out([], unmarked) == ""

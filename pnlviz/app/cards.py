@@ -55,13 +55,22 @@ def calibration_card(view: FrameView, state: AppState) -> str:
     if res.subset != SHOT_SUBSET:
         lines.append(f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, "
                      f"{len(res.inliers)} inliers; PnL set: {len(res.pnl_lines)} lines/circles"
-                     + (f", fitted without the {len(res.lines_alone)} keypoints derived from them"
-                        if res.lines_alone else ""))
+                     + _left_out(res.lines_alone, state.model.unmarked_points()))
     lines += pin_lines(res)
     if view.jac:
         lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))
     lines.append(f"computed in {view.ms:.0f} ms")
     return "\n\n".join(lines)
+
+
+def _left_out(ids: Sequence[int], unmarked: Mapping[int, str]) -> str:
+    """The PnL set's note on the keypoints its lines and circles fix without: those derived from
+    them, and those no paint marks (held to their marking only)."""
+    derived = [k for k in ids if k not in unmarked]
+    on = [k for k in ids if k in unmarked]
+    parts = ([f"the {len(derived)} keypoint{'s' * (len(derived) != 1)} derived from them"] if derived else []) + (
+        [f"{len(on)} that no paint marks ({', '.join(map(str, on))}: held to their marking only)"] if on else [])
+    return f", fitted without {' and '.join(parts)}" if parts else ""
 
 
 def findings_text(marks) -> str:
