@@ -129,13 +129,15 @@ def test_lines_alone_and_the_second_gate_raise_both_development_sets(sn22, wc14)
     assert wc["default"] > wc["no lines alone"], wc
 
 
-def test_tightening_raises_the_score_of_the_sn22_set(sn22):
-    """The pulling-in as the pipeline runs it (inside PnL, every round) raises the FS@5 of the 400
-    SN22 frames from their annotations (the evaluator counts a class right only when all its
-    points are within 5 px; a least-squares fit spreads its error over every point)."""
+def test_the_pulling_in_stays_off_while_it_does_not_raise_the_sn22_score(sn22):
+    """``class_tolerance_px`` is off by default: with the verdict judging a fit from the lines alone
+    by its lines, pulling the classes beyond 4 px in no longer raises the FS@5 of the 400 SN22
+    frames from their annotations (0.9332 with it, 0.9337 without, when written). Should a change
+    make it pay again, this fails and the default is to be chosen again."""
     gt, _, observations = sn22
     default = CalibParams()
-    assert _fs(gt, observations, default) > _fs(gt, observations, replace(default, class_tolerance_px=0.0))
+    assert default.class_tolerance_px == 0.0
+    assert _fs(gt, observations, default) >= _fs(gt, observations, replace(default, class_tolerance_px=4.0))
 
 
 def test_border_points_aimed_inside_raise_both_development_sets(sn22, wc14):
@@ -163,7 +165,7 @@ def test_the_second_gate_adds_what_the_refined_model_lets_through_and_drops_noth
               2: {"Side line top": 3.0, "Middle line": 40.0, "Side line left": 5.0}}
 
     class Kind:
-        data = SimpleNamespace(obs=obs)
+        data = SimpleNamespace(obs=obs, model=load_field_model())
 
         def pnl_solve(self, estimate, keypoints, lines, circles):
             calls.append((estimate, list(lines)))

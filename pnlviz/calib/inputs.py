@@ -27,6 +27,8 @@ class Detections(Protocol):
 
 #: Keypoint ids PnLCalib's published networks predict (1..57; 58-73 are not predicted).
 PREDICTED_KEYPOINTS = range(1, 58)
+
+
 def auxiliary_keypoints(lines: dict[str, np.ndarray], width: int, height: int, model: FieldModel,
                         skip: Set[int] = frozenset(), beyond: float = 0.5) -> dict[int, tuple[float, float]]:
     """Keypoints at the intersections of pairs of observed straight lines (catalogue ``line_line``
@@ -78,9 +80,9 @@ def observations_from_predictions(pred: Detections, width: int, height: int, *, 
     line whose both ends pass ``line_threshold``; the intersections of detected line pairs add
     auxiliary keypoints where the network found none (the paper's augmentation; marked
     ``kp_derived``). A detected point of a line or circle where nothing painted marks it
-    (:meth:`FieldModel.unmarked_points`) is also a point of that line or circle, and its keypoint is marked
-    ``kp_derived``: where the lines and circles fix the camera, the refinement holds it to its
-    marking only (across it, where the paint is), not to its place along it."""
+    (:meth:`FieldModel.unmarked_points`) is also a point of that line or circle, and its keypoint
+    is marked ``kp_derived``: where the lines and circles fix the camera, the refinement holds it
+    to its marking only (across it, where the paint is), not to its place along it."""
     model = model or load_field_model()
     kps = {}
     for kid, (x, y, p) in pred.keypoints.items():

@@ -28,7 +28,7 @@ Without pins every step is what it was.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
@@ -216,36 +216,63 @@ def _gated(obs: Observations, params, line_errors: Mapping[str, float],
     return kp_ok, lines, circles
 
 
-def _classes_fix_it(params, lines: list[str], circles: list[str]) -> bool:
+def _classes_fix_it(params, lines: Sequence[str], circles: Sequence[str]) -> bool:
     """At least ``params.lines_alone_classes`` line and circle classes (0: never)."""
     return bool(params.lines_alone_classes) and len(lines) + len(circles) >= params.lines_alone_classes
 
 
+def left_out(obs: Observations, params, lines: Sequence[str], circles: Sequence[str]) -> np.ndarray:
+    """Mask of the derived keypoints (``Observations.kp_derived``) a fit with these classes leaves
+    out: all of them when at least ``params.lines_alone_classes`` line and circle classes are in
+    it (they repeat those classes, computed from them as straight lines under a pinhole where the
+    fit has the lens, and the classes alone fix the model's eight parameters), else none."""
+    return obs.derived.copy() if _classes_fix_it(params, lines, circles) else np.zeros(obs.n_keypoints, bool)
+
+
 def lines_alone(obs: Observations, params, keypoints: np.ndarray, lines: list[str], circles: list[str]) -> np.ndarray:
     """The keypoints PnL fits, of those that passed the gates: without the derived ones
-    (``Observations.kp_derived``, computed from the frame's own lines) when at least
-    ``params.lines_alone_classes`` line and circle classes are in it: they repeat those classes
-    (computed from them as straight lines under a pinhole, where the fit has the lens), and the
-    classes alone fix the model's eight parameters."""
-    return keypoints & ~obs.derived if _classes_fix_it(params, lines, circles) else keypoints
+    :func:`left_out` names."""
+    return keypoints & ~left_out(obs, params, lines, circles)
+
+
+def pnl_set(obs: Observations, params, keypoints: np.ndarray, lines: Sequence[str], circles: Sequence[str],
+            unmarked: Mapping[int, str]) -> tuple[np.ndarray, list[str], list[str]]:
+    """What PnL fits of what passed the gates: the keypoints :func:`lines_alone` keeps, and the
+    classes, but for a class made of nothing but detected points no paint marks (``unmarked``:
+    :meth:`FieldModel.unmarked_points`, added to their marking as its points) while those
+    keypoints are fitted (fewer classes than ``params.lines_alone_classes``): they count once."""
+    kp = lines_alone(obs, params, keypoints, list(lines), list(circles))
+    if _classes_fix_it(params, lines, circles):
+        return kp, list(lines), list(circles)
+    stand_in: dict[str, list[np.ndarray]] = {}
+    for k, xy, use in zip(obs.kp_ids, obs.kp_xy, kp & obs.derived):
+        if use and int(k) in unmarked:
+            stand_in.setdefault(unmarked[int(k)], []).append(xy)
+
+    def repeated(name: str, points: np.ndarray) -> bool:
+        held = np.asarray(stand_in.get(name) or np.zeros((0, 2)))
+        return len(held) > 0 and all(np.any(np.all(held == p, axis=1)) for p in np.asarray(points))
+
+    return (kp, [n for n in lines if not repeated(n, obs.lines[n])],
+            [n for n in circles if not repeated(n, obs.circles[n])])
 
 
 def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
                point_errors: dict[int, float]) -> tuple[Any, list[str], np.ndarray]:
     """Step 3: the lines, circles and keypoints that pass the gates at ``estimate`` (:func:`_gated`,
-    :func:`lines_alone`), then ``kind.pnl_solve``. The voted estimate can be several pixels off,
+    :func:`pnl_set`), then ``kind.pnl_solve``. The voted estimate can be several pixels off,
     so a class it gates out may be within the gate of the refined one: the gates are applied
     again at the refined estimate and, when they let something more through, solved again from
     there with it, up to ``params.regate_rounds`` times. Nothing that passed is dropped (on a frame
     with four keypoints and two lines, dropping one that the refined model moved away from let the
     next solve drift: three synthetic frames lost their camera).
 
-    Returns the estimate, the classes used and the mask of the derived keypoints the final fit
-    left out (:func:`lines_alone`: all of them, or none; the estimate unchanged, no class and none
-    left out when the solve had too little to go on or failed)."""
-    obs = kind.data.obs
+    Returns the estimate, the classes it fitted (:func:`pnl_set`) and the mask of the derived
+    keypoints it left out (:func:`left_out`; the estimate unchanged, no class and none left out
+    when the solve had too little to go on or failed)."""
+    obs, unmarked = kind.data.obs, kind.data.model.unmarked_points()
     kp_ok, lines, circles = _gated(obs, params, line_errors, point_errors)
-    new = kind.pnl_solve(estimate, lines_alone(obs, params, kp_ok, lines, circles), lines, circles)
+    new = kind.pnl_solve(estimate, *pnl_set(obs, params, kp_ok, lines, circles, unmarked))
     if new is None:
         return estimate, [], np.zeros(obs.n_keypoints, bool)
     for _ in range(params.regate_rounds):
@@ -254,12 +281,12 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
                  [k for k in obs.circles if k in circles or k in gated[2]])
         if np.array_equal(again[0], kp_ok) and again[1:] == (lines, circles):
             break
-        newer = kind.pnl_solve(new, lines_alone(obs, params, *again), again[1], again[2])
+        newer = kind.pnl_solve(new, *pnl_set(obs, params, *again, unmarked))
         if newer is None:
             break
         new, (kp_ok, lines, circles) = newer, again
-    left_out = obs.derived if _classes_fix_it(params, lines, circles) else np.zeros(obs.n_keypoints, bool)
-    return new, sorted(lines + circles), left_out
+    _, fitted_lines, fitted_circles = pnl_set(obs, params, kp_ok, lines, circles, unmarked)
+    return new, sorted(fitted_lines + fitted_circles), left_out(obs, params, lines, circles)
 
 
 def calibrate_with(kind: Kind[ResultT], params) -> ResultT:
@@ -321,9 +348,9 @@ def _finish(result: FrameResult, estimate, kind: Kind, params, solve: bool = Fal
     result.point_residuals_initial = kind.point_errors(estimate)
     result.line_residuals_initial = kind.class_errors(estimate)
     if solve or (params.pnl and (obs.lines or obs.circles)):
-        estimate, result.pnl_lines, left_out = pnl_refine(estimate, kind, params, result.line_residuals_initial,
-                                                          result.point_residuals_initial)
-        result.lines_alone = [int(i) for i in obs.kp_ids[left_out]]
+        estimate, result.pnl_lines, out = pnl_refine(estimate, kind, params, result.line_residuals_initial,
+                                                     result.point_residuals_initial)
+        result.lines_alone = [int(i) for i in obs.kp_ids[out]]
     result.estimate = estimate
     result.point_residuals = kind.point_errors(estimate)
     result.line_residuals = kind.class_errors(estimate)
@@ -337,11 +364,18 @@ def _finish(result: FrameResult, estimate, kind: Kind, params, solve: bool = Fal
 def _verdict(result: FrameResult, obs: Observations, params) -> None:
     """Step 4: no estimate when no inlier keypoint has a residual, or their RMS is above ``max_rms``.
     The inliers judged are those that are not derived keypoints the final fit left out
-    (:func:`lines_alone`: they are not measurements) when any remain, else all of them."""
+    (:func:`lines_alone`: they are not measurements) when any remain; when the fit left out every
+    inlier (its lines and circles fixed it alone), the farthest point of each class it fitted
+    (the derived keypoints repeat those classes, computed as straight lines under a pinhole: an
+    intersection of two detected lines far outside the image can be tens of pixels off a camera
+    that sits on both lines)."""
     inlier_ids = [int(i) for i in obs.kp_ids[np.isin(obs.kp_ids, result.inliers)]
                   if int(i) in result.point_residuals and int(i) not in result.flagged]
     fitted = [i for i in inlier_ids if i not in result.lines_alone]
-    inlier_residuals = [result.point_residuals[i] for i in (fitted or inlier_ids)]
+    if fitted or not result.lines_alone:
+        inlier_residuals = [result.point_residuals[i] for i in (fitted or inlier_ids)]
+    else:
+        inlier_residuals = [result.line_residuals[c] for c in result.pnl_lines if c in result.line_residuals]
     if not inlier_residuals:
         result.estimate, result.failure_code = None, "no_inliers"
         result.failure = "no keypoint agrees with the camera (no inliers)"

@@ -99,26 +99,10 @@ class FrameData:
             for name, p in self.obs.circles.items():
                 arc = self.model.circles[name]
                 k = max(8, int(np.radians(arc.end_deg - arc.start_deg) * arc.radius / step))
-                world = arc.point_at(_with_marks(np.linspace(np.radians(arc.start_deg), np.radians(arc.end_deg), k + 1),
-                                                 arc, self.model))
+                world = arc.point_at(np.linspace(np.radians(arc.start_deg), np.radians(arc.end_deg), k + 1))
                 out.append((name, world, np.asarray(p, float).reshape(-1, 2)))
             self._arcs[step] = out
         return self._arcs[step]
-
-
-def _with_marks(angles: np.ndarray, arc, model: FieldModel) -> np.ndarray:
-    """The sample angles (increasing) of ``arc`` with the directions of the catalogue points on
-    it that no paint marks added (:meth:`FieldModel.unmarked_points`): a detection of such a point
-    is a point of the circle near its catalogue place, and the chords between samples run inside
-    the circle (by up to 3 mm at 0.5 m apart), so with a sample there such a point exactly on the
-    circle is measured on it."""
-    marks = [model.keypoints[k].xyz for k, c in model.unmarked_points().items() if c == arc.name]
-    if not marks:
-        return angles
-    d = np.asarray(marks, float) - arc.center
-    a = angles[0] + np.mod(np.arctan2(d[:, 1], d[:, 0]) - angles[0], 2 * np.pi)
-    a = a[(a <= angles[-1]) & (np.min(np.abs(a[:, None] - angles[None]), axis=1) > 1e-9)]
-    return np.sort(np.concatenate([angles, a]))
 
 
 @dataclass

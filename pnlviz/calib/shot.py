@@ -27,7 +27,7 @@ matrix is sparse: a frame's rows touch its own four columns and the four shared 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +40,7 @@ from pnlviz.geometry.projection import camera_to_pixels, to_camera, undistort_k1
 from pnlviz.geometry.so3 import cross
 
 from .observations import Observations
+from .pipeline import pnl_set
 from .problem import FrameData, pin_block
 from .residuals import Block, SegmentJacobian, point_block, segment_block
 from .shot_circles import CircleGroup, circle_residuals, group_circles
@@ -118,16 +119,18 @@ class FrameDistances:
     rss: float = 0.0
     n: int = 0
 
-    def selection(self, obs: Observations, point_gate: float, line_gate: float, lines_alone: int = 0) -> Selection:
-        """The observations within the gates (and every pin); with at least ``lines_alone`` (> 0)
-        line and circle classes in, without the keypoints derived from them (``kp_derived``:
-        the frame pipeline's rule, :func:`pnlviz.calib.pipeline.lines_alone`)."""
+    def selection(self, obs: Observations, point_gate: float, line_gate: float, calib=None,
+                  unmarked: Mapping[int, str] | None = None) -> Selection:
+        """The observations within the gates (and every pin); with ``calib`` (the frames'
+        :class:`~pnlviz.calib.calibrate.CalibParams`), what the frame pipeline's PnL fits of them
+        (:func:`pnlviz.calib.pipeline.pnl_set`; ``unmarked``: :meth:`FieldModel.unmarked_points`)."""
         kp = (self.keypoints <= point_gate) | obs.pins
         lines = tuple(k for k in obs.lines if self.classes.get(k, math.inf) <= line_gate)
         circles = tuple(k for k in obs.circles if self.classes.get(k, math.inf) <= line_gate)
-        if lines_alone and len(lines) + len(circles) >= lines_alone:
-            return Selection(kp & ~obs.derived, lines, circles, int((kp & obs.derived).sum()))
-        return Selection(kp, lines, circles)
+        if calib is None:
+            return Selection(kp, lines, circles)
+        fitted, fit_lines, fit_circles = pnl_set(obs, calib, kp, lines, circles, unmarked or {})
+        return Selection(fitted, tuple(fit_lines), tuple(fit_circles), int((kp & ~fitted).sum()))
 
     def kept(self, sel: Selection) -> np.ndarray:
         """The distances of the selected observations (keypoints, then classes)."""

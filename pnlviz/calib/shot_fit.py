@@ -139,9 +139,9 @@ def _start_vector(start: ShotFit, T: int) -> np.ndarray:
 
 
 def _selections(data: Sequence[FrameData | None], cameras: Sequence[Camera | None], point_gate: float,
-                line_gate: float, lines_alone: int) -> list[Selection | None]:
+                line_gate: float, calib: CalibParams) -> list[Selection | None]:
     """Per frame, the observations ``cameras[t]`` (its own camera) puts within the gates
-    (everything of a frame without a camera; ``lines_alone``: :meth:`FrameDistances.selection`)."""
+    (everything of a frame without a camera; ``calib``: :meth:`FrameDistances.selection`)."""
     out: list[Selection | None] = []
     for d, cam in zip(data, cameras):
         if d is None:
@@ -149,20 +149,21 @@ def _selections(data: Sequence[FrameData | None], cameras: Sequence[Camera | Non
         elif cam is None:
             out.append(Selection.everything(d.obs))
         else:
-            out.append(distances(d, cam).selection(d.obs, point_gate, line_gate, lines_alone))
+            out.append(distances(d, cam).selection(d.obs, point_gate, line_gate, calib, d.model.unmarked_points()))
     return out
 
 
 def _gated(data: Sequence[FrameData | None], dist: Sequence[FrameDistances | None], point_gate: float,
-           line_gate: float, lines_alone: int) -> list[Selection | None]:
+           line_gate: float, calib: CalibParams) -> list[Selection | None]:
     """Per frame, the observations the shot's camera puts within the gates (``dist``:
     :meth:`ShotProblem.distances` with everything selected)."""
-    return [None if d is None or m is None else m.selection(d.obs, point_gate, line_gate, lines_alone)
+    return [None if d is None or m is None
+            else m.selection(d.obs, point_gate, line_gate, calib, d.model.unmarked_points())
             for d, m in zip(data, dist)]
 
 
 def _kept_selections(data: Sequence[FrameData | None], start: ShotFit, point_gate: float,
-                     line_gate: float, lines_alone: int) -> list[Selection | None]:
+                     line_gate: float, calib: CalibParams) -> list[Selection | None]:
     """The observations a warm solve starts with: the previous solve's, but for the frames whose
     observations changed since (an edit), gated anew against their camera of that solve."""
     old = start.selections or [None] * len(data)
@@ -173,7 +174,7 @@ def _kept_selections(data: Sequence[FrameData | None], start: ShotFit, point_gat
                                              and set(s.circles) <= set(d.obs.circles)
                                              and not (d.obs.pins & ~s.keypoints).any())
         out.append(s if fits else None if d is None
-                   else distances(d, cam).selection(d.obs, point_gate, line_gate, lines_alone))
+                   else distances(d, cam).selection(d.obs, point_gate, line_gate, calib, d.model.unmarked_points()))
     return out
 
 
@@ -204,7 +205,7 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
     whole = ShotProblem(fd, size, params, alpha=calib.alpha)
     if start is not None:
         x = _start_vector(start, T)
-        sel = _kept_selections(fd, start, point_gate, line_gate, calib.lines_alone_classes)
+        sel = _kept_selections(fd, start, point_gate, line_gate, calib)
         params = replace(params, max_iterations=min(params.max_iterations, WARM_ITERATIONS))
         tol = WARM_TOL  # from a previous solution an edit moves the cameras a little: a looser stop is as good
     else:
@@ -213,7 +214,7 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
         # start from the observations each frame's own camera agrees with (all of a frame without
         # one): a detector's wrong ids and lines would otherwise pull the first solve off
         gate = calib.px(params.start_outlier_px, W)
-        sel = _selections(fd, cameras, gate, gate, calib.lines_alone_classes)
+        sel = _selections(fd, cameras, gate, gate, calib)
         tol = 1e-10
     nfev, info = 0, {"success": False, "cost": math.inf, "iterations": 0}
     dist: list[FrameDistances | None] = []
@@ -222,7 +223,7 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
         nfev += int(info["iterations"])
         # then those the shot's camera agrees with, until the set stops changing
         dist = whole.distances(x)
-        new = _gated(fd, dist, point_gate, line_gate, calib.lines_alone_classes)
+        new = _gated(fd, dist, point_gate, line_gate, calib)
         if _same(new, sel):
             break
         sel = new

@@ -106,7 +106,7 @@ def apply_keypoint_edits(obs: Observations, edits: Mapping[str, KeypointEdit], m
 
 
 def _without(points: np.ndarray, xy: Sequence[float]) -> np.ndarray:
-    """``points`` without the row at ``xy`` (the first one there; all of them when none is)."""
+    """``points`` without its first row at ``xy`` (all of them when no row is there)."""
     points = np.asarray(points, float)
     hit = np.flatnonzero(np.all(points == np.asarray(xy, float), axis=1))
     return np.delete(points, hit[:1], axis=0)
