@@ -60,8 +60,9 @@ def on_their_markings(keypoints: Mapping[int, tuple[float, float]], lines: Mappi
 
     Id 52 too, from PnLCalib's networks, whose table puts it 0.15 m inside the centre circle
     (x = 9.0): their WC14 detections of it sit 9.03 m from the centre under the calibrated
-    cameras, and as a point of the circle it still gave FS@5 0.949 on WC14 against 0.942 as a
-    keypoint at the table's place (its place along the circle is the worse error)."""
+    cameras, yet as a point of the circle it gave FS@5 0.949 on WC14 against 0.942 as a keypoint
+    at the table's place (measured with a first version of the rule; its place along the circle
+    is the worse error)."""
     lines, circles = dict(lines), dict(circles)
     unmarked = model.unmarked_points()
     ids = sorted(k for k in keypoints if k in unmarked)

@@ -286,10 +286,10 @@ def unmarked_points(model: FieldModel) -> dict[int, str]:
     """``{keypoint id: line or circle class}`` of the catalogue points that lie on a painted
     marking where nothing painted crosses it: the tangent points of the circles, and where the
     long axis or a diagonal meets a circle or a box's main line (not the centre of the pitch,
-    where the centre mark is painted). A picture shows the marking
-    there, not the point: a network places such a point along its marking from the context (the
-    light model on a synthetic clip: 1-4 px off along the centre circle, the same way through a
-    shot), while across the marking it sees the paint.
+    where the centre mark is painted). A picture shows the marking there, not the point: a
+    network places such a point along its marking from the context (the light model on a
+    synthetic clip: 1-4 px off along the centre circle, the same way through a shot), while
+    across the marking it sees the paint.
 
     >>> sorted(load_field_model().unmarked_points().items())[:2]
     [(37, 'Circle left'), (38, 'Circle central')]
