@@ -272,7 +272,8 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
     when the solve had too little to go on or failed)."""
     obs, unmarked = kind.data.obs, kind.data.model.unmarked_points()
     kp_ok, lines, circles = _gated(obs, params, line_errors, point_errors)
-    new = kind.pnl_solve(estimate, *pnl_set(obs, params, kp_ok, lines, circles, unmarked))
+    fit = pnl_set(obs, params, kp_ok, lines, circles, unmarked)
+    new = kind.pnl_solve(estimate, *fit)
     if new is None:
         return estimate, [], np.zeros(obs.n_keypoints, bool)
     for _ in range(params.regate_rounds):
@@ -281,12 +282,12 @@ def pnl_refine(estimate, kind: Kind, params, line_errors: dict[str, float],
                  [k for k in obs.circles if k in circles or k in gated[2]])
         if np.array_equal(again[0], kp_ok) and again[1:] == (lines, circles):
             break
-        newer = kind.pnl_solve(new, *pnl_set(obs, params, *again, unmarked))
+        fit_again = pnl_set(obs, params, *again, unmarked)
+        newer = kind.pnl_solve(new, *fit_again)
         if newer is None:
             break
-        new, (kp_ok, lines, circles) = newer, again
-    _, fitted_lines, fitted_circles = pnl_set(obs, params, kp_ok, lines, circles, unmarked)
-    return new, sorted(fitted_lines + fitted_circles), left_out(obs, params, lines, circles)
+        new, (kp_ok, lines, circles), fit = newer, again, fit_again
+    return new, sorted(fit[1] + fit[2]), left_out(obs, params, lines, circles)
 
 
 def calibrate_with(kind: Kind[ResultT], params) -> ResultT:

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse
@@ -44,6 +45,9 @@ from .pipeline import pnl_set
 from .problem import FrameData, pin_block
 from .residuals import Block, SegmentJacobian, point_block, segment_block
 from .shot_circles import CircleGroup, circle_residuals, group_circles
+
+if TYPE_CHECKING:
+    from .calibrate import CalibParams
 
 __all__ = ["FrameDistances", "Selection", "ShotProblem", "TemporalParams", "angle_steps", "frame_data"]
 
@@ -119,7 +123,7 @@ class FrameDistances:
     rss: float = 0.0
     n: int = 0
 
-    def selection(self, obs: Observations, point_gate: float, line_gate: float, calib=None,
+    def selection(self, obs: Observations, point_gate: float, line_gate: float, calib: CalibParams | None = None,
                   unmarked: Mapping[int, str] | None = None) -> Selection:
         """The observations within the gates (and every pin); with ``calib`` (the frames'
         :class:`~pnlviz.calib.calibrate.CalibParams`), what the frame pipeline's PnL fits of them
