@@ -42,6 +42,7 @@ from pnlviz.geometry.camera import Camera
 from pnlviz.labels.types import Label
 
 from .calibrate import CalibParams, calibrate
+from .carried import carried_points
 from .cuts import CutEdits, apply_cuts, find_shots
 from .observations import Observations
 from .problem import FrameData
@@ -49,9 +50,9 @@ from .shot import TemporalParams
 from .shot_check import CameraChoice
 from .shot_fit import ShotFit, distances
 from .sources import apply_keypoint_edits
-from .temporal import ShotSolver
+from .temporal import ShotPart, ShotSolver
 
-__all__ = ["DISTRUST_PX", "PROVENANCE", "ClipSolver", "carried_points"]
+__all__ = ["DISTRUST_PX", "PROVENANCE", "QUICK_MIN_FRAMES", "ClipSolver", "ShotJob", "carried_points"]
 
 #: a detected keypoint the hand moved farther than this (px at 960 px width) is not trusted on the
 #: shot's other frames (3 x the detection noise of :class:`TemporalParams`)
@@ -60,46 +61,29 @@ DISTRUST_PX = 4.5
 #: where a clip frame's label comes from
 PROVENANCE = PROVENANCES
 
-
-def _in_view(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, bool]:
-    """``X`` (3,) projected by ``cam``, and whether it is in the image (in front, inside, and not
-    folded back in by the lens far outside the view)."""
-    uv, z = cam.project_with_depth(X[None])
-    flat = cam.project(X[None], distort=False)
-    ok = bool(z[0] > 0 and 0 <= uv[0, 0] < cam.width and 0 <= uv[0, 1] < cam.height
-              and abs(flat[0, 0] - cam.cx) < cam.width and abs(flat[0, 1] - cam.cy) < cam.height)
-    return uv[0], ok
+#: a shot this long gets a quick provisional solve around an edit before its full one
+#: (:meth:`ClipSolver.quick_solve`; a 64-frame shot's full solve takes about 40 ms)
+QUICK_MIN_FRAMES = 64
 
 
-def carried_points(shot: range, edits: Mapping[int, Mapping[str, Sequence[float] | None]],
-                   cameras: Sequence[Camera | None],
-                   model: FieldModel) -> dict[int, dict[int, np.ndarray]]:
-    """``{frame: {id: (x, y)}}``: every keypoint placed by hand on a frame of ``shot`` carried to
-    the frames before and after it through their cameras (``cameras[t]`` for frame t of the clip)
-    while it stays in view; it stops where it leaves the image, where it is hidden or placed by
-    hand again, at the shot's ends. The nearest placement wins where two reach a frame."""
-    out: dict[int, dict[int, np.ndarray]] = {}
-    dist: dict[tuple[int, int], int] = {}
-    for u in shot:
-        for key, value in (edits.get(u) or {}).items():
-            if value is None:
-                continue
-            kid = int(key)
-            X = model.keypoint_xyz(np.array([kid]))[0]
-            for step in (-1, 1):
-                t = u + step
-                while t in shot and str(kid) not in (edits.get(t) or {}):
-                    cam = cameras[t]
-                    if cam is None:
-                        break
-                    uv, ok = _in_view(cam, X)
-                    if not ok:
-                        break
-                    if dist.get((t, kid), 1 << 30) > abs(t - u):
-                        out.setdefault(t, {})[kid] = uv
-                        dist[(t, kid)] = abs(t - u)
-                    t += step
-    return out
+@dataclass
+class ShotJob:
+    """A full solve of one shot from its state when the job was made (:meth:`ClipSolver.solve_job`):
+    :meth:`run` touches nothing of the solver it came from, so it can run outside the caller's
+    lock; :meth:`ClipSolver.install` then takes its answer unless the shot changed meanwhile."""
+
+    frames: range
+    stamp: int
+    worker: ShotSolver
+    start: ShotFit | None
+    part: ShotPart | None = None
+    seconds: float = 0.0
+
+    def run(self) -> ShotJob:
+        t0 = time.perf_counter()
+        self.part = self.worker.part(self.frames, start=self.start)
+        self.seconds = time.perf_counter() - t0
+        return self
 
 
 @dataclass
@@ -146,8 +130,15 @@ class ClipSolver:
         self._parts = parts
         self._seconds = [0.0] * len(parts)
         self._labels: dict[int, dict[int, Label]] | None = None
+        self._errors: dict[int, float] | None = None
         self._carried_by_shot: dict[int, dict[int, dict[int, np.ndarray]]] | None = None
         self._drop: list[frozenset[int]] = [frozenset()] * len(parts)
+        #: per shot (by its first frame): when it last changed, and the shots whose answer is a
+        #: quick one (:meth:`quick_solve`) not yet followed by a full solve
+        self._stamps: dict[int, int] = {}
+        self._clock = 0
+        self._provisional: set[int] = set()
+        self._quick_seconds = 0.0
         for k in range(len(parts)):  # the edits made before: their shots leave the detections they corrected out
             if self._trust(k):
                 self._solve(k, warm=False)
@@ -194,6 +185,7 @@ class ClipSolver:
             d = self._solver.data[t]
             self._solver.own[t] = self._own_camera(d.obs if d is not None else None)
             self._solver.forget(t)
+            self._labels = self._carried_by_shot = self._errors = None  # a frame on its own camera shows another
         return self._solver.own[t]
 
     def cameras_of(self) -> list[Camera | None]:
@@ -269,6 +261,7 @@ class ClipSolver:
         else:
             self.edits.pop(t, None)
         k = self.shot_of(t)
+        self._changed(k)  # a job made before this edit is no answer to it
         self._solver.data[t] = self._frame_data(t, self._drop[k])
         self._solver.stale.add(t)  # its own camera: recalibrated when asked for (it can take a second)
         self._solver.forget(t)
@@ -286,6 +279,8 @@ class ClipSolver:
     def set_cut(self, t: int, cut: bool) -> None:
         """A cut before frame ``t`` added (``cut``) or removed by hand; the shots it touches are
         solved again from the frames' own cameras, the others keep their solution."""
+        for k in range(len(self._parts)):  # the shots kept keep a full answer
+            self.settle(k)
         self.cuts = self.cuts.with_cut(t, cut)
         old = {(p.frames.start, p.frames.stop): (p, sec) for p, sec in zip(self._parts, self._seconds)}
         parts, seconds = [], []
@@ -299,14 +294,72 @@ class ClipSolver:
         for t in range(self.T):
             self._solver.data[t] = self._frame_data(t)
         for k in range(len(parts)):
+            self._changed(k)  # a job made before the cut is no answer to it
             if self._trust(k):
                 self._solve(k, warm=False)
-        self._labels = self._carried_by_shot = None
 
     def solve(self, k: int | None = None, warm: bool = True) -> None:
         """Solve shot ``k`` (every shot when None) again."""
         for j in range(len(self._parts)) if k is None else [k]:
             self._solve(j, warm)
+
+    # ------------------------------------------------------------------ an edit's answer in two steps
+    def quick_solve(self, t: int) -> bool:
+        """After an edit on frame ``t`` (:meth:`set_edits` with ``solve`` off): its shot solved
+        again around ``t`` only (:meth:`ShotSolver.window_part`), an answer to draw at once; False
+        (nothing done) for a shot shorter than :data:`QUICK_MIN_FRAMES` frames or without a fit,
+        which a full solve answers as fast. The shot is :meth:`provisional` until a full solve
+        (:meth:`solve`, :meth:`install`, :meth:`settle`)."""
+        k = self.shot_of(t)
+        p = self._parts[k]
+        if len(p.frames) < QUICK_MIN_FRAMES or p.fit is None:
+            return False
+        t0 = time.perf_counter()
+        self._parts[k] = self._solver.window_part(p, t)
+        self._quick_seconds = time.perf_counter() - t0
+        self._changed(k)
+        self._provisional.add(p.frames.start)
+        return True
+
+    def provisional(self, k: int) -> bool:
+        """Shot ``k``'s cameras are a quick answer (:meth:`quick_solve`) its full solve has not replaced yet."""
+        return self._parts[k].frames.start in self._provisional
+
+    def solve_job(self, k: int) -> ShotJob:
+        """Shot ``k``'s full solve (warm, from its present answer) as a job to run anywhere."""
+        p = self._parts[k]
+        return ShotJob(p.frames, self._stamps.get(p.frames.start, 0), self._solver.detached(), p.fit)
+
+    def current(self, job: ShotJob) -> bool:
+        """Nothing changed ``job``'s shot since the job was made (it is still worth running)."""
+        return self._stamps.get(job.frames.start, 0) == job.stamp and any(p.frames == job.frames for p in self._parts)
+
+    def install(self, job: ShotJob) -> bool:
+        """Take a :class:`ShotJob`'s answer; False (nothing changes) when its shot changed since
+        the job was made (a later edit: its own job answers it) or the job has not run."""
+        k = next((j for j, p in enumerate(self._parts) if p.frames == job.frames), None)
+        if k is None or job.part is None or self._stamps.get(job.frames.start, 0) != job.stamp:
+            return False
+        self._parts[k], self._seconds[k] = job.part, job.seconds
+        self._changed(k)
+        self._provisional.discard(job.frames.start)
+        return True
+
+    def settle(self, k: int) -> None:
+        """Shot ``k`` fully solved now if its answer is a quick one (before its cameras are
+        written down: a review's snapshot, an accepted shot)."""
+        if self.provisional(k):
+            self._solve(k, warm=True)
+
+    def quick_seconds(self) -> float:
+        """How long the latest :meth:`quick_solve` took."""
+        return self._quick_seconds
+
+    def _changed(self, k: int) -> None:
+        """Shot ``k`` has another answer: what was derived from the old one goes."""
+        self._clock += 1
+        self._stamps[self._parts[k].frames.start] = self._clock
+        self._labels = self._carried_by_shot = self._errors = None
 
     # ------------------------------------------------------------------ labels
     def labels(self, t: int) -> dict[int, Label]:
@@ -365,7 +418,14 @@ class ClipSolver:
     def frame_error(self, t: int) -> float:
         """What the app ranks frame ``t`` by: the median distance (px) of its observations (each
         keypoint, the farthest point of each line and circle, the left-out ones too) to the camera
-        it uses; inf without one."""
+        it uses; inf without one. Measured once per solve (the clip's strip asks for every frame)."""
+        if self._errors is None:
+            self._errors = {}
+        if t not in self._errors:
+            self._errors[t] = self._frame_error(t)
+        return self._errors[t]
+
+    def _frame_error(self, t: int) -> float:
         cam, d = self.camera(t), self._solver.data[t]
         if cam is None:
             return float("inf")
@@ -387,4 +447,5 @@ class ClipSolver:
         start = p.fit if warm and p.fit is not None else None
         self._parts[k] = self._solver.part(p.frames, start=start)
         self._seconds[k] = time.perf_counter() - t0
-        self._labels = self._carried_by_shot = None
+        self._changed(k)
+        self._provisional.discard(p.frames.start)

@@ -37,13 +37,19 @@ from .problem import FrameData, Problem
 from .shot import FrameDistances, Selection, ShotProblem, TemporalParams, frame_data
 from .solver import SolverParams, levenberg_marquardt
 
-__all__ = ["ShotFit", "camera_vector", "distances", "fit_shot"]
+__all__ = ["WINDOW_RADIUS", "ShotFit", "camera_vector", "distances", "fit_shot", "fit_window", "window_of"]
 
 #: the relative decrease of the cost a solve from a previous solution stops at (1e-10 from the
 #: per-frame cameras): the cameras it gives differ by hundredths of a pixel
 WARM_TOL = 1e-6
 #: ... and its iterations at most (the page waits for it: the next edit goes on from where it is)
 WARM_ITERATIONS = 15
+#: the frames an edit's quick solve frees on either side of the edited one (:func:`fit_window`:
+#: half a second at 25 fps)
+WINDOW_RADIUS = 12
+#: frames held at each end of that window: the motion prior reads three frames in a row, so two
+#: held frames carry it across the window's ends
+_HELD = 2
 
 
 @dataclass
@@ -123,11 +129,63 @@ def camera_vector(cam: Camera) -> np.ndarray:
     return np.concatenate([cam.C, [cam.radial[0]], pan_tilt_roll_from_rotation(cam.R), [math.log(cam.fx)]])
 
 
-def _solve(m: ShotProblem, x: np.ndarray, params: TemporalParams, tol: float) -> tuple[np.ndarray, dict]:
-    """The shot solved from ``x`` by the one solver, soft-L1 (``robust``)."""
+def _solve(m: ShotProblem, x: np.ndarray, params: TemporalParams, tol: float,
+           free: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """The shot solved from ``x`` by the one solver, soft-L1 (``robust``); ``free``: a mask of the
+    parameters it may change (None: all), the others hold their value in ``x``."""
     solver = SolverParams(loss="soft_l1", f_scale=params.robust, max_iter=params.max_iterations, tol=tol,
                           step_tol=1e-10 * float(np.linalg.norm(x)), max_trials=12)
-    return levenberg_marquardt(m.evaluate, lambda x, dx: x + dx, x, solver)
+    if free is None:
+        return levenberg_marquardt(m.evaluate, lambda x, dx: x + dx, x, solver)
+    held = x.copy()
+
+    def evaluate(y: np.ndarray, jac: bool = False):
+        full = held.copy()
+        full[free] = y
+        r, J = m.evaluate(full, jac)
+        return r, (None if J is None else J[:, free])
+
+    y, info = levenberg_marquardt(evaluate, lambda y, dy: y + dy, x[free], solver)
+    out = held.copy()
+    out[free] = y
+    return out, info
+
+
+def _gated_solve(fd: Sequence[FrameData | None], size: tuple[float, float], params: TemporalParams,
+                 calib: CalibParams, x: np.ndarray, sel: list[Selection | None], tol: float,
+                 free: np.ndarray | None = None) -> tuple[np.ndarray, list[Selection | None], list, dict, ShotProblem]:
+    """Solve from ``x`` with the observations ``sel``, then with those the shot's camera puts within
+    the PnL gates, until that set stops changing (three solves at most). Returns ``x``, the
+    selections, the frames' distances (everything selected), the last solve's info with the
+    iterations of all of them, and the problem with everything selected (its cameras)."""
+    W = float(size[0])
+    point_gate, line_gate = calib.px(calib.point_gate_px, W), calib.px(calib.line_gate_px, W)
+    whole = ShotProblem(fd, size, params, alpha=calib.alpha)
+    nfev, info = 0, {"success": False, "cost": math.inf, "iterations": 0}
+    dist: list[FrameDistances | None] = []
+    for _ in range(3):
+        x, info = _solve(ShotProblem(fd, size, params, sel, calib.alpha), x, params, tol, free)
+        nfev += int(info["iterations"])
+        dist = whole.distances(x)
+        new = _gated(fd, dist, point_gate, line_gate, calib)
+        if _same(new, sel):
+            break
+        sel = new
+    return x, sel, dist, {**info, "iterations": nfev}, whole
+
+
+def _kept(fd: Sequence[FrameData | None], sel: Sequence[Selection | None],
+          dist: Sequence[FrameDistances | None]) -> tuple[list[np.ndarray], list[int]]:
+    """Per frame, the distances of the observations kept, and how many were left out."""
+    res, dropped = [], []
+    for d, s, m in zip(fd, sel, dist):
+        if d is None or s is None or m is None:
+            res.append(np.zeros(0))
+            dropped.append(0)
+            continue
+        res.append(m.kept(s))
+        dropped.append(d.obs.n_keypoints + len(d.obs.lines) + len(d.obs.circles) - s.size - s.left_out)
+    return res, dropped
 
 
 def _start_vector(start: ShotFit, T: int) -> np.ndarray:
@@ -202,7 +260,6 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
     fd = list(data) if data is not None else frame_data(observations, model)
     W = float(size[0])
     point_gate, line_gate = calib.px(calib.point_gate_px, W), calib.px(calib.line_gate_px, W)
-    whole = ShotProblem(fd, size, params, alpha=calib.alpha)
     if start is not None:
         x = _start_vector(start, T)
         sel = _kept_selections(fd, start, point_gate, line_gate, calib)
@@ -216,27 +273,53 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
         gate = calib.px(params.start_outlier_px, W)
         sel = _selections(fd, cameras, gate, gate, calib)
         tol = 1e-10
-    nfev, info = 0, {"success": False, "cost": math.inf, "iterations": 0}
-    dist: list[FrameDistances | None] = []
-    for _ in range(3):
-        x, info = _solve(ShotProblem(fd, size, params, sel, calib.alpha), x, params, tol)
-        nfev += int(info["iterations"])
-        # then those the shot's camera agrees with, until the set stops changing
-        dist = whole.distances(x)
-        new = _gated(fd, dist, point_gate, line_gate, calib)
-        if _same(new, sel):
-            break
-        sel = new
-    cams = whole.cameras(x)
-    res, dropped = [], []
-    for t in range(T):
-        d, s, m = fd[t], sel[t], dist[t]
-        if d is None or s is None or m is None:
-            res.append(np.zeros(0))
-            dropped.append(0)
-            continue
-        res.append(m.kept(s))
-        dropped.append(d.obs.n_keypoints + len(d.obs.lines) + len(d.obs.circles) - s.size - s.left_out)
+    x, sel, dist, info, whole = _gated_solve(fd, size, params, calib, x, sel, tol)
+    res, dropped = _kept(fd, sel, dist)
     C, k1, per = whole.unpack(x)
-    return ShotFit(cams, C.copy(), float(k1), per[:, :3].copy(), np.exp(per[:, 3]), res, dropped,
-                   float(info["cost"]), nfev, bool(info["success"]), sel, dist)
+    return ShotFit(whole.cameras(x), C.copy(), float(k1), per[:, :3].copy(), np.exp(per[:, 3]), res, dropped,
+                   float(info["cost"]), int(info["iterations"]), bool(info["success"]), sel, dist)
+
+
+def window_of(i: int, T: int, radius: int = WINDOW_RADIUS) -> range:
+    """The frames of a ``T``-frame shot an edit on its frame ``i`` frees in :func:`fit_window`."""
+    return range(max(0, i - radius), min(T, i + radius + 1))
+
+
+def fit_window(data: Sequence[FrameData | None], start: ShotFit, i: int, size: tuple[float, float],
+               params: TemporalParams = TemporalParams(), calib: CalibParams = CalibParams(),
+               radius: int = WINDOW_RADIUS) -> ShotFit:
+    """Shot ``start`` solved again after an edit on its frame ``i``, around that frame only: the
+    frames of :func:`window_of` are free, the others and the shot's centre and k1 hold their
+    values of ``start`` (two held frames each side carry the motion prior across the window's
+    ends). ``data``: the shot's :func:`~pnlviz.calib.shot.frame_data`, the edit in it.
+
+    An edit moves the frames near it most and the shot's shared centre a little: on a 250-frame
+    synthetic shot this lands within 0.25 px of the full solve (:func:`fit_shot` from ``start``)
+    in a tenth of its time (``benchmarks/bench_clip_browser.py``). A provisional answer to draw at
+    once while the full solve runs; its ``cost`` is ``start``'s."""
+    T = len(data)
+    if len(start.cameras) != T:
+        raise ValueError(f"a window of a solution of the same {T} frames, got {len(start.cameras)}")
+    free_frames = window_of(i, T, radius)
+    a, b = max(0, free_frames.start - _HELD), min(T, free_frames.stop + _HELD)
+    W = float(size[0])
+    point_gate, line_gate = calib.px(calib.point_gate_px, W), calib.px(calib.line_gate_px, W)
+    sel = _kept_selections(data, start, point_gate, line_gate, calib)[a:b]
+    x0 = _start_vector(start, T)
+    x = np.concatenate([x0[:4], x0[4 + 4 * a:4 + 4 * b]])
+    free = np.zeros(len(x), bool)
+    free[4 + 4 * (free_frames.start - a):4 + 4 * (free_frames.stop - a)] = True
+    params = replace(params, max_iterations=min(params.max_iterations, WARM_ITERATIONS))
+    fd = list(data[a:b])
+    x, sel, dist, info, m = _gated_solve(fd, size, params, calib, x, sel, WARM_TOL, free)
+    _, _, per = m.unpack(x)
+    res, dropped = _kept(fd, sel, dist)
+    cameras, angles, focal = list(start.cameras), start.angles.copy(), start.focal.copy()
+    selections = list(start.selections or [None] * T)
+    distances_ = list(start.distances or [None] * T)
+    residuals, dropped_ = list(start.residuals), list(start.dropped)
+    cameras[a:b], selections[a:b], distances_[a:b], residuals[a:b], dropped_[a:b] = m.cameras(x), sel, dist, res, dropped
+    angles[a:b], focal[a:b] = per[:, :3], np.exp(per[:, 3])
+    return replace(start, cameras=cameras, angles=angles, focal=focal, residuals=residuals, dropped=dropped_,
+                   nfev=int(info["iterations"]), converged=start.converged and bool(info["success"]),
+                   selections=selections, distances=distances_)

@@ -18,6 +18,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
+import copy
+
 import numpy as np
 
 from pnlviz.field.model import FieldModel, load_field_model
@@ -29,7 +31,7 @@ from .observations import Observations
 from .problem import FrameData
 from .shot import FrameDistances, TemporalParams, frame_data
 from .shot_check import CameraChoice, alone_kept_by_shot, judge_frame
-from .shot_fit import ShotFit, distances, fit_shot
+from .shot_fit import ShotFit, distances, fit_shot, fit_window, window_of
 
 if TYPE_CHECKING:  # imported when called (frame imports this module's neighbours)
     from .frame import FrameInputs, FrameSettings
@@ -160,6 +162,14 @@ class ShotSolver:
             self._own[t] = None if d is None or cam is None else distances(d, cam)
         return self._own[t]
 
+    def detached(self) -> ShotSolver:
+        """A copy the caller's later changes to the frames (:attr:`data`, :attr:`own`,
+        :attr:`stale`) do not reach: a solve of it can run in another thread while this one takes
+        the next edit."""
+        out = copy.copy(self)
+        out.data, out.own, out.stale, out._own = list(self.data), list(self.own), set(self.stale), dict(self._own)
+        return out
+
     def solve(self, found: Sequence[range], cuts: CutEdits) -> tuple[list[ShotPart], str | None]:
         """The clip's shots from the ``found`` ones and the hand's ``cuts``, each fitted, judged and
         split where that helps; and why the frames are not a clip (None: they are). A clip whose
@@ -190,6 +200,19 @@ class ShotSolver:
             if other.worse < part.worse:
                 return other
         return part
+
+    def window_part(self, part: ShotPart, t: int) -> ShotPart:
+        """``part`` solved again after an edit on its frame ``t``, around that frame only
+        (:func:`~pnlviz.calib.shot_fit.fit_window`), the frames there judged again: a provisional
+        answer, drawn while :meth:`part` solves the whole shot."""
+        if part.fit is None:
+            raise ValueError("a shot without a fit has no window to solve again")
+        i = t - part.frames.start
+        fit = fit_window([self.data[u] for u in part.frames], part.fit, i, self.size, self.params, self.calib)
+        choices = list(part.choices)
+        for j in window_of(i, len(part.frames)):
+            choices[j] = self._judge(part.frames.start + j, j, fit)
+        return ShotPart(part.frames, fit, alone_kept_by_shot(choices))
 
     def _fit(self, frames: range, start: ShotFit | None, params: TemporalParams) -> ShotPart:
         fd = [self.data[t] for t in frames]
