@@ -53,6 +53,8 @@ class ClipShots:
         self._lock = threading.RLock()
         #: ``callback(stems)`` after a shot was solved again: its frames show another camera
         self._shot_listeners: list = []
+        #: full solves waiting for :meth:`finish`: ``(model key, model, job)``
+        self._pending: list[tuple] = []
 
     def listen(self, callback) -> None:
         """Call ``callback(stems)`` with the frames of a shot whenever it is solved again after an
@@ -128,7 +130,11 @@ class ClipShots:
             self.host.notify(s)  # what the clip's frames show changed: the tabs showing one redraw
 
     def changed(self, stem: str) -> None:
-        """A frame changed (its edits, its review, its detections): its clip's models follow."""
+        """A frame changed (its edits, its review, its detections): its clip's models follow.
+
+        An edit on a long shot is answered twice: here a quick solve around the edited frame
+        (:meth:`ClipSolver.quick_solve`), which the tabs on the shot's other frames draw at once;
+        the full solve waits for :meth:`finish`."""
         where = self._where.get(stem)
         if where is None:
             return
@@ -144,13 +150,40 @@ class ClipShots:
                     continue
                 edits = dict(record.get("keypoints") or {})
                 if edits != solver.edits.get(t, {}):
-                    k = solver.set_edits(t, edits)
+                    k = solver.set_edits(t, edits, solve=False)
+                    if solver.quick_solve(t):
+                        self._pending.append((key, solver, solver.solve_job(k)))
+                    else:
+                        solver.solve(k)
+                        self._after_solve(key, solver, k)
                     solved |= {self.clips[clip][u] for u in solver.shots[k]}
-                    if key[1] == self.host.default_settings:
-                        self._refresh_reviewed(clip, solver, k, key[1])
-        if solved:
+        self._tell(solved - {stem})  # the edited frame's tabs redraw as it changed
+
+    def finish(self) -> None:
+        """The full solves the quick answers of :meth:`changed` wait for, run outside the lock (the
+        tabs draw meanwhile) and taken unless a later edit came first (its own job answers it);
+        the tabs on their shots redraw again (the cameras move by a fraction of a pixel)."""
+        with self._lock:
+            jobs, self._pending = self._pending, []
+        for key, solver, job in jobs:
+            with self._lock:
+                if not solver.current(job):
+                    continue
+            job.run()
+            with self._lock:
+                if not solver.install(job):
+                    continue
+                self._after_solve(key, solver, solver.shot_of(job.frames.start))
+            self._tell({self.clips[key[0]][u] for u in job.frames})
+
+    def _after_solve(self, key: tuple, solver: ClipSolver, k: int) -> None:
+        if key[1] == self.host.default_settings:
+            self._refresh_reviewed(key[0], solver, k, key[1])
+
+    def _tell(self, stems: set[str]) -> None:
+        if stems:
             for callback in list(self._shot_listeners):
-                callback(sorted(solved - {stem}))  # the edited frame's tabs redraw as it changed
+                callback(sorted(stems))
 
     def _refresh_reviewed(self, clip: str, solver: ClipSolver, k: int, settings) -> None:
         """The frames of shot ``k`` reviewed with their shot record what it shows now."""
@@ -169,6 +202,8 @@ class ClipShots:
             return None
         self.changed(stem)
         solver = place.solver or self.build(place.clip, settings)
+        with self._lock:
+            solver.settle(solver.shot_of(place.t))
         return shot_snapshot(self.host.reader, solver, place.clip, place.stems, place.t, settings)
 
     def shot_view(self, view, settings):
@@ -215,6 +250,8 @@ class ClipShots:
             return []
         solver = place.solver or self.build(place.clip, settings)
         k = solver.shot_of(place.t)
+        with self._lock:
+            solver.settle(k)
         return accept_shot(self.host.reader, solver, place.clip, place.stems, k, settings, write=self.host.write)
 
     def toggle_cut(self, stem: str, settings) -> bool | None:

@@ -307,10 +307,13 @@ class AppState:
 
     def notify(self, stem: str, changed: bool = True) -> bool:
         """Tell the listeners (the shot models, then every tab) that ``stem`` shows something else
-        now (when ``changed``); returns ``changed``."""
+        now (when ``changed``), then run the shots' full solves waiting behind quick answers
+        (:meth:`pnlviz.app.shots.ClipShots.finish`: the tabs redraw again); returns ``changed``."""
         if changed:
             for callback in list(self._listeners):
                 callback(stem)
+            if self._shots is not None:
+                self._shots.finish()  # the shots' full solves after the quick answers drawn
         return changed
 
     # ------------------------------------------------------------------ review and edits
@@ -324,7 +327,9 @@ class AppState:
         snapshot, ``snapshot`` when given (a shot's; a function of the record as changed, for one
         made from it), else what the frame shows under ``settings`` when it is reviewed
         (:meth:`snapshot`); then every tab is told (``notify`` False: a snapshot refreshed while they
-        are being told already). True when the record changed."""
+        are being told already). A clip frame's shot model follows before the snapshot: the tabs on
+        the shot's other frames draw its quick answer while the snapshot is taken
+        (:meth:`pnlviz.app.shots.ClipShots.changed`). True when the record changed."""
         self.index_of(stem)
         with self.edits.lock(stem):  # the change and the snapshot that goes with it are one
             changed = change is not None and self.edits.act(stem, change, corrected=corrected, merge=merge)
@@ -332,6 +337,8 @@ class AppState:
             if snap is not None and snap != self.edits.get(stem).get("snapshot"):
                 self.edits.update(stem, snapshot=snap)
                 changed = True
+        if notify and changed and self._shots is not None:
+            self._shots.changed(stem)  # a clip's tabs on other frames draw the shot's quick answer meanwhile
         if snapshot is None and changed:
             self.snapshot(stem, settings)
         return self.notify(stem, changed) if notify else changed
