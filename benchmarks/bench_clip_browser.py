@@ -127,7 +127,7 @@ def main() -> None:
                 out.append(settled_after(cast, up))
                 k_shot = solver.shot_of(middle)
                 solves.append(solver.solve_seconds(k_shot))
-                quick.append(solver.quick_seconds())
+                quick.append(solver.quick_seconds)
             print(f"edit release in tab A -> tab B ({args.gap} frames on) drawn under the new shot camera: "
                   f"{percentiles(out)}")
             print(f"the shot's solve after an edit (server): quick, around the edit: median "

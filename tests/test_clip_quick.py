@@ -77,9 +77,9 @@ def test_the_quick_answer_moves_the_frames_near_the_edit_toward_the_full_solve(s
         before = quick.cameras_of()
         kid, xy = _edit(plan, t)
         k = quick.set_keypoint(t, kid, xy, solve=False)
-        assert quick.quick_solve(t) and quick.provisional(k)
+        assert quick.quick_solve(t) and quick.fit(k).provisional
         full.set_keypoint(t, kid, xy)  # the full solve at once, as the command line does
-        assert not full.provisional(k)
+        assert not full.fit(k).provisional
         after, target = quick.cameras_of(), full.cameras_of()
         near = window_of(t, 90, WINDOW_RADIUS)
         far = [u for u in range(90) if u < near.start - 2 or u >= near.stop + 2]
@@ -90,7 +90,7 @@ def test_the_quick_answer_moves_the_frames_near_the_edit_toward_the_full_solve(s
         pin = np.hypot(*(before[t].project(MODEL.keypoint_xyz([kid]))[0] - xy))
         assert quick.labels(t)[kid].residual < 0.5 * pin  # the hand's point is honoured at once
         job = quick.solve_job(k).run()
-        assert quick.install(job) and not quick.provisional(k)
+        assert quick.install(job) and not quick.fit(k).provisional
         assert _max_error(quick.cameras_of(), target) < 0.05
         assert quick.labels(t)[kid].provenance == "hand"
 
@@ -105,11 +105,11 @@ def test_a_job_overtaken_by_a_later_edit_is_not_taken(shot):
     kid2, xy2 = _edit(plan, 60)
     s.set_keypoint(60, kid2, xy2, solve=False)  # another tab's edit on the same shot
     s.quick_solve(60)
-    assert not s.current(first)
+    assert not first.current()
     assert not s.install(first.run())  # it knows nothing of the second edit
-    assert s.provisional(k)
+    assert s.fit(k).provisional
     second = s.solve_job(k).run()
-    assert s.current(second) and s.install(second) and not s.provisional(k)
+    assert second.current() and s.install(second) and not s.fit(k).provisional
     again = s.solve_job(k).run()  # the answer taken is the solve of both edits: nothing left to move
     assert _max_error(s.cameras_of(), again.part.fit.cameras) < 0.02
     assert not s.install(s.solve_job(k))  # a job that has not run changes nothing
@@ -123,14 +123,14 @@ def test_settle_solves_a_provisional_shot_fully_and_short_shots_are_solved_fully
     s.quick_solve(50)
     full.set_keypoint(50, kid, xy)
     s.settle(k)
-    assert not s.provisional(k)
+    assert not s.fit(k).provisional
     assert _max_error(s.cameras_of(), full.cameras_of()) < 0.05
     short = _solver(obs[:40])
     kid, xy = _edit(plan, 20)
     short.set_keypoint(20, kid, xy, solve=False)
     before = short.cameras_of()
     assert not short.quick_solve(20)  # shorter than QUICK_MIN_FRAMES: its full solve is as fast
-    assert _max_error(before, short.cameras_of()) == 0.0 and not short.provisional(0)
+    assert _max_error(before, short.cameras_of()) == 0.0 and not short.fit(0).provisional
 
 
 @pytest.fixture(scope="module")
@@ -166,7 +166,7 @@ def test_the_app_tells_the_shots_tabs_twice_and_keeps_the_latest_full_answer(cli
         st.move_keypoint(stems[35], kid, *xy, settings)
         assert len(told) == 2
         assert set(told[0]) == set(stems) - {stems[35]} and set(told[1]) == set(stems)
-        assert not solver.provisional(0)
+        assert not solver.fit(0).provisional
 
         errors: list[BaseException] = []
 
@@ -185,7 +185,7 @@ def test_the_app_tells_the_shots_tabs_twice_and_keeps_the_latest_full_answer(cli
         for th in threads:
             th.join()
         assert errors == []
-        assert not solver.provisional(0)
+        assert not solver.fit(0).provisional
         for t in [*range(10, 30, 4), *range(40, 60, 4)]:
             k, xy = _edit(plan, t)
             assert solver.edits[t][str(k)] == pytest.approx(xy)
@@ -193,3 +193,35 @@ def test_the_app_tells_the_shots_tabs_twice_and_keeps_the_latest_full_answer(cli
         assert _max_error(solver.cameras_of(), again.part.fit.cameras) < 0.02
     finally:
         st.close()
+
+
+def test_a_full_solve_that_fails_leaves_the_edit_saved_and_the_shot_provisional_until_settled(
+        clip_folder, tmp_path, monkeypatch):
+    from pnlviz.app.state import AppState
+    from pnlviz.calib.clip import ShotJob
+
+    plan, folder = clip_folder
+    st = AppState(folder, edits=tmp_path / "edits")
+    try:
+        settings = st.default_settings
+        clip = next(iter(st.shots.clips))
+        stems = st.shots.clips[clip]
+        solver = st.shots.build(clip, settings)
+
+        def broken(self):
+            raise RuntimeError("solver failed")
+
+        with monkeypatch.context() as m:
+            m.setattr(ShotJob, "run", broken)
+            kid, xy = _edit(plan, 35)
+            with pytest.raises(RuntimeError, match="solver failed"):
+                st.move_keypoint(stems[35], kid, *xy, settings)
+        assert st.edits.get(stems[35])["keypoints"][str(kid)] == pytest.approx(xy)  # the edit is saved
+        assert solver.edits[35][str(kid)] == pytest.approx(xy) and solver.fit(0).provisional
+        full = solver.solve_job(0).run().part.fit.cameras  # a full solve from where it stands
+        solver.settle(0)  # what a review snapshot or an accepted shot does first
+        assert not solver.fit(0).provisional
+        assert _max_error(solver.cameras_of(), full) < 0.05
+    finally:
+        st.close()
+

@@ -162,19 +162,29 @@ class ClipShots:
     def finish(self) -> None:
         """The full solves the quick answers of :meth:`changed` wait for, run outside the lock (the
         tabs draw meanwhile) and taken unless a later edit came first (its own job answers it);
-        the tabs on their shots redraw again (the cameras move by a fraction of a pixel)."""
+        the tabs on their shots redraw again (usually a fraction of a pixel off the quick answer;
+        a few pixels where the edit moved the shot's centre). A solve that fails leaves its shot
+        provisional (settled before anything is written down) and the others still run; its
+        error is raised after them."""
         with self._lock:
             jobs, self._pending = self._pending, []
+        failed: Exception | None = None
         for key, solver, job in jobs:
             with self._lock:
-                if not solver.current(job):
+                if not job.current():
                     continue
-            job.run()
+            try:
+                job.run()
+            except Exception as exc:  # noqa: BLE001 - raised below, once the other shots are solved
+                failed = failed or exc
+                continue
             with self._lock:
                 if not solver.install(job):
                     continue
                 self._after_solve(key, solver, solver.shot_of(job.frames.start))
             self._tell({self.clips[key[0]][u] for u in job.frames})
+        if failed is not None:
+            raise failed
 
     def _after_solve(self, key: tuple, solver: ClipSolver, k: int) -> None:
         if key[1] == self.host.default_settings:

@@ -31,7 +31,7 @@ Pure (numpy / scipy, no I/O): the app, the export and the benchmark call the sam
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +66,17 @@ PROVENANCE = PROVENANCES
 QUICK_MIN_FRAMES = 64
 
 
+def _own_camera(params: CalibParams, model: FieldModel, obs: Observations | None) -> Camera | None:
+    """A frame's own camera from its observations (None: it has none)."""
+    if obs is None or obs.n_keypoints == 0:
+        return None
+    try:
+        r = calibrate(obs, params, model)
+    except Exception:  # noqa: BLE001 - a frame without its own camera is placed by its shot
+        return None
+    return r.camera if r.ok else None
+
+
 @dataclass
 class ShotJob:
     """A full solve of one shot from its state when the job was made (:meth:`ClipSolver.solve_job`):
@@ -73,9 +84,10 @@ class ShotJob:
     lock; :meth:`ClipSolver.install` then takes its answer unless the shot changed meanwhile."""
 
     frames: range
-    stamp: int
     worker: ShotSolver
     start: ShotFit | None
+    #: nothing changed the shot since the job was made (it is still worth running)
+    current: Callable[[], bool]
     part: ShotPart | None = None
     seconds: float = 0.0
 
@@ -119,7 +131,8 @@ class ClipSolver:
                 self.edits[int(t)] = {str(int(k)): (None if v is None else [float(v[0]), float(v[1])])
                                       for k, v in e.items()}
         data = [self._frame_data(t) for t in range(self.T)]
-        own = ([self._own_camera(d.obs if d else None) for d in data] if self.cameras is None else list(self.cameras))
+        own = ([_own_camera(self.calib_params, self.field_model, d.obs if d else None) for d in data]
+               if self.cameras is None else list(self.cameras))
         self._solver = ShotSolver(data, own, self.size, self.params, self.calib_params, self.field_model)
         #: the shots found (before the hand's cuts; the fit's splits included)
         found = find_shots(own, self.changes, self.params)
@@ -133,12 +146,11 @@ class ClipSolver:
         self._errors: dict[int, float] | None = None
         self._carried_by_shot: dict[int, dict[int, dict[int, np.ndarray]]] | None = None
         self._drop: list[frozenset[int]] = [frozenset()] * len(parts)
-        #: per shot (by its first frame): when it last changed, and the shots whose answer is a
-        #: quick one (:meth:`quick_solve`) not yet followed by a full solve
+        #: per shot (by its first frame): when it last changed (a job made before is no answer)
         self._stamps: dict[int, int] = {}
         self._clock = 0
-        self._provisional: set[int] = set()
-        self._quick_seconds = 0.0
+        #: how long the latest :meth:`quick_solve` took (seconds)
+        self.quick_seconds = 0.0
         for k in range(len(parts)):  # the edits made before: their shots leave the detections they corrected out
             if self._trust(k):
                 self._solve(k, warm=False)
@@ -183,7 +195,7 @@ class ClipSolver:
         if t in self._solver.stale:
             self._solver.stale.discard(t)
             d = self._solver.data[t]
-            self._solver.own[t] = self._own_camera(d.obs if d is not None else None)
+            self._solver.own[t] = _own_camera(self.calib_params, self.field_model, d.obs if d is not None else None)
             self._solver.forget(t)
             self._labels = self._carried_by_shot = self._errors = None  # a frame on its own camera shows another
         return self._solver.own[t]
@@ -308,52 +320,44 @@ class ClipSolver:
         """After an edit on frame ``t`` (:meth:`set_edits` with ``solve`` off): its shot solved
         again around ``t`` only (:meth:`ShotSolver.window_part`), an answer to draw at once; False
         (nothing done) for a shot shorter than :data:`QUICK_MIN_FRAMES` frames or without a fit,
-        which a full solve answers as fast. The shot is :meth:`provisional` until a full solve
-        (:meth:`solve`, :meth:`install`, :meth:`settle`)."""
+        which a full solve answers as fast. The shot's fit is ``provisional`` until a full solve
+        (:meth:`solve`, :meth:`install`, :meth:`settle`); :attr:`quick_seconds`: how long it took."""
         k = self.shot_of(t)
         p = self._parts[k]
         if len(p.frames) < QUICK_MIN_FRAMES or p.fit is None:
             return False
         t0 = time.perf_counter()
         self._parts[k] = self._solver.window_part(p, t)
-        self._quick_seconds = time.perf_counter() - t0
+        self.quick_seconds = time.perf_counter() - t0
         self._changed(k)
-        self._provisional.add(p.frames.start)
         return True
-
-    def provisional(self, k: int) -> bool:
-        """Shot ``k``'s cameras are a quick answer (:meth:`quick_solve`) its full solve has not replaced yet."""
-        return self._parts[k].frames.start in self._provisional
 
     def solve_job(self, k: int) -> ShotJob:
         """Shot ``k``'s full solve (warm, from its present answer) as a job to run anywhere."""
         p = self._parts[k]
-        return ShotJob(p.frames, self._stamps.get(p.frames.start, 0), self._solver.detached(), p.fit)
+        frames, stamp = p.frames, self._stamps.get(p.frames.start, 0)
 
-    def current(self, job: ShotJob) -> bool:
-        """Nothing changed ``job``'s shot since the job was made (it is still worth running)."""
-        return self._stamps.get(job.frames.start, 0) == job.stamp and any(p.frames == job.frames for p in self._parts)
+        def current() -> bool:
+            return self._stamps.get(frames.start, 0) == stamp and any(q.frames == frames for q in self._parts)
+
+        return ShotJob(frames, self._solver.detached(), p.fit, current)
 
     def install(self, job: ShotJob) -> bool:
         """Take a :class:`ShotJob`'s answer; False (nothing changes) when its shot changed since
         the job was made (a later edit: its own job answers it) or the job has not run."""
-        k = next((j for j, p in enumerate(self._parts) if p.frames == job.frames), None)
-        if k is None or job.part is None or self._stamps.get(job.frames.start, 0) != job.stamp:
+        if job.part is None or not job.current():
             return False
+        k = next(j for j, p in enumerate(self._parts) if p.frames == job.frames)
         self._parts[k], self._seconds[k] = job.part, job.seconds
         self._changed(k)
-        self._provisional.discard(job.frames.start)
         return True
 
     def settle(self, k: int) -> None:
-        """Shot ``k`` fully solved now if its answer is a quick one (before its cameras are
-        written down: a review's snapshot, an accepted shot)."""
-        if self.provisional(k):
+        """Shot ``k`` fully solved now if its answer is a quick one (``fit(k).provisional``:
+        before its cameras are written down, a review's snapshot, an accepted shot)."""
+        fit = self._parts[k].fit
+        if fit is not None and fit.provisional:
             self._solve(k, warm=True)
-
-    def quick_seconds(self) -> float:
-        """How long the latest :meth:`quick_solve` took."""
-        return self._quick_seconds
 
     def _changed(self, k: int) -> None:
         """Shot ``k`` has another answer: what was derived from the old one goes."""
@@ -370,18 +374,6 @@ class ClipSolver:
         if t not in self._labels:
             self._labels[t] = self._frame_labels(t)
         return self._labels[t]
-
-    def _carried(self, k: int) -> dict[int, dict[int, np.ndarray]]:
-        """The hand's points carried through shot ``k`` (:func:`carried_points`), per frame."""
-        if self._carried_by_shot is None:
-            self._carried_by_shot = {}
-        if k not in self._carried_by_shot:
-            frames = self._parts[k].frames
-            cams: list[Camera | None] = [None] * self.T
-            for t in frames:
-                cams[t] = self.camera(t)
-            self._carried_by_shot[k] = carried_points(frames, self.edits, cams, self.field_model)
-        return self._carried_by_shot[k]
 
     def provenance(self, t: int, kid: int) -> str:
         """What frame ``t``'s own keypoint ``kid`` is called (see ``origins``): "annotation" or
@@ -400,37 +392,32 @@ class ClipSolver:
                 r = None if res is None or not np.isfinite(res[i]) else float(res[i])
                 labels[int(kid)] = Label(float(obs.kp_xy[i, 0]), float(obs.kp_xy[i, 1]), str(obs.kp_sets[i]),
                                          "hand" if obs.pins[i] else self.provenance(t, int(kid)), r)
-        for kid, uv in self._carried(self.shot_of(t)).get(t, {}).items():
+        k = self.shot_of(t)
+        if self._carried_by_shot is None:
+            self._carried_by_shot = {}
+        if k not in self._carried_by_shot:  # the hand's points carried through the shot, once per solve
+            frames = self._parts[k].frames
+            cams: list[Camera | None] = [None] * self.T
+            for u in frames:
+                cams[u] = self.camera(u)
+            self._carried_by_shot[k] = carried_points(frames, self.edits, cams, self.field_model)
+        for kid, uv in self._carried_by_shot[k].get(t, {}).items():
             if kid not in labels:
                 labels[kid] = Label(float(uv[0]), float(uv[1]), self.field_model.keypoints[kid].group, "shot", 0.0)
         return labels
 
     # ------------------------------------------------------------------ internals
-    def _own_camera(self, obs: Observations | None) -> Camera | None:
-        if obs is None or obs.n_keypoints == 0:
-            return None
-        try:
-            r = calibrate(obs, self.calib_params, self.field_model)
-        except Exception:  # noqa: BLE001 - a frame without its own camera is placed by its shot
-            return None
-        return r.camera if r.ok else None
-
     def frame_error(self, t: int) -> float:
         """What the app ranks frame ``t`` by: the median distance (px) of its observations (each
         keypoint, the farthest point of each line and circle, the left-out ones too) to the camera
         it uses; inf without one. Measured once per solve (the clip's strip asks for every frame)."""
         if self._errors is None:
             self._errors = {}
-        if t not in self._errors:
-            self._errors[t] = self._frame_error(t)
-        return self._errors[t]
-
-    def _frame_error(self, t: int) -> float:
+        if t in self._errors:
+            return self._errors[t]
         cam, d = self.camera(t), self._solver.data[t]
-        if cam is None:
-            return float("inf")
-        if d is None:
-            return 0.0
+        if cam is None or d is None:
+            return self._errors.setdefault(t, float("inf") if cam is None else 0.0)
         p = self._parts[self.shot_of(t)]
         i = t - p.frames.start
         if p.choices[i].use == "shot" and p.fit is not None and p.fit.distances is not None:
@@ -439,7 +426,7 @@ class ClipSolver:
             m = distances(d, cam)
         r = np.concatenate([m.keypoints, list(m.classes.values())]) if m is not None else np.zeros(0)
         r = r[np.isfinite(r)]
-        return float(np.median(r)) if len(r) else 0.0
+        return self._errors.setdefault(t, float(np.median(r)) if len(r) else 0.0)
 
     def _solve(self, k: int, warm: bool) -> None:
         p = self._parts[k]
@@ -448,4 +435,3 @@ class ClipSolver:
         self._parts[k] = self._solver.part(p.frames, start=start)
         self._seconds[k] = time.perf_counter() - t0
         self._changed(k)
-        self._provisional.discard(p.frames.start)

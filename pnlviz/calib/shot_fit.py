@@ -71,6 +71,8 @@ class ShotFit:
     selections: list[Selection | None] | None = None
     #: per frame: how far its shot camera puts each of its observations
     distances: list[FrameDistances | None] | None = None
+    #: a quick answer around an edit (:func:`fit_window`), not yet a solve of the whole shot
+    provisional: bool = False
 
 
 def distances(data: FrameData, cam: Camera) -> FrameDistances:
@@ -322,4 +324,4 @@ def fit_window(data: Sequence[FrameData | None], start: ShotFit, i: int, size: t
     angles[a:b], focal[a:b] = per[:, :3], np.exp(per[:, 3])
     return replace(start, cameras=cameras, angles=angles, focal=focal, residuals=residuals, dropped=dropped_,
                    nfev=int(info["iterations"]), converged=start.converged and bool(info["success"]),
-                   selections=selections, distances=distances_)
+                   selections=selections, distances=distances_, provisional=True)
