@@ -147,81 +147,76 @@ def clip_folder(tmp_path_factory):
     return plan, folder
 
 
-def test_the_app_tells_the_shots_tabs_twice_and_keeps_the_latest_full_answer(clip_folder, tmp_path):
+@pytest.fixture
+def served(clip_folder, tmp_path):
+    """The clip's app state, its model built: ``(plan, state, settings, stems, solver)``."""
+    from pnlviz.app.state import AppState
+
+    plan, folder = clip_folder
+    st = AppState(folder, edits=tmp_path / "edits")
+    try:
+        clip = next(iter(st.shots.clips))
+        yield plan, st, st.default_settings, st.shots.clips[clip], st.shots.build(clip, st.default_settings)
+    finally:
+        st.close()
+
+
+def test_the_app_tells_the_shots_tabs_twice_and_keeps_the_latest_full_answer(served):
     """Two threads (two tabs) edit frames of one 70-frame shot at once: the shot's other frames
     are told once for the quick answer (the edited frame is not: its tab redraws as it changed)
     and once for the full one; when both are done the shot holds a full answer of every edit."""
-    from pnlviz.app.state import AppState
+    plan, st, settings, stems, solver = served
+    told: list[list[str]] = []
+    st.shots.listen(told.append)
+    kid, xy = _edit(plan, 35)
+    st.move_keypoint(stems[35], kid, *xy, settings)
+    assert len(told) == 2
+    assert set(told[0]) == set(stems) - {stems[35]} and set(told[1]) == set(stems)
+    assert not solver.fit(0).provisional
 
-    plan, folder = clip_folder
-    st = AppState(folder, edits=tmp_path / "edits")
-    try:
-        settings = st.default_settings
-        clip = next(iter(st.shots.clips))
-        stems = st.shots.clips[clip]
-        solver = st.shots.build(clip, settings)
-        told: list[list[str]] = []
-        st.shots.listen(told.append)
-        kid, xy = _edit(plan, 35)
-        st.move_keypoint(stems[35], kid, *xy, settings)
-        assert len(told) == 2
-        assert set(told[0]) == set(stems) - {stems[35]} and set(told[1]) == set(stems)
-        assert not solver.fit(0).provisional
+    errors: list[BaseException] = []
 
-        errors: list[BaseException] = []
+    def edits(frames) -> None:
+        try:
+            for t in frames:
+                k, (x, y) = _edit(plan, t)
+                st.move_keypoint(stems[t], k, x, y, settings)
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
 
-        def edits(frames) -> None:
-            try:
-                for t in frames:
-                    k, (x, y) = _edit(plan, t)
-                    st.move_keypoint(stems[t], k, x, y, settings)
-            except BaseException as exc:  # noqa: BLE001 - reported below
-                errors.append(exc)
-
-        threads = [threading.Thread(target=edits, args=(range(10, 30, 4),)),
-                   threading.Thread(target=edits, args=(range(40, 60, 4),))]
-        for th in threads:
-            th.start()
-        for th in threads:
-            th.join()
-        assert errors == []
-        assert not solver.fit(0).provisional
-        for t in [*range(10, 30, 4), *range(40, 60, 4)]:
-            k, xy = _edit(plan, t)
-            assert solver.edits[t][str(k)] == pytest.approx(xy)
-        again = solver.solve_job(0).run()
-        assert _max_error(solver.cameras_of(), again.part.fit.cameras) < 0.02
-    finally:
-        st.close()
+    threads = [threading.Thread(target=edits, args=(range(10, 30, 4),)),
+               threading.Thread(target=edits, args=(range(40, 60, 4),))]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert errors == []
+    assert not solver.fit(0).provisional
+    for t in [*range(10, 30, 4), *range(40, 60, 4)]:
+        k, xy = _edit(plan, t)
+        assert solver.edits[t][str(k)] == pytest.approx(xy)
+    again = solver.solve_job(0).run()
+    assert _max_error(solver.cameras_of(), again.part.fit.cameras) < 0.02
 
 
 def test_a_full_solve_that_fails_leaves_the_edit_saved_and_the_shot_provisional_until_settled(
-        clip_folder, tmp_path, monkeypatch):
-    from pnlviz.app.state import AppState
+        served, monkeypatch):
     from pnlviz.calib.clip import ShotJob
 
-    plan, folder = clip_folder
-    st = AppState(folder, edits=tmp_path / "edits")
-    try:
-        settings = st.default_settings
-        clip = next(iter(st.shots.clips))
-        stems = st.shots.clips[clip]
-        solver = st.shots.build(clip, settings)
+    plan, st, settings, stems, solver = served
 
-        def broken(self):
-            raise RuntimeError("solver failed")
+    def broken(self):
+        raise RuntimeError("solver failed")
 
-        with monkeypatch.context() as m:
-            m.setattr(ShotJob, "run", broken)
-            kid, xy = _edit(plan, 35)
-            with pytest.raises(RuntimeError, match="solver failed"):
-                st.move_keypoint(stems[35], kid, *xy, settings)
-        assert st.edits.get(stems[35])["keypoints"][str(kid)] == pytest.approx(xy)  # the edit is saved
-        assert solver.edits[35][str(kid)] == pytest.approx(xy) and solver.fit(0).provisional
-        full = solver.solve_job(0).run().part.fit.cameras  # a full solve from where it stands
-        solver.settle(0)  # what a review snapshot or an accepted shot does first
-        assert not solver.fit(0).provisional
-        assert _max_error(solver.cameras_of(), full) < 0.05
-    finally:
-        st.close()
+    with monkeypatch.context() as m:
+        m.setattr(ShotJob, "run", broken)
+        kid, xy = _edit(plan, 35)
+        with pytest.raises(RuntimeError, match="solver failed"):
+            st.move_keypoint(stems[35], kid, *xy, settings)
+    assert st.edits.get(stems[35])["keypoints"][str(kid)] == pytest.approx(xy)  # the edit is saved
+    assert solver.edits[35][str(kid)] == pytest.approx(xy) and solver.fit(0).provisional
+    full = solver.solve_job(0).run().part.fit.cameras  # a full solve from where it stands
+    solver.settle(0)  # what a review snapshot or an accepted shot does first
+    assert not solver.fit(0).provisional
+    assert _max_error(solver.cameras_of(), full) < 0.05
 
