@@ -296,9 +296,10 @@ def fit_window(data: Sequence[FrameData | None], start: ShotFit, i: int, size: t
     ends). ``data``: the shot's :func:`~pnlviz.calib.shot.frame_data`, the edit in it.
 
     An edit moves the frames near it most and the shot's shared centre a little: on a 250-frame
-    synthetic shot this lands within 0.25 px of the full solve (:func:`fit_shot` from ``start``)
-    in a tenth of its time (``benchmarks/bench_clip_browser.py``). A provisional answer to draw at
-    once while the full solve runs; its ``cost`` is ``start``'s."""
+    synthetic shot with every marking this lands within 0.25 px of the full solve (:func:`fit_shot`
+    from ``start``) in 25-40 ms against 150-230 ms (``benchmarks/bench_clip_browser.py``); where a
+    pin moves the centre (few keypoints a frame) it is a few pixels off on the frames it holds. A
+    provisional answer to draw at once while the full solve runs; its ``cost`` is ``start``'s."""
     T = len(data)
     if len(start.cameras) != T:
         raise ValueError(f"a window of a solution of the same {T} frames, got {len(start.cameras)}")

@@ -14,11 +14,10 @@ cuts.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
-
-import copy
 
 import numpy as np
 
