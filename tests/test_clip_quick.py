@@ -220,3 +220,32 @@ def test_a_full_solve_that_fails_leaves_the_edit_saved_and_the_shot_provisional_
     assert not solver.fit(0).provisional
     assert _max_error(solver.cameras_of(), full) < 0.05
 
+
+
+def test_a_tab_on_another_frame_of_a_long_shot_draws_the_quick_answer_then_the_full_one(
+        clip_folder, tmp_path, serve):
+    """Two tabs of the app on one 70-frame shot: an edit in one redraws the other twice without
+    it navigating, and what it shows in the end is the shot's full answer."""
+    plan, folder = clip_folder
+    app = serve(folder, edits=tmp_path / "edits")
+    st = app.state
+    a, b = app.session(), app.session()
+    a.goto(35)
+    b.goto(40)
+    clip = next(iter(st.shots.clips))
+    stems = st.shots.clips[clip]
+    solver = st.shots.build(clip, a.settings)
+    b.show()
+    b.flush()
+    before = b.view().camera
+    cameras: list = []
+    original = b.show
+    b.show = lambda: (original(), cameras.append(b.view().camera))[0]
+    kid, xy = _edit(plan, 35)
+    st.move_keypoint(stems[35], kid, *xy, a.settings)
+    b.flush()
+    assert b.stem == stems[40] and len(cameras) == 2  # the quick answer, then the full one
+    assert cameras[0] is not before and cameras[1] is solver.camera(40) and not solver.fit(0).provisional
+    # five frames from the edit, on this 70-frame shot, the edit moves the camera half a pixel and
+    # the quick answer (the shot's centre held) is as far from the full one: within a pixel
+    assert _max_error([cameras[0]], [cameras[1]]) < 1.0
