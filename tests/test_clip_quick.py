@@ -244,8 +244,11 @@ def test_a_tab_on_another_frame_of_a_long_shot_draws_the_quick_answer_then_the_f
     kid, xy = _edit(plan, 35)
     st.move_keypoint(stems[35], kid, *xy, a.settings)
     b.flush()
-    assert b.stem == stems[40] and len(cameras) == 2  # the quick answer, then the full one
-    assert cameras[0] is not before and cameras[1] is solver.camera(40) and not solver.fit(0).provisional
+    # the quick answer, then the full one it ends on (under load the background pass can redraw it
+    # once more meanwhile: the same frame)
+    assert b.stem == stems[40] and cameras[-1] is solver.camera(40) and not solver.fit(0).provisional
+    quick = [c for c in cameras[:-1] if c is not before and c is not cameras[-1]]
+    assert quick
     # five frames from the edit, on this 70-frame shot, the edit moves the camera half a pixel and
     # the quick answer (the shot's centre held) is as far from the full one: within a pixel
-    assert _max_error([cameras[0]], [cameras[1]]) < 1.0
+    assert _max_error(quick[:1], cameras[-1:]) < 1.0

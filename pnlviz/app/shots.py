@@ -53,8 +53,9 @@ class ClipShots:
         self._lock = threading.RLock()
         #: ``callback(stems)`` after a shot was solved again: its frames show another camera
         self._shot_listeners: list = []
-        #: full solves waiting for :meth:`finish`: ``(model key, model, job)``
-        self._pending: list[tuple] = []
+        #: full solves waiting for :meth:`finish`, ``(model key, model, job)``, per thread: the thread
+        #: whose edit made the quick answer runs them (its caller returns with the full answer in)
+        self._pending = threading.local()
 
     def listen(self, callback) -> None:
         """Call ``callback(stems)`` with the frames of a shot whenever it is solved again after an
@@ -152,7 +153,7 @@ class ClipShots:
                 if edits != solver.edits.get(t, {}):
                     k = solver.set_edits(t, edits, solve=False)
                     if solver.quick_solve(t):
-                        self._pending.append((key, solver, solver.solve_job(k)))
+                        self._jobs().append((key, solver, solver.solve_job(k)))
                     else:
                         solver.solve(k)
                         self._after_solve(key, solver, k)
@@ -160,14 +161,13 @@ class ClipShots:
         self._tell(solved - {stem})  # the edited frame's tabs redraw as it changed
 
     def finish(self) -> None:
-        """The full solves the quick answers of :meth:`changed` wait for, run outside the lock (the
-        tabs draw meanwhile) and taken unless a later edit came first (its own job answers it);
-        the tabs on their shots redraw again (usually a fraction of a pixel off the quick answer;
-        a few pixels where the edit moved the shot's centre). A solve that fails leaves its shot
-        provisional (settled before anything is written down) and the others still run; its
-        error is raised after them."""
-        with self._lock:
-            jobs, self._pending = self._pending, []
+        """The full solves the quick answers of this thread's :meth:`changed` wait for, run outside
+        the lock (the tabs draw meanwhile) and taken unless a later edit came first (its own job
+        answers it); the tabs on their shots redraw again (usually a fraction of a pixel off the
+        quick answer; a few pixels where the edit moved the shot's centre). A solve that fails
+        leaves its shot provisional (settled before anything is written down) and the others
+        still run; its error is raised after them."""
+        jobs, self._pending.jobs = self._jobs(), []
         failed: Exception | None = None
         for key, solver, job in jobs:
             with self._lock:
@@ -185,6 +185,12 @@ class ClipShots:
             self._tell({self.clips[key[0]][u] for u in job.frames})
         if failed is not None:
             raise failed
+
+    def _jobs(self) -> list[tuple]:
+        """This thread's full solves waiting for :meth:`finish`."""
+        if not hasattr(self._pending, "jobs"):
+            self._pending.jobs = []
+        return self._pending.jobs
 
     def _after_solve(self, key: tuple, solver: ClipSolver, k: int) -> None:
         if key[1] == self.host.default_settings:

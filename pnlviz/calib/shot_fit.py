@@ -222,13 +222,13 @@ def _gated(data: Sequence[FrameData | None], dist: Sequence[FrameDistances | Non
             for d, m in zip(data, dist)]
 
 
-def _kept_selections(data: Sequence[FrameData | None], start: ShotFit, point_gate: float,
-                     line_gate: float, calib: CalibParams) -> list[Selection | None]:
-    """The observations a warm solve starts with: the previous solve's, but for the frames whose
-    observations changed since (an edit), gated anew against their camera of that solve."""
-    old = start.selections or [None] * len(data)
+def _kept_selections(data: Sequence[FrameData | None], old: Sequence[Selection | None], cameras: Sequence[Camera],
+                     point_gate: float, line_gate: float, calib: CalibParams) -> list[Selection | None]:
+    """The observations a warm solve starts with: the previous solve's (``old``, with its
+    ``cameras``), but for the frames whose observations changed since (an edit), gated anew
+    against their camera of that solve."""
     out: list[Selection | None] = []
-    for d, s, cam in zip(data, old, start.cameras):
+    for d, s, cam in zip(data, old, cameras):
         fits = (d is None and s is None) or (d is not None and s is not None and s.keypoints.shape == (d.obs.n_keypoints,)
                                              and set(s.lines) <= set(d.obs.lines)
                                              and set(s.circles) <= set(d.obs.circles)
@@ -264,7 +264,7 @@ def fit_shot(observations: Sequence[Observations | None], cameras: Sequence[Came
     point_gate, line_gate = calib.px(calib.point_gate_px, W), calib.px(calib.line_gate_px, W)
     if start is not None:
         x = _start_vector(start, T)
-        sel = _kept_selections(fd, start, point_gate, line_gate, calib)
+        sel = _kept_selections(fd, start.selections or [None] * T, start.cameras, point_gate, line_gate, calib)
         params = replace(params, max_iterations=min(params.max_iterations, WARM_ITERATIONS))
         tol = WARM_TOL  # from a previous solution an edit moves the cameras a little: a looser stop is as good
     else:
@@ -307,7 +307,8 @@ def fit_window(data: Sequence[FrameData | None], start: ShotFit, i: int, size: t
     a, b = max(0, free_frames.start - _HELD), min(T, free_frames.stop + _HELD)
     W = float(size[0])
     point_gate, line_gate = calib.px(calib.point_gate_px, W), calib.px(calib.line_gate_px, W)
-    sel = _kept_selections(data, start, point_gate, line_gate, calib)[a:b]
+    sel = _kept_selections(data[a:b], (start.selections or [None] * T)[a:b], start.cameras[a:b],  # the window's only
+                           point_gate, line_gate, calib)
     x0 = _start_vector(start, T)
     x = np.concatenate([x0[:4], x0[4 + 4 * a:4 + 4 * b]])
     free = np.zeros(len(x), bool)
