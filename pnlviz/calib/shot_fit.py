@@ -198,6 +198,12 @@ def _start_vector(start: ShotFit, T: int) -> np.ndarray:
     return np.concatenate([start.C, [start.k1], per.ravel()])
 
 
+def _select(m: FrameDistances, d: FrameData, point_gate: float, line_gate: float, calib: CalibParams) -> Selection:
+    """What a shot's solve fits of frame ``d`` at distances ``m``: :meth:`FrameDistances.selection`
+    with the frame's model's points no paint marks."""
+    return m.selection(d.obs, point_gate, line_gate, calib, d.model.unmarked_points())
+
+
 def _selections(data: Sequence[FrameData | None], cameras: Sequence[Camera | None], point_gate: float,
                 line_gate: float, calib: CalibParams) -> list[Selection | None]:
     """Per frame, the observations ``cameras[t]`` (its own camera) puts within the gates
@@ -209,7 +215,7 @@ def _selections(data: Sequence[FrameData | None], cameras: Sequence[Camera | Non
         elif cam is None:
             out.append(Selection.everything(d.obs))
         else:
-            out.append(distances(d, cam).selection(d.obs, point_gate, line_gate, calib, d.model.unmarked_points()))
+            out.append(_select(distances(d, cam), d, point_gate, line_gate, calib))
     return out
 
 
@@ -218,7 +224,7 @@ def _gated(data: Sequence[FrameData | None], dist: Sequence[FrameDistances | Non
     """Per frame, the observations the shot's camera puts within the gates (``dist``:
     :meth:`ShotProblem.distances` with everything selected)."""
     return [None if d is None or m is None
-            else m.selection(d.obs, point_gate, line_gate, calib, d.model.unmarked_points())
+            else _select(m, d, point_gate, line_gate, calib)
             for d, m in zip(data, dist)]
 
 
@@ -234,7 +240,7 @@ def _kept_selections(data: Sequence[FrameData | None], old: Sequence[Selection |
                                              and set(s.circles) <= set(d.obs.circles)
                                              and not (d.obs.pins & ~s.keypoints).any())
         out.append(s if fits else None if d is None
-                   else distances(d, cam).selection(d.obs, point_gate, line_gate, calib, d.model.unmarked_points()))
+                   else _select(distances(d, cam), d, point_gate, line_gate, calib))
     return out
 
 
