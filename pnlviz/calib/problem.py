@@ -175,6 +175,10 @@ class Problem:
         self.world, self.circle_items, self.n_res = lay.world, lay.circle_items, lay.n_res
         self.kp_X = self.world[:lay.K]
         self.line_a, self.line_b = self.world[lay.K:lay.K + lay.L], self.world[lay.K + lay.L:lay.K + 2 * lay.L]
+        # the rows projected to pixels, in one call per evaluation: the keypoints, then the circles'
+        # samples (a circle's rows in ``world`` less ``2 L``: its rows among them)
+        self._pixel_rows = np.r_[0:lay.K, lay.K + 2 * lay.L:len(self.world)]
+        self._circle_shift = 2 * lay.L
         has_curves = lay.n_res > 2 * lay.K
         self.w_pt = np.sqrt(1 - alpha) if has_curves else 1.0
         self.w_ln = np.sqrt(alpha) if lay.K else 1.0
@@ -194,9 +198,11 @@ class Problem:
         J = np.empty((self.n_res, m.n_params)) if jac else None
         K, L = len(self.kp_xy), len(self.line_pts)
         at = 0
+        uv, Juv = np.zeros((0, 2)), None
+        if len(self._pixel_rows):
+            uv, Juv = m.pixels(T[self._pixel_rows], state, jac, self.world[self._pixel_rows])
         if K:
-            uv, Juv = m.pixels(T[:K], state, jac, self.kp_X)
-            block = point_block(uv, Juv, self.kp_xy)
+            block = point_block(uv[:K], None if Juv is None else Juv[:K], self.kp_xy)
             if self.pins is not None:
                 block = pin_block(block, self.pins, self.pin_weight, self.pin_scale)
             at = self._put(r, J, at, self.w_pt, block)
@@ -207,7 +213,8 @@ class Problem:
             for block in segment_block(A, B, q, m.scale(state), m.min_depth, sj):
                 at = self._put(r, J, at, self.w_ln, block)
         for _, rows, pts in self.circle_items:
-            weight, block = self._circle(T[rows], self.world[rows], pts, state, jac)
+            px = slice(rows.start - self._circle_shift, rows.stop - self._circle_shift)
+            weight, block = self._circle(T[rows], uv[px], None if Juv is None else Juv[px], pts)
             at = self._put(r, J, at, weight, block)
         return r, (None if J is None else J[:, m.free])
 
@@ -220,14 +227,14 @@ class Problem:
             J[at:at + n] = weight * block.J
         return at + n
 
-    def _circle(self, T: np.ndarray, world: np.ndarray, pts: np.ndarray, state, jac: bool) -> tuple[float, Block]:
+    def _circle(self, T: np.ndarray, uv: np.ndarray, J: np.ndarray | None, pts: np.ndarray) -> tuple[float, Block]:
+        """A circle's block: its samples ``T`` (the model's space), their pixels ``uv`` and, in a
+        Jacobian evaluation, their derivatives ``J``; the samples behind the camera left out."""
         front = self.model.front(T)
         if front.sum() < 2:
-            return 1.0, Block(np.full(len(pts), BEHIND), np.zeros((len(pts), self.model.n_params)) if jac else None)
-        T, world = T[front], world[front]
-        poly, _ = self.model.pixels(T, state)
-        vertex_jacobian = (lambda idx: self.model.pixels(T[idx], state, True, world[idx])[1]) if jac else None
-        return self.w_ln, polyline_block(poly, pts, vertex_jacobian)
+            return 1.0, Block(np.full(len(pts), BEHIND), None if J is None else np.zeros((len(pts), self.model.n_params)))
+        Jf = None if J is None else J[front]
+        return self.w_ln, polyline_block(uv[front], pts, None if Jf is None else (lambda idx: Jf[idx]))
 
     def residuals(self, state) -> np.ndarray:
         return self.evaluate(state)[0]

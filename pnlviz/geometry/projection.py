@@ -49,10 +49,6 @@ def project_k1(X: np.ndarray, R: np.ndarray, C: np.ndarray, f: float, aspect: fl
     return camera_to_pixels(to_camera(X, R, C), R, f, aspect, cx, cy, k1, jac)
 
 
-#: the constant part of d(normalised point)/d(rotation step), see camera_to_pixels
-_DP_DW = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
-
-
 def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float | np.ndarray, aspect: float, cx: float, cy: float,
                      k1: float, jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """:func:`project_k1` from camera coordinates ``Xc`` (N, 3) (``R`` is needed for the
@@ -65,33 +61,38 @@ def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float | np.ndarray, aspec
     [[580.0, 320.0], [680.0, 370.0]]
     """
     Xc = as_points(Xc, 3, "Xc")
-    z = np.where(Xc[:, 2] > CLAMP_DEPTH, Xc[:, 2], CLAMP_DEPTH)
-    p = Xc[:, :2] / z[:, None]  # normalised (xn, yn)
-    r2 = p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1]
+    z = np.maximum(Xc[:, 2], CLAMP_DEPTH)
+    xn, yn = Xc[:, 0] / z, Xc[:, 1] / z  # normalised
+    r2 = xn * xn + yn * yn
     g = 1 + k1 * r2
-    focal = np.array([f, f * aspect]) if np.ndim(f) == 0 else np.stack([f, f * aspect], axis=1)
-    uv = p * g[:, None] * focal + (cx, cy)
+    fa = f * aspect
+    uv = np.empty((len(Xc), 2))
+    uv[:, 0] = f * g * xn + cx
+    uv[:, 1] = fa * g * yn + cy
     if not jac:
         return uv, None
-    # d(normalised point)/d(dw, dC), with dXc = -[Xc]x dw - R dC:
-    #   dp/ddw = [[-xn yn, zr + xn^2, -yn], [-(zr + yn^2), xn yn, xn]] = p (-yn, xn, 0) + zr [[0, 1, 0], [-1, 0, 0]]
-    #   + (0, 0, (-yn, xn)), with zr = Xc_z / z (1 but for points clamped behind the camera);
-    #   dp/dC = (p R[2] - R[:2]) / z
+    # d(normalised point)/d(dw, dC), with dXc = -[Xc]x dw - R dC (one row each for xn and yn):
+    #   dxn/ddw = (-xn yn, zr + xn^2, -yn), dyn/ddw = (-(zr + yn^2), xn yn, xn), with zr = Xc_z / z
+    #   (1 but for points clamped behind the camera); dp/dC = (p R[2] - R[:2]) / z
     n = len(Xc)
-    Jp = np.empty((n, 2, 6))
-    perp = np.empty((n, 3))
-    perp[:, 0], perp[:, 1], perp[:, 2] = -p[:, 1], p[:, 0], 0.0
-    Jp[:, :, :3] = p[:, :, None] * perp[:, None, :] + (Xc[:, 2] / z)[:, None, None] * _DP_DW
-    Jp[:, :, 2] += perp[:, :2]
-    Jp[:, :, 3:] = (p[:, :, None] * R[..., None, 2, :] - R[..., :2, :]) / z[:, None, None]
+    zr, xy = Xc[:, 2] / z, xn * yn
+    R2, iz = R[..., 2, :], (1.0 / z)[:, None]
+    dx, dy = np.empty((n, 6)), np.empty((n, 6))
+    dx[:, 0], dx[:, 1], dx[:, 2] = -xy, zr + xn * xn, -yn
+    dy[:, 0], dy[:, 1], dy[:, 2] = -(zr + yn * yn), xy, xn
+    dx[:, 3:] = (xn[:, None] * R2 - R[..., 0, :]) * iz
+    dy[:, 3:] = (yn[:, None] * R2 - R[..., 1, :]) * iz
     # then the lens and the focal length: d(pixels)/dp = diag(f, f aspect) (g I + 2 k1 p p^T)
-    D = 2 * k1 * p[:, :, None] * p[:, None, :]
-    D[:, 0, 0] += g
-    D[:, 1, 1] += g
     J = np.empty((n, 2, N_CAMERA_PARAMS))
-    J[:, :, :6] = (D * focal[..., :, None]) @ Jp
-    J[:, :, 6] = uv - (cx, cy)  # d/d log f
-    J[:, :, 7] = p * (r2[:, None] * focal)  # d/d k1
+    if k1 == 0.0:
+        J[:, 0, :6] = (f * g)[:, None] * dx if np.ndim(f) else f * dx
+        J[:, 1, :6] = (fa * g)[:, None] * dy if np.ndim(fa) else fa * dy
+    else:
+        k2 = 2 * k1 * xy
+        J[:, 0, :6] = (f * (g + 2 * k1 * xn * xn))[:, None] * dx + (f * k2)[:, None] * dy
+        J[:, 1, :6] = (fa * k2)[:, None] * dx + (fa * (g + 2 * k1 * yn * yn))[:, None] * dy
+    J[:, 0, 6], J[:, 1, 6] = uv[:, 0] - cx, uv[:, 1] - cy  # d/d log f
+    J[:, 0, 7], J[:, 1, 7] = xn * r2 * f, yn * r2 * fa  # d/d k1
     return uv, J
 
 
