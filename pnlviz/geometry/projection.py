@@ -84,9 +84,9 @@ def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float | np.ndarray, aspec
     dy[:, 3:] = (yn[:, None] * R2 - R[..., 1, :]) * iz
     # then the lens and the focal length: d(pixels)/dp = diag(f, f aspect) (g I + 2 k1 p p^T)
     J = np.empty((n, 2, N_CAMERA_PARAMS))
-    if k1 == 0.0:
-        J[:, 0, :6] = (f * g)[:, None] * dx if np.ndim(f) else f * dx
-        J[:, 1, :6] = (fa * g)[:, None] * dy if np.ndim(fa) else fa * dy
+    if k1 == 0.0:  # g = 1 and no cross term
+        J[:, 0, :6] = np.reshape(f, (-1, 1)) * dx  # one focal length, or one per point
+        J[:, 1, :6] = np.reshape(fa, (-1, 1)) * dy
     else:
         k2 = 2 * k1 * xy
         J[:, 0, :6] = (f * (g + 2 * k1 * xn * xn))[:, None] * dx + (f * k2)[:, None] * dy
