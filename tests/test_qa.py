@@ -1,6 +1,8 @@
 """The label-error finder (pnlviz.calib.qa) on synthetic frames with an exact camera: each kind
 of error injected alone is found, named, and its suggested fix brings the frame's score back."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -372,3 +374,29 @@ def test_the_apps_suspects_are_pnlviz_qas_findings_on_the_same_folder(tmp_path):
     assert qa["00003"]["score"] >= 10 and qa["00003"]["findings"][0]["kind"] == "wrong_class"
     assert [s for s, _ in sorted(app.items(), key=lambda kv: -kv[1][0])][:2] == \
         [line["stem"] for line in lines if "stem" in line][:2]  # the same order, most suspect first
+
+
+def test_a_detected_line_off_the_annotated_one_is_found_with_its_distance(left):
+    """The line check: a detected line whose extremities sit 30 px across the annotated line is a
+    disagreement of that class, its distance the farthest point's; on the line, nothing."""
+    from pnlviz.data import Predictions
+    from pnlviz.field.names import CLASS_TO_LINE_ID
+
+    cam, ann = left
+    name = "Big rect. left main"
+    assert name in ann
+    pts = np.asarray(ann[name], float) * [959, 539]
+    a, b = pts[0], pts[-1]
+    normal = np.array([-(b - a)[1], (b - a)[0]]) / np.hypot(*(b - a))
+
+    def with_line(shift):
+        p, q = (a + shift * normal) / [959, 539], (b + shift * normal) / [959, 539]
+        return Predictions(keypoints={}, lines={CLASS_TO_LINE_ID[name]: (p[0], p[1], 0.9, q[0], q[1], 0.9)})
+
+    on = check_frame(ann, detections=with_line(0.0))
+    assert [f for f in on.findings if f.kind == "detection_disagreement"] == []
+    off = check_frame(ann, detections=with_line(30.0))
+    f = only(off, "detection_disagreement")
+    assert f.cls == name and 25 < f.evidence["distance_px"] < 35
+    said = re.search(r"its detected points lie up to (\d+) px from the annotated line", f.message)
+    assert said and abs(int(said.group(1)) - f.evidence["distance_px"]) <= 1

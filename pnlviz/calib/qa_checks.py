@@ -290,7 +290,7 @@ def detection_findings(ann_obs, det_obs, cam: Camera, annotation_px: dict[str, n
         d = float(np.max(np.abs(np.asarray(ends, float) @ line[:2] + line[2])))
         if d <= tol:
             continue
-        out.append(Finding("detection_disagreement", f"{name!r}: the detected line is {d:.0f} px from the "
-                           "annotated one", min(params.max_severity, d / tol), name,
+        out.append(Finding("detection_disagreement", f"{name!r}: its detected points lie up to {d:.0f} px from "
+                           "the annotated line", min(params.max_severity, d / tol), name,
                            evidence={"distance_px": _r(d)}))
     return out
