@@ -120,6 +120,9 @@ class Layout:
     K: int  #: keypoints: world[:K]
     L: int  #: line points: starts world[K:K+L], ends world[K+L:K+2L]
     circle_items: list  #: (class, its samples' rows in world, observed pixels (M, 2))
+    #: the rows of ``world`` projected to pixels, in one call per evaluation: the keypoints, then
+    #: the circles' samples (a circle's rows in ``world`` less ``2 L``: its rows among these)
+    pixel_rows: np.ndarray
 
     @property
     def n_res(self) -> int:
@@ -153,7 +156,8 @@ def _layout(data: FrameData, lift, keypoints, lines, circles, ground_only: bool,
         items.append((name, slice(start, start + len(w)), pts))
         start += len(w)
     line_pts = np.concatenate(parts_q) if parts_q else np.zeros((0, 2))
-    return Layout(mask, obs.kp_ids[mask], obs.kp_xy[mask], line_pts, slices, world, K, L, items)
+    pixel_rows = np.r_[0:K, K + 2 * L:len(world)]
+    return Layout(mask, obs.kp_ids[mask], obs.kp_xy[mask], line_pts, slices, world, K, L, items, pixel_rows)
 
 
 class Problem:
@@ -175,10 +179,7 @@ class Problem:
         self.world, self.circle_items, self.n_res = lay.world, lay.circle_items, lay.n_res
         self.kp_X = self.world[:lay.K]
         self.line_a, self.line_b = self.world[lay.K:lay.K + lay.L], self.world[lay.K + lay.L:lay.K + 2 * lay.L]
-        # the rows projected to pixels, in one call per evaluation: the keypoints, then the circles'
-        # samples (a circle's rows in ``world`` less ``2 L``: its rows among them)
-        self._pixel_rows = np.r_[0:lay.K, lay.K + 2 * lay.L:len(self.world)]
-        self._circle_shift = 2 * lay.L
+        self._pixel_rows, self._circle_shift = lay.pixel_rows, 2 * lay.L
         has_curves = lay.n_res > 2 * lay.K
         self.w_pt = np.sqrt(1 - alpha) if has_curves else 1.0
         self.w_ln = np.sqrt(alpha) if lay.K else 1.0
