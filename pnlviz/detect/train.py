@@ -45,6 +45,7 @@ import cv2
 import numpy as np
 import torch
 
+from pnlviz.conventions import EVAL_SIZE
 from pnlviz.detect.checkpoint import save_checkpoint
 from pnlviz.detect.light import LightNet, sidecar_path
 from pnlviz.detect.train_data import (AnnotatedFrames, ExportedFrames, HomographyFrames, View, annotation_example,
@@ -52,6 +53,7 @@ from pnlviz.detect.train_data import (AnnotatedFrames, ExportedFrames, Homograph
 
 from pnlviz.detect.train_config import TrainConfig, resolve_path
 from pnlviz.detect.train_loss import augment, loss_fn
+from pnlviz.labels.resize import resize_annotation
 
 __all__ = ["FrameCache", "Source", "TrainResult", "build_sources", "epoch_plan", "train", "write_sidecar"]
 
@@ -204,7 +206,9 @@ class FrameCache:
                     np.savez(tmp, image=image, annotation=np.array(json.dumps(annotation)))
                     tmp.replace(path)
             self.images.append(image)
-            self.annotations.append(_annotation_arrays(annotation))
+            # the annotation is made at 960x540 by the camera the frame was rendered through, scaled
+            # (pnlviz.synth.annotate.evaluation_camera): read at the render's size the same way
+            self.annotations.append(resize_annotation(_annotation_arrays(annotation), EVAL_SIZE, _pair(size), "index"))
 
     def __len__(self) -> int:
         return len(self.images)

@@ -46,7 +46,7 @@ import numpy as np
 from pnlviz.data.limits import MAX_IMAGE_BYTES
 from pnlviz.data.reading import read_file
 from pnlviz.field.names import FLIP_X, canonical_class_name
-from pnlviz.geometry.polylines import segment_in_image
+from pnlviz.labels.resize import clip_to_image, resize_annotation, resize_matrix
 
 __all__ = ["AnnotatedFrames", "HomographyFrames", "View", "apply_view_image", "clip_annotation", "draw_view",
            "pad_targets"]
@@ -184,20 +184,6 @@ def apply_view_image(img: np.ndarray, view: View, lines: list[np.ndarray] | None
     return np.ascontiguousarray(img)
 
 
-def _clip_polyline(pts: np.ndarray, width: int, height: int) -> np.ndarray:
-    """The parts of a pixel polyline inside [0, W-1] x [0, H-1] (segments clipped, in order)."""
-    if len(pts) == 1:
-        return pts[(pts[:, 0] >= 0) & (pts[:, 0] <= width - 1) & (pts[:, 1] >= 0) & (pts[:, 1] <= height - 1)]
-    out: list[np.ndarray] = []
-    for a, b in zip(pts[:-1], pts[1:]):
-        inside = segment_in_image(a, b, width, height)
-        if inside is not None:
-            for p in (a + inside[0] * (b - a), a + inside[1] * (b - a)):
-                if not out or np.hypot(*(out[-1] - p)) > 1e-6:
-                    out.append(p)
-    return np.array(out).reshape(-1, 2)
-
-
 def clip_annotation(annotation: dict[str, np.ndarray], A: np.ndarray, width: int, height: int
                     ) -> dict[str, np.ndarray]:
     """A normalised annotation (``{class: (N, 2)}``, x (W - 1) scaling) mapped through the pixel
@@ -209,7 +195,7 @@ def clip_annotation(annotation: dict[str, np.ndarray], A: np.ndarray, width: int
     for name, pts in annotation.items():
         px = np.asarray(pts, float).reshape(-1, 2) * scale
         px = px @ A[:2, :2].T + A[:2, 2]
-        px = _clip_polyline(px, width, height)
+        px = clip_to_image(px, width, height)
         canon = canonical_class_name(name) or name
         if len(px):
             out[FLIP_X.get(canon, canon) if flip else canon] = px / scale
@@ -250,6 +236,7 @@ def annotation_example(img: np.ndarray, annotation: dict[str, np.ndarray], input
     from pnlviz.labels import training_targets
 
     W, H = input_size
+    annotation = resize_annotation(annotation, (img.shape[1], img.shape[0]), (W, H))  # as _to_input resizes img
     if view.flip or view.crop is not None:
         annotation = clip_annotation(annotation, view.affine(W, H), W, H)
     lines = None
@@ -439,8 +426,7 @@ class ExportedFrames:
         img = apply_view_image(_to_input(image, input_size), view)
         (w0, h0), points = self.keypoints[i]["size"], self.keypoints[i]["points"]
         # frame pixels -> input pixels (cv2.resize aligns pixel centres), then the view
-        S = np.array([[W / w0, 0, 0.5 * W / w0 - 0.5], [0, H / h0, 0.5 * H / h0 - 0.5], [0, 0, 1.0]])
-        A = view.affine(W, H) @ S
+        A = view.affine(W, H) @ resize_matrix((w0, h0), (W, H))
         flip = _keypoint_id_map(-1.0, 1.0) if view.flip else None
         px: dict[int, np.ndarray] = {}
         for kid, (x, y) in points.items():
@@ -450,7 +436,7 @@ class ExportedFrames:
             kid = flip.get(kid) if flip is not None else kid
             if kid is not None:
                 px[kid] = q[:2]
-        annotation = self.annotations[i]
+        annotation = resize_annotation(self.annotations[i], (w0, h0), (W, H))
         if view.flip or view.crop is not None:
             annotation = clip_annotation(annotation, view.affine(W, H), W, H)
         # left-right disambiguation on the ground keypoints' homography

@@ -70,9 +70,13 @@ def homography_for_size(H_template: np.ndarray, size: tuple[int, int], *, source
                         model: FieldModel | None = None) -> np.ndarray:
     """A WC14-convention homography (template yards -> pixels of a ``source_size`` frame) as a
     field-metres -> pixels homography for a copy of the frame resized to ``size`` (W, H):
-    ``diag(W / W0, H / H0, 1) @ H @ template_from_field``."""
+    ``S @ H @ template_from_field``, ``S`` the pixel map of a resize
+    (:func:`pnlviz.labels.resize.resize_matrix`: pixel centres move by half a pixel, as
+    ``cv2.resize`` moves them; the identity at the source size)."""
+    from pnlviz.labels.resize import resize_matrix
+
     model = model or _default_model()
-    S = np.diag([size[0] / source_size[0], size[1] / source_size[1], 1.0])
+    S = resize_matrix(source_size, size)
     return S @ np.asarray(H_template, float) @ np.linalg.inv(model.template_to_field_matrix)
 
 
