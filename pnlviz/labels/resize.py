@@ -12,11 +12,11 @@ size ``W' x H'`` shows that point at
   the network's input size: the projection scales): ``x' = x W' / W``.
 
 Scaling the normalised coordinates by ``W' - 1`` instead (the annotation simply read at the new
-size) is neither: it shrinks the labels towards the top-left corner by up to half a pixel of the
-smaller picture, one pixel at 960x540 (measured on the light model's synthetic training frames:
-its detections of 960x540 frames sat 0.45 px above the true points). The same holds for a
-homography made for one size and used on a resized copy: :func:`resize_matrix` is the map to
-put in front of it.
+size) is neither: it moves the labels by up to half a pixel of the smaller picture (towards its
+middle for a resize, towards its top-left corner for a render: one pixel at 960x540; a model
+trained on synthetic frames labelled that way detects the points of 960x540 frames 0.45 px above
+where they are, docs/detector.md). The same holds for a homography made for one size and used on
+a resized copy: :func:`resize_matrix` is the map to put in front of it.
 """
 
 from __future__ import annotations
