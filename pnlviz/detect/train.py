@@ -92,7 +92,8 @@ def build_sources(config: TrainConfig, *, cache: "FrameCache | None" = None, cac
     every entry of ``real``:
 
     * ``{"kind": "homography", "path": image folder, "homographies": json (default
-      path/homographies.json), "source_size": [1280, 720], "exclude": [stems], "weight", "augment"}``;
+      path/homographies.json), "source_size": [1280, 720], "exclude": [stems], "paint_fit": false
+      (each homography brought onto its image's paint first), "weight", "augment"}``;
     * ``{"kind": "soccernet", "path": dataset folder or zip, "exclude": [stems], "weight", "augment"}``;
     * ``{"kind": "labels", "path": a pnlviz export (folder or zip), "images": the dataset it was
       made on, "exclude", "weight", "augment"}``.
@@ -110,7 +111,8 @@ def build_sources(config: TrainConfig, *, cache: "FrameCache | None" = None, cac
         if kind == "homography":
             hom = entry.get("homographies")
             frames = HomographyFrames(path, resolve_path(hom, config.base_dir) if hom else None,
-                                      source_size=_pair(entry.get("source_size", (1280, 720))), exclude=exclude)
+                                      source_size=_pair(entry.get("source_size", (1280, 720))), exclude=exclude,
+                                      paint_fit=bool(entry.get("paint_fit", False)))
         elif kind == "soccernet":
             frames = AnnotatedFrames(path, exclude=exclude)
         elif kind == "labels":

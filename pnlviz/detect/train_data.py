@@ -251,11 +251,13 @@ def annotation_example(img: np.ndarray, annotation: dict[str, np.ndarray], input
 class HomographyFrames:
     """Images with ground-truth homographies (see the module docstring). ``stems``: the frames to
     use (default: every image that has a homography); images are decoded once and kept (these
-    sets are small: WC14 has 209 training frames)."""
+    sets are small: WC14 has 209 training frames). ``paint_fit``: each homography is first
+    brought onto the paint of its own image (:func:`pnlviz.labels.paint_fit.fit_to_paint`; kept
+    as given where the paint measures too little of it); :attr:`paint_fits` says what each got."""
 
     def __init__(self, images: str | os.PathLike, homographies: str | os.PathLike | None = None, *,
                  source_size: tuple[int, int] = (1280, 720), stems: list[str] | None = None,
-                 exclude: list[str] | None = None) -> None:
+                 exclude: list[str] | None = None, paint_fit: bool = False) -> None:
         from pnlviz.data import read_homographies
         from pnlviz.data.errors import DataError
 
@@ -282,8 +284,23 @@ class HomographyFrames:
             if img is None:
                 raise DataError(str(path), "cannot decode the image")
             self.stems.append(stem)
-            self.homographies.append(gt[stem])
+            self.homographies.append(np.asarray(gt[stem], float))
             self.images.append(img)
+        self.paint_fits: list = []
+        if paint_fit:
+            self.paint_fits = [self._fit_to_paint(i) for i in range(len(self.stems))]
+
+    def _fit_to_paint(self, i: int):
+        """Frame ``i``'s homography fitted to its image's paint (kept in the source's convention)."""
+        from pnlviz.field import load_field_model
+        from pnlviz.labels.paint_fit import fit_to_paint
+
+        h, w = self.images[i].shape[:2]
+        fit = fit_to_paint(self.field_homography(i, (w, h)), self.images[i])
+        if fit.refined:  # back to template yards -> source pixels
+            S = resize_matrix(self.source_size, (w, h))
+            self.homographies[i] = np.linalg.inv(S) @ fit.H @ load_field_model().template_to_field_matrix
+        return fit
 
     def __len__(self) -> int:
         return len(self.stems)
