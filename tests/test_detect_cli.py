@@ -199,12 +199,13 @@ def test_batches_and_half_precision_keep_the_detections(tmp_path):
     moved, unshared, total = [], 0, 0
     for stem in ref:
         a, b, h = (p[stem].points_px(960, 540) for p in (ref, batch, half))
-        assert a.keys() == b.keys() and len(a) > 10
+        assert a.keys() == b.keys() and len(a) >= 5  # something to compare on every frame
         assert max(np.hypot(a[k][0] - b[k][0], a[k][1] - b[k][1]) for k in a) < 1e-3
         total += len(a)
         unshared += len(a.keys() ^ h.keys())
         moved += [np.hypot(a[k][0] - h[k][0], a[k][1] - h[k][1]) for k in a.keys() & h.keys()]
     moved = np.asarray(moved)
+    assert total > 100
     assert unshared <= 0.02 * total and np.mean(moved < 1.0) >= 0.98 and np.median(moved) < 0.1
     assert moved.max() > 0  # float16 did run: float32 again would give the same points exactly
     assert read_predictions_info(outs["half"])["precision"] == "float16"
