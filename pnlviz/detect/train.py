@@ -45,7 +45,6 @@ import cv2
 import numpy as np
 import torch
 
-from pnlviz.conventions import EVAL_SIZE
 from pnlviz.detect.checkpoint import save_checkpoint
 from pnlviz.detect.light import LightNet, sidecar_path
 from pnlviz.detect.train_data import (AnnotatedFrames, ExportedFrames, HomographyFrames, View, annotation_example,
@@ -181,6 +180,7 @@ class FrameCache:
         from tqdm import tqdm
 
         from pnlviz.synth import make_frame
+        from pnlviz.synth.cameras import EVAL_SIZE
 
         self.images: list[np.ndarray] = []
         self.annotations: list[dict[str, np.ndarray]] = []
