@@ -65,7 +65,7 @@ def paint_strength(image: np.ndarray) -> np.ndarray:
 
 
 def _ground_lines(model: FieldModel) -> list[str]:
-    return [n for n in STRAIGHT_CLASSES if abs(model.lines[n].start[2]) < 1e-9 and abs(model.lines[n].end[2]) < 1e-9]
+    return [n for n in STRAIGHT_CLASSES if model.lines[n].plane == "ground"]
 
 
 def paint_offsets(H: np.ndarray, strength: np.ndarray, model: FieldModel | None = None, min_contrast: float = 12.0,
@@ -97,7 +97,7 @@ def paint_offsets(H: np.ndarray, strength: np.ndarray, model: FieldModel | None 
             peak = prof.max()
             if peak < min_contrast or prof[0] > 0.5 * peak or prof[-1] > 0.5 * peak:
                 continue  # no paint, or the edge of something wide (a board, a shadow): not a line
-            top = np.where(prof > 0.5 * prof.max(), prof, 0.0)
+            top = np.where(prof > 0.5 * peak, prof, 0.0)
             pts.append(p)
             normals.append(nv)
             offsets.append(float((top * t).sum() / top.sum()))
@@ -125,11 +125,13 @@ def fit_to_paint(H: np.ndarray, image: np.ndarray, model: FieldModel | None = No
     g = np.stack(np.meshgrid(np.linspace(-1, 1, 5), np.linspace(-1, 1, 5)), -1).reshape(-1, 2)
     gx, gy = _jacobian(g, w, h)
     damp = np.vstack([gx, gy]) * DAMPING
-    _, _, first, _ = paint_offsets(H, strength, model)
-    before = float(np.median(np.abs(first))) if len(first) else float("nan")
+    P, N, D, L = paint_offsets(H, strength, model)
+    first = len(D)
+    before = float(np.median(np.abs(D))) if len(D) else float("nan")
     out = H.copy()
-    for _ in range(rounds):
-        P, N, D, L = paint_offsets(out, strength, model)
+    for k in range(rounds):
+        if k:  # measured again where the last round put the lines
+            P, N, D, L = paint_offsets(out, strength, model)
         why = _too_little(N, L, min_samples)
         if why:
             return PaintFit(H, before, before, len(D), len(set(L.tolist())), why)
@@ -146,7 +148,7 @@ def fit_to_paint(H: np.ndarray, image: np.ndarray, model: FieldModel | None = No
     _, _, last, L = paint_offsets(out, strength, model)
     after = float(np.median(np.abs(last))) if len(last) else float("nan")
     if not after < before:
-        return PaintFit(H, before, before, len(first), len(set(L.tolist())), "no closer to the paint")
+        return PaintFit(H, before, before, first, len(set(L.tolist())), "no closer to the paint")
     return PaintFit(out / out[2, 2], before, after, len(last), len(set(L.tolist())))
 
 
