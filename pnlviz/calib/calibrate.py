@@ -50,6 +50,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from pnlviz.calib.line_start import MIN_SPAN_PX, line_sets, lines_suffice
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.pins import PinFailure, pin_camera
 from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_frame, plane_masks, refit_with
@@ -111,6 +112,9 @@ class CalibParams:
     #: as observed): SN22 from annotations FS@5 0.913 -> 0.918, WC14 0.918 -> 0.922
     border_aim_px: float = 2.0
     prior_search: bool = True  #: with too few keypoints for a homography, start from broadcast priors
+    #: with too few keypoints for a homography, start from the straight ground lines too where
+    #: they fix the plane (:mod:`pnlviz.calib.line_start`)
+    line_search: bool = True
     refine_top: int = 3  #: candidates refined (focal + pose) after the first vote
     tol: float = 1e-6  #: refinements stop when the cost drops by less than this fraction
     #: Levenberg-Marquardt steps of each PnL solve: most converge in 4-12 steps from the voted camera;
@@ -292,6 +296,33 @@ def prior_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
     return out
 
 
+def line_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
+    """Cameras for frames whose keypoints are too few for a homography but whose straight ground
+    lines (with their ground keypoints) fix the plane (:mod:`pnlviz.calib.line_start`): each
+    homography of :func:`pnlviz.calib.line_start.line_sets` decomposed, then fitted (focal
+    length and pose) to the lines and keypoints it was solved from (the vote then scores it on
+    every observation, and PnL's gates choose what it fits)."""
+    obs, W = data.obs, data.obs.width
+    tau = params.px(params.vote_tau, W)
+    thr = params.ransac_thresholds[-1]
+    out = []
+    for H, lines, points in line_sets(obs, data.model, params.px(MIN_SPAN_PX, W)):
+        cam0 = camera_from_plane_homography(H, "ground", W, obs.height, data.model)
+        if cam0 is None or _sane(cam0, params):
+            continue
+        use = np.zeros(obs.n_keypoints, bool)
+        use[points] = True
+        cam, _ = CameraProblem(cam0, data, RefineParams(alpha=0.5, loss="soft_l1", f_scale=tau, max_iter=40),
+                               use_keypoints=use, lines=lines, circles=()).solve()
+        if _sane(cam, params):
+            continue
+        err = _kp_errors(cam, obs)
+        inl = err < params.px(thr, W)
+        rms = float(np.sqrt(np.mean(np.minimum(err, 1e3) ** 2))) if len(err) else 0.0
+        out.append(Candidate("lines", float(thr), "ground", cam, obs.kp_ids[inl], rms))
+    return out
+
+
 # ------------------------------------------------------------------------------ residual reports
 def point_residuals(cam: Camera, obs: Observations) -> dict[int, float]:
     return {int(i): float(e) for i, e in zip(obs.kp_ids, _kp_errors(cam, obs))}
@@ -334,7 +365,11 @@ class CameraKind:
     def too_few(self) -> str | None:
         obs, p = self.data.obs, self.params
         needed = 2 if p.prior_search and (obs.lines or obs.circles) else p.min_points
-        return f"too few keypoints ({obs.n_keypoints} < {needed})" if obs.n_keypoints < needed else None
+        if obs.n_keypoints >= needed:
+            return None
+        if p.line_search and lines_suffice(obs, self.data.model, p.px(MIN_SPAN_PX, obs.width)):
+            return None
+        return f"too few keypoints ({obs.n_keypoints} < {needed})"
 
     def fit(self, sub: Observations, plane: str, on_plane: np.ndarray, local_xy: np.ndarray, thr_px: float):
         """The camera of a RANSAC homography of the plane's points, its inliers over the subset
@@ -379,7 +414,9 @@ class CameraKind:
         return refine_candidate(c, self.data, self.params)
 
     def fallback(self) -> list[Candidate]:
-        return prior_candidates(self.data, self.params) if self.params.prior_search else []
+        p = self.params
+        return ((prior_candidates(self.data, p) if p.prior_search else [])
+                + (line_candidates(self.data, p) if p.line_search else []))
 
     def degenerate(self) -> str:
         planes = plane_masks(self.data.obs.kp_xyz, self.data.model)

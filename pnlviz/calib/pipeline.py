@@ -369,14 +369,18 @@ def _verdict(result: FrameResult, obs: Observations, params) -> None:
     inlier (its lines and circles fixed it alone), the farthest point of each class it fitted
     (the derived keypoints repeat those classes, computed as straight lines under a pinhole: an
     intersection of two detected lines far outside the image can be tens of pixels off a camera
-    that sits on both lines)."""
+    that sits on both lines). A fit with no inlier keypoint at all is judged by its classes the
+    same way when they fix it alone (``lines_alone_classes``: a frame whose lines meet outside
+    the image, started from them by :mod:`pnlviz.calib.line_start`)."""
     inlier_ids = [int(i) for i in obs.kp_ids[np.isin(obs.kp_ids, result.inliers)]
                   if int(i) in result.point_residuals and int(i) not in result.flagged]
     fitted = [i for i in inlier_ids if i not in result.lines_alone]
-    if fitted or not result.lines_alone:
+    if fitted or (inlier_ids and not result.lines_alone):
         inlier_residuals = [result.point_residuals[i] for i in (fitted or inlier_ids)]
-    else:
+    elif result.lines_alone or _classes_fix_it(params, result.pnl_lines, ()):
         inlier_residuals = [result.line_residuals[c] for c in result.pnl_lines if c in result.line_residuals]
+    else:
+        inlier_residuals = []
     if not inlier_residuals:
         result.estimate, result.failure_code = None, "no_inliers"
         result.failure = "no keypoint agrees with the camera (no inliers)"
