@@ -155,3 +155,23 @@ def test_the_line_search_raises_sn22(shared_dir):
     # and the frames that had a camera are calibrated exactly as before with the search on
     some = [s for s in obs if off[s].ok][:40]
     assert all(calibrate(obs[s]).camera.allclose(off[s].camera) for s in some)
+
+
+def test_the_app_card_says_the_camera_started_from_the_lines(shared_dir, tmp_path):
+    """The app's calibration card of such a frame says where its camera came from (an annotation
+    without its image: SN22 frame 01610, three corners in view and six lines)."""
+    import zipfile
+
+    from pnlviz.app.cards import calibration_card
+    from pnlviz.app.state import AppState
+
+    data = tmp_path / "set"
+    data.mkdir()
+    with zipfile.ZipFile(shared_dir / "data" / "sn22_test_subset" / "annotations.zip") as zf:
+        name = next(n for n in zf.namelist() if n.endswith("01610.json"))
+        (data / "01610.json").write_bytes(zf.read(name))
+    st = AppState(data, edits=tmp_path / "edits")
+    view = st.view("01610")
+    assert view.result is not None and view.result.ok and view.result.subset == "lines"
+    card = calibration_card(view, st)
+    assert "too few keypoints for a homography: started from **its straight lines**" in card, card

@@ -16,6 +16,10 @@ from pnlviz.app.shots import SHOT_SUBSET
 from pnlviz.app.state import AppState, FrameView
 
 
+#: the starts of a frame whose keypoints are too few for a homography (its result's ``subset``), in words
+STARTS = {"prior": "a broadcast camera's usual place", "lines": "its straight lines"}
+
+
 def calibration_card(view: FrameView, state: AppState) -> str:
     """Markdown of the calibration card."""
     lines = []
@@ -52,7 +56,11 @@ def calibration_card(view: FrameView, state: AppState) -> str:
                      "of it; the frame's own camera: the Clip panel's toggle)")
     if view.shot_note:
         lines.append(view.shot_note)
-    if res.subset != SHOT_SUBSET:
+    if res.subset in STARTS:
+        lines.append(f"too few keypoints for a homography: started from **{STARTS[res.subset]}**, "
+                     f"{len(res.inliers)} inliers; PnL set: {len(res.pnl_lines)} lines/circles"
+                     + _left_out(res.lines_alone, state.model.unmarked_points()))
+    elif res.subset != SHOT_SUBSET:
         lines.append(f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, "
                      f"{len(res.inliers)} inliers; PnL set: {len(res.pnl_lines)} lines/circles"
                      + _left_out(res.lines_alone, state.model.unmarked_points()))

@@ -257,6 +257,13 @@ def _align_rays(cam_dirs: np.ndarray, world_dirs: np.ndarray) -> np.ndarray:
     return U @ D @ Vt
 
 
+def fits_everything(cam: Camera, data: FrameData, params: CalibParams) -> bool:
+    """Whether every observation (keypoints, lines, circles) fits ``cam`` within
+    ``prior_good_rms`` px RMS: a start good enough to stop searching for others."""
+    r = CameraProblem(cam, data, RefineParams(alpha=0.5)).residuals()
+    return bool(np.sqrt(np.mean(r * r)) < params.px(params.prior_good_rms, data.obs.width))
+
+
 def prior_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
     """Cameras for frames with too few keypoints for a homography: start from typical broadcast
     positions and fields of view, rotate so that two keypoints (or line intersections) line up,
@@ -290,22 +297,23 @@ def prior_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
             inl = err < params.px(params.ransac_thresholds[-1], W)
             out.append(Candidate("prior", float(params.ransac_thresholds[-1]), "ground", cam, obs.kp_ids[inl],
                                  float(np.sqrt(np.mean(np.minimum(err, 1e3) ** 2)))))
-            r = CameraProblem(cam, data, RefineParams(alpha=0.5)).residuals()
-            if np.sqrt(np.mean(r * r)) < params.px(params.prior_good_rms, W):
-                return out  # good enough: every observation fits within a few pixels
+            if fits_everything(cam, data, params):
+                return out
     return out
 
 
-def line_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
+def line_candidates(data: FrameData, params: CalibParams) -> tuple[list[Candidate], bool]:
     """Cameras for frames whose keypoints are too few for a homography but whose straight ground
     lines (with their ground keypoints) fix the plane (:mod:`pnlviz.calib.line_start`): each
     homography of :func:`pnlviz.calib.line_start.line_sets` decomposed, then fitted (focal
     length and pose) to the lines and keypoints it was solved from (the vote then scores it on
-    every observation, and PnL's gates choose what it fits)."""
+    every observation, and PnL's gates choose what it fits). Also whether one of them is settled:
+    ``lines_alone_classes`` lines or more that it fits within ``prior_good_rms`` px RMS (no
+    broadcast prior need be tried then)."""
     obs, W = data.obs, data.obs.width
     tau = params.px(params.vote_tau, W)
     thr = params.ransac_thresholds[-1]
-    out = []
+    out, settled = [], False
     for H, lines, points in line_sets(obs, data.model, params.px(MIN_SPAN_PX, W)):
         cam0 = camera_from_plane_homography(H, "ground", W, obs.height, data.model)
         if cam0 is None or _sane(cam0, params):
@@ -320,7 +328,10 @@ def line_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
         inl = err < params.px(thr, W)
         rms = float(np.sqrt(np.mean(np.minimum(err, 1e3) ** 2))) if len(err) else 0.0
         out.append(Candidate("lines", float(thr), "ground", cam, obs.kp_ids[inl], rms))
-    return out
+        r = CameraProblem(cam, data, RefineParams(alpha=0.5), use_keypoints=use, lines=lines, circles=()).residuals()
+        fits = np.sqrt(np.mean(r * r)) < params.px(params.prior_good_rms, W)
+        settled |= bool(fits and params.lines_alone_classes and len(lines) >= params.lines_alone_classes)
+    return out, settled
 
 
 # ------------------------------------------------------------------------------ residual reports
@@ -414,9 +425,14 @@ class CameraKind:
         return refine_candidate(c, self.data, self.params)
 
     def fallback(self) -> list[Candidate]:
+        """The starts of a frame with too few keypoints: its straight lines first (a few ms), then
+        the broadcast priors (up to 72 fits, about a second) unless a line start is settled
+        (:func:`line_candidates`)."""
         p = self.params
-        return ((prior_candidates(self.data, p) if p.prior_search else [])
-                + (line_candidates(self.data, p) if p.line_search else []))
+        lines, settled = line_candidates(self.data, p) if p.line_search else ([], False)
+        if settled:
+            return lines
+        return lines + (prior_candidates(self.data, p) if p.prior_search else [])
 
     def degenerate(self) -> str:
         planes = plane_masks(self.data.obs.kp_xyz, self.data.model)
