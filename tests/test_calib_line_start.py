@@ -106,6 +106,15 @@ def test_a_frame_of_lines_alone_gets_its_camera():
     assert max(res.line_residuals[c] for c in res.pnl_lines) < 2.5
 
 
+def test_four_lines_alone_are_not_trusted():
+    """Four lines fix a homography exactly, a wrong one among them as well: a camera started from
+    them, with nothing else to check it, is refused (the same four lines and a fifth pass)."""
+    four = ACROSS[:2] + ALONG
+    res = calibrate(lines_only(CAMERA, four, noise=0.5))
+    assert not res.ok and res.failure_code == "degenerate" and "nothing checks them" in res.failure
+    assert calibrate(lines_only(CAMERA, four + [ACROSS[2]], noise=0.5)).ok
+
+
 def test_a_wrong_class_costs_one_start_not_the_frame():
     """A side line stored under the other side line's name (as an annotator's slip or a
     detector's mix-up): the set without it gives the camera, and PnL's gate leaves it out."""
@@ -133,8 +142,8 @@ def test_frames_with_keypoints_for_a_homography_are_untouched():
 
 def test_the_line_search_raises_sn22(shared_dir):
     """Set-level, as ``benchmarks/misses.py`` measures it: on the SN22 development frames (human
-    line annotations) the line search gives cameras to frames that had none (their three keypoints
-    are the corners of the lines in view) and raises FS@5; frames that had a camera keep it."""
+    line annotations) the line search gives a camera to a frame that had none (its three keypoints
+    are corners of the six lines in view) and raises FS@5; frames that had a camera keep it."""
     from pnlviz.calib.inputs import observations_from_annotation
     from pnlviz.data import open_dataset
     from pnlviz.metrics.soccernet import evaluate_dataset
@@ -145,13 +154,13 @@ def test_the_line_search_raises_sn22(shared_dir):
     off = {s: calibrate(o, replace(CalibParams(), line_search=False)) for s, o in obs.items()}
     on = {s: calibrate(o) if not off[s].ok else off[s] for s, o in obs.items()}
     gained = [s for s in obs if on[s].ok and not off[s].ok]
-    assert len(gained) >= 2 and all(on[s].subset == "lines" for s in gained), gained
+    assert gained and all(on[s].subset == "lines" for s in gained), gained
     for s in gained:  # each is judged by what it fitted, within the verdict's limit
         assert on[s].failure is None
     score_off = evaluate_dataset(gt, {s: r.camera for s, r in off.items() if r.ok}, progress=False)
     score_on = evaluate_dataset(gt, {s: r.camera for s, r in on.items() if r.ok}, progress=False)
     assert score_on.completeness > score_off.completeness
-    assert score_on.final_score > score_off.final_score + 0.002
+    assert score_on.final_score > score_off.final_score + 0.001
     # and the frames that had a camera are calibrated exactly as before with the search on
     some = [s for s in obs if off[s].ok][:40]
     assert all(calibrate(obs[s]).camera.allclose(off[s].camera) for s in some)

@@ -347,7 +347,7 @@ def test_the_apps_suspects_are_pnlviz_qas_findings_on_the_same_folder(tmp_path):
     _, clean = synthetic(7)
     wrong = dict(clean)
     wrong["Small rect. right main"] = wrong.pop("Small rect. left main")
-    _, other = synthetic(15)
+    _, other = synthetic(26)  # six classes: renamed, one leaves too few for a camera, from lines or priors
     broken = dict(other)
     broken["Big rect. left main"] = broken.pop("Big rect. right main")
     _, sparse = synthetic(2)

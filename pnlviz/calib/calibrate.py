@@ -50,7 +50,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from pnlviz.calib.line_start import MIN_SPAN_PX, line_sets, lines_suffice
+from pnlviz.calib.line_start import CHECKED_CLASSES, LINE_SUBSET, MIN_SPAN_PX, line_sets, lines_suffice
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.pins import PinFailure, pin_camera
 from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_frame, plane_masks, refit_with
@@ -308,8 +308,8 @@ def line_candidates(data: FrameData, params: CalibParams) -> tuple[list[Candidat
     homography of :func:`pnlviz.calib.line_start.line_sets` decomposed, then fitted (focal
     length and pose) to the lines and keypoints it was solved from (the vote then scores it on
     every observation, and PnL's gates choose what it fits). Also whether one of them is settled:
-    ``lines_alone_classes`` lines or more that it fits within ``prior_good_rms`` px RMS (no
-    broadcast prior need be tried then)."""
+    :data:`pnlviz.calib.line_start.CHECKED_CLASSES` lines or more (more than fix it) that it fits
+    within ``prior_good_rms`` px RMS (no broadcast prior need be tried then)."""
     obs, W = data.obs, data.obs.width
     tau = params.px(params.vote_tau, W)
     thr = params.ransac_thresholds[-1]
@@ -327,10 +327,10 @@ def line_candidates(data: FrameData, params: CalibParams) -> tuple[list[Candidat
         err = _kp_errors(cam, obs)
         inl = err < params.px(thr, W)
         rms = float(np.sqrt(np.mean(np.minimum(err, 1e3) ** 2))) if len(err) else 0.0
-        out.append(Candidate("lines", float(thr), "ground", cam, obs.kp_ids[inl], rms))
+        out.append(Candidate(LINE_SUBSET, float(thr), "ground", cam, obs.kp_ids[inl], rms))
         r = CameraProblem(cam, data, RefineParams(alpha=0.5), use_keypoints=use, lines=lines, circles=()).residuals()
         fits = np.sqrt(np.mean(r * r)) < params.px(params.prior_good_rms, W)
-        settled |= bool(fits and params.lines_alone_classes and len(lines) >= params.lines_alone_classes)
+        settled |= bool(fits and len(lines) >= CHECKED_CLASSES)
     return out, settled
 
 

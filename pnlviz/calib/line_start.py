@@ -15,6 +15,9 @@ The image lines are straight fits to the observed points (the lens bends them a 
 refinement that follows has k1); only the start comes from here. The lines and points must fix
 the plane (:func:`determined`): two lines in each of two directions do, three parallel lines and
 one across do not (parallel lines meet at one point, at infinity, and a third adds one equation).
+Four lines fix a homography exactly, a wrong one among them too: a camera started here must hold
+more classes than fix it, or a measured keypoint, to pass the verdict
+(:func:`pnlviz.calib.pipeline._verdict`).
 """
 
 from __future__ import annotations
@@ -25,10 +28,16 @@ from pnlviz.field.model import FieldModel
 
 from .observations import Observations
 
-__all__ = ["determined", "ground_lines", "line_homography", "line_sets", "lines_suffice"]
+__all__ = ["CHECKED_CLASSES", "LINE_SUBSET", "MIN_SPAN_PX", "determined", "ground_lines", "line_homography", "line_sets",
+           "lines_suffice"]
 
 #: an image line is fitted only to points spanning at least this far (px at 960 px width)
 MIN_SPAN_PX = 20.0
+#: the ``subset`` of a candidate (and of the result it wins) started from the lines
+LINE_SUBSET = "lines"
+#: four lines fix a homography exactly (eight equations), a wrong one among them as well: a camera
+#: started from the lines is trusted when it fits this many classes, or a measured keypoint
+CHECKED_CLASSES = 5
 
 
 def _fit_image_line(points: np.ndarray) -> np.ndarray:

@@ -34,6 +34,7 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from pnlviz.calib.line_start import CHECKED_CLASSES, LINE_SUBSET
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.pins import flagged_pins
 from pnlviz.calib.problem import FrameData
@@ -371,7 +372,9 @@ def _verdict(result: FrameResult, obs: Observations, params) -> None:
     intersection of two detected lines far outside the image can be tens of pixels off a camera
     that sits on both lines). A fit with no inlier keypoint at all is judged by its classes the
     same way when they fix it alone (``lines_alone_classes``: a frame whose lines meet outside
-    the image, started from them by :mod:`pnlviz.calib.line_start`)."""
+    the image, started from them by :mod:`pnlviz.calib.line_start`). A camera started from the
+    lines with no measured keypoint must fit :data:`pnlviz.calib.line_start.CHECKED_CLASSES`
+    classes: four lines fix a homography exactly, a wrong one among them too."""
     inlier_ids = [int(i) for i in obs.kp_ids[np.isin(obs.kp_ids, result.inliers)]
                   if int(i) in result.point_residuals and int(i) not in result.flagged]
     fitted = [i for i in inlier_ids if i not in result.lines_alone]
@@ -384,6 +387,13 @@ def _verdict(result: FrameResult, obs: Observations, params) -> None:
     if not inlier_residuals:
         result.estimate, result.failure_code = None, "no_inliers"
         result.failure = "no keypoint agrees with the camera (no inliers)"
+        return
+    derived = {int(i) for i in obs.kp_ids[obs.derived]}
+    measured = [i for i in fitted if i not in derived]
+    if result.subset == LINE_SUBSET and not measured and len(result.pnl_lines) < CHECKED_CLASSES:
+        result.estimate, result.failure_code = None, "degenerate"
+        result.failure = (f"degenerate geometry: the camera started from the lines fits {len(result.pnl_lines)} "
+                          "classes, no more than fix it, and no measured keypoint: nothing checks them")
         return
     rms = float(np.sqrt(np.mean(np.square(inlier_residuals))))
     limit = params.px(params.max_rms, obs.width)
