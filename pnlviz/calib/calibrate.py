@@ -17,7 +17,8 @@ Refinement Module", plus what the data asked for):
    ``refine_top`` are refined (focal length and pose on their inliers over all three planes: the
    3-plane rig of the paper, the homography giving the intrinsic initial guess), scored again, and
    the lowest score wins (ties: ``full`` first, as in the paper). Frames with too few keypoints
-   for a homography start from broadcast camera priors instead (:func:`prior_candidates`).
+   for a homography start from their straight lines instead (:func:`line_candidates`, where the
+   lines fix the ground plane) and from broadcast camera priors (:func:`prior_candidates`).
 3. PnL refinement, cost ``alpha * lines + (1 - alpha) * points`` (squares): a line or circle
    joins when all its observed points are within ``line_gate_px`` of its projection by the voted
    camera, a keypoint when within ``point_gate_px``. The paper refines the pose with K fixed
