@@ -106,6 +106,17 @@ def test_a_frame_of_lines_alone_gets_its_camera():
     assert max(res.line_residuals[c] for c in res.pnl_lines) < 2.5
 
 
+def test_a_point_that_is_not_a_number_is_ignored():
+    """Observations built by hand (the file readers refuse them) may hold a non-finite point: the
+    line is fitted to the others."""
+    obs = lines_only(CAMERA, ACROSS + ALONG, noise=0.5)
+    clean = ground_lines(obs, MODEL, 20.0)
+    obs.lines["Side line left"] = np.vstack([obs.lines["Side line left"], [[np.nan, np.inf]]])
+    found = ground_lines(obs, MODEL, 20.0)
+    assert found.keys() == clean.keys()
+    assert all(np.array_equal(found[n][0], clean[n][0]) for n in clean)
+
+
 def test_four_lines_alone_are_not_trusted():
     """Four lines fix a homography exactly, a wrong one among them as well: a camera started from
     them, with nothing else to check it, is refused (the same four lines and a fifth pass)."""

@@ -55,6 +55,7 @@ def ground_lines(obs: Observations, model: FieldModel, min_span: float) -> dict[
     for name, pts in obs.lines.items():
         seg = model.lines.get(name)
         pts = np.asarray(pts, float).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]  # a point no one can place says nothing of the line
         if seg is None or seg.plane != "ground" or len(pts) < 2:
             continue
         if np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)) < min_span:
