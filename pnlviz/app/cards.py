@@ -14,10 +14,11 @@ from pnlviz.app.modes import PointKind, Selection
 from pnlviz.app.overlay import Overlay
 from pnlviz.app.shots import SHOT_SUBSET
 from pnlviz.app.state import AppState, FrameView
+from pnlviz.calib.line_start import LINE_SUBSET
 
 
 #: the starts of a frame whose keypoints are too few for a homography (its result's ``subset``), in words
-STARTS = {"prior": "a broadcast camera's usual place", "lines": "its straight lines"}
+STARTS = {"prior": "a broadcast camera's usual place", LINE_SUBSET: "its straight lines"}
 
 
 def calibration_card(view: FrameView, state: AppState) -> str:
