@@ -89,6 +89,8 @@ def main() -> None:
                 cast.wait(1.2)
                 times[kind].append(shown_after(cast, n0, t0, regions[kind]))
             browser.close()
+        app.stop()
+        app.state.close()
         print(f"{args.frames} synthetic frames served, background pass running; load average "
               f"{os.getloadavg()[0]:.1f}")
         for kind, label in (("panel", "a panel element changed"), ("scene", "a pitch layer shown/hidden")):
