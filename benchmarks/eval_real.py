@@ -148,7 +148,11 @@ def main(argv: list[str] | None = None) -> int:
             fitted = HomographyFrames(data / "wc14_real" / "trainval_300", stems=stems, paint_fit=True)
             gt = dict(zip(fitted.stems, fitted.homographies))
             truth = f"on the paint ({sum(f.refined for f in fitted.paint_fits)} of {len(stems)} fitted)"
-        images = load_real(data / "wc14_real" / "trainval_300", stems)
+            # the frames it decoded, resized as load_real resizes them (not read a second time)
+            images = {s: cv2.resize(img, SIZE, interpolation=cv2.INTER_LINEAR)
+                      for s, img in zip(fitted.stems, fitted.images)}
+        else:
+            images = load_real(data / "wc14_real" / "trainval_300", stems)
         fig, cams, _ = run_frames(det, images, gt)
         r = np.array([fig["reproj"].get(s, np.inf) for s in images])
         print(f"val (held-out WC14 train/val, {len(images)} frames, homographies {truth}): PCK@5 {fig['pck5']:.3f} PCK@10 {fig['pck10']:.3f} "

@@ -9,7 +9,7 @@ import pytest
 
 from pnlviz.detect.peaks import extract_keypoints
 from pnlviz.field import load_field_model
-from pnlviz.labels.from_homography import homography_for_size
+from pnlviz.labels.from_homography import homography_for_size, template_homography
 from pnlviz.labels.resize import resize_annotation, resize_matrix
 
 torch = pytest.importorskip("torch")
@@ -119,6 +119,8 @@ def test_a_homography_for_a_resized_copy_moves_pixel_centres():
         want = (resize_matrix((1280, 720), size) @ (src / src[:, 2:]).T).T
         np.testing.assert_allclose(got[:, :2] / got[:, 2:], want[:, :2], atol=1e-9)
     np.testing.assert_allclose(homography_for_size(H, (1280, 720)), H @ field)
+    for size in ((300, 300), (480, 272)):  # and back: what the paint fit stores after fitting a copy
+        np.testing.assert_allclose(template_homography(homography_for_size(H, size), size), H, rtol=1e-9, atol=1e-9)
 
 
 def test_resize_annotation_clips_to_the_new_picture_and_refuses_unknown_alignments():

@@ -321,15 +321,16 @@ def line_candidates(data: FrameData, params: CalibParams) -> tuple[list[Candidat
             continue
         use = np.zeros(obs.n_keypoints, bool)
         use[points] = True
-        cam, _ = CameraProblem(cam0, data, RefineParams(alpha=0.5, loss="soft_l1", f_scale=tau, max_iter=40),
-                               use_keypoints=use, lines=lines, circles=()).solve()
+        own = CameraProblem(cam0, data, RefineParams(alpha=0.5, loss="soft_l1", f_scale=tau, max_iter=40),
+                            use_keypoints=use, lines=lines, circles=())
+        cam, _ = own.solve()
         if _sane(cam, params):
             continue
         err = _kp_errors(cam, obs)
         inl = err < params.px(thr, W)
         rms = float(np.sqrt(np.mean(np.minimum(err, 1e3) ** 2))) if len(err) else 0.0
         out.append(Candidate(LINE_SUBSET, float(thr), "ground", cam, obs.kp_ids[inl], rms))
-        r = CameraProblem(cam, data, RefineParams(alpha=0.5), use_keypoints=use, lines=lines, circles=()).residuals()
+        r = own.residuals(cam)  # the loss is the solver's: these are the plain weighted residuals
         fits = np.sqrt(np.mean(r * r)) < params.px(params.prior_good_rms, W)
         settled |= bool(fits and len(lines) >= CHECKED_CLASSES)
     return out, settled

@@ -388,9 +388,8 @@ def _verdict(result: FrameResult, obs: Observations, params) -> None:
         result.estimate, result.failure_code = None, "no_inliers"
         result.failure = "no keypoint agrees with the camera (no inliers)"
         return
-    derived = {int(i) for i in obs.kp_ids[obs.derived]}
-    measured = [i for i in fitted if i not in derived]
-    if result.subset == LINE_SUBSET and not measured and len(result.pnl_lines) < CHECKED_CLASSES:
+    if result.subset == LINE_SUBSET and len(result.pnl_lines) < CHECKED_CLASSES and \
+            not set(fitted) - {int(i) for i in obs.kp_ids[obs.derived]}:  # no measured keypoint fitted
         result.estimate, result.failure_code = None, "degenerate"
         result.failure = (f"degenerate geometry: the camera started from the lines fits {len(result.pnl_lines)} "
                           "classes, no more than fix it, and no measured keypoint: nothing checks them")

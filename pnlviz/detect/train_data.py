@@ -292,14 +292,13 @@ class HomographyFrames:
 
     def _fit_to_paint(self, i: int):
         """Frame ``i``'s homography fitted to its image's paint (kept in the source's convention)."""
-        from pnlviz.field import load_field_model
+        from pnlviz.labels.from_homography import template_homography
         from pnlviz.labels.paint_fit import fit_to_paint
 
         h, w = self.images[i].shape[:2]
         fit = fit_to_paint(self.field_homography(i, (w, h)), self.images[i])
-        if fit.refined:  # back to template yards -> source pixels
-            S = resize_matrix(self.source_size, (w, h))
-            self.homographies[i] = np.linalg.inv(S) @ fit.H @ load_field_model().template_to_field_matrix
+        if fit.refined:
+            self.homographies[i] = template_homography(fit.H, (w, h), source_size=self.source_size)
         return fit
 
     def __len__(self) -> int:

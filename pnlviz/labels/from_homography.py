@@ -80,6 +80,18 @@ def homography_for_size(H_template: np.ndarray, size: tuple[int, int], *, source
     return S @ np.asarray(H_template, float) @ np.linalg.inv(model.template_to_field_matrix)
 
 
+def template_homography(H_field: np.ndarray, size: tuple[int, int], *, source_size: tuple[int, int] = WC14_SIZE,
+                        model: FieldModel | None = None) -> np.ndarray:
+    """The inverse of :func:`homography_for_size`: a field-metres -> pixels homography of a copy
+    resized to ``size`` (W, H) as the WC14 convention's template yards -> pixels of the
+    ``source_size`` frame."""
+    from pnlviz.labels.resize import resize_matrix
+
+    model = model or _default_model()
+    S = resize_matrix(source_size, size)
+    return np.linalg.inv(S) @ np.asarray(H_field, float) @ model.template_to_field_matrix
+
+
 def _front_sign(H: np.ndarray, width: int, height: int) -> float:
     """The sign of the homogeneous w of ground points in front of the camera: that of the ground
     point seen at the bottom centre of the image (a broadcast frame's bottom row is pitch)."""

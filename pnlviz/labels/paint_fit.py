@@ -90,10 +90,12 @@ def paint_offsets(H: np.ndarray, strength: np.ndarray, model: FieldModel | None 
         n = np.stack([-d[:, 1], d[:, 0]], 1)
         n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-12
         inside = (uv[:, 0] > half + 1) & (uv[:, 0] < w - half - 2) & (uv[:, 1] > half + 1) & (uv[:, 1] < h - half - 2)
-        for p, nv in zip(uv[inside], n[inside]):
-            s = p[None] + t[:, None] * nv
-            prof = cv2.remap(strength, s[:, 0].astype(np.float32)[None], s[:, 1].astype(np.float32)[None],
-                             cv2.INTER_LINEAR)[0]
+        if not inside.any():
+            continue
+        # every profile across the line sampled in one call: row k is the profile at point k
+        s = uv[inside][:, None] + t[None, :, None] * n[inside][:, None]
+        profiles = cv2.remap(strength, s[..., 0].astype(np.float32), s[..., 1].astype(np.float32), cv2.INTER_LINEAR)
+        for p, nv, prof in zip(uv[inside], n[inside], profiles):
             peak = prof.max()
             if peak < min_contrast or prof[0] > 0.5 * peak or prof[-1] > 0.5 * peak:
                 continue  # no paint, or the edge of something wide (a board, a shadow): not a line
