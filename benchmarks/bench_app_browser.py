@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import base64
+import contextlib
 import resource
 import shutil
 import socket
@@ -93,6 +94,40 @@ class Screencast:
             if np.mean(np.abs(self.crop(data, region) - final)) < 1.5:
                 return 1e3 * (t - t0)
         return None
+
+
+@contextlib.contextmanager
+def served_page(frames: int, init_script: str | None = None):
+    """``pnlviz serve``'s app on a fresh ``pnlviz synth`` set of ``frames`` frames (seed 5; its
+    background pass working, as the command runs it) and a headless Chromium page on it at
+    1600x900 (``init_script`` run before the page's own): yields (app, page, browser). The app is
+    stopped and the set removed afterwards."""
+    from pnlviz.app.server import PnlvizApp
+    from pnlviz.app.state import AppState
+
+    tmp = Path(tempfile.mkdtemp(prefix="pnlviz-bench-"))
+    try:
+        data = tmp / "set"
+        subprocess.run([sys.executable, "-m", "pnlviz.cli", "synth", "--out", str(data), "-n", str(frames),
+                        "--seed", "5", "--workers", "2", "--no-progress"], check=True)
+        app = PnlvizApp(AppState(data, edits=tmp / "edits"), port=free_port())
+        try:
+            with sync_playwright() as pw:
+                browser = pw.chromium.launch(executable_path=shutil.which("chromium"), args=FLAGS)
+                try:
+                    page = browser.new_page(viewport={"width": 1600, "height": 900})
+                    if init_script:
+                        page.add_init_script(init_script)
+                    page.goto(app.page_url)
+                    page.get_by_text("review:").first.wait_for(timeout=60_000)
+                    yield app, page, browser
+                finally:
+                    browser.close()
+        finally:
+            app.stop()
+            app.state.close()
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def free_port() -> int:

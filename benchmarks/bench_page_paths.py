@@ -18,18 +18,14 @@ from __future__ import annotations
 import argparse
 import os
 import resource
-import shutil
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_app_browser import FLAGS, Screencast, free_port, percentiles  # noqa: E402
+from bench_app_browser import Screencast, percentiles, served_page  # noqa: E402
 
 BLOCK = '<div id="bench-block" style="width:300px;height:40px;background:{}"></div>'
 
@@ -49,56 +45,36 @@ def main() -> None:
     ap.add_argument("--changes", type=int, default=20, help="changes of each kind")
     args = ap.parse_args()
 
-    from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.state import AppState
-
-    tmp = Path(tempfile.mkdtemp(prefix="pnlviz-bench-"))
-    try:
-        data = tmp / "set"
-        subprocess.run([sys.executable, "-m", "pnlviz.cli", "synth", "--out", str(data), "-n", str(args.frames),
-                        "--seed", "5", "--workers", "2", "--no-progress"], check=True)
-        app = PnlvizApp(AppState(data, edits=tmp / "edits"), port=free_port())
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=shutil.which("chromium"), args=FLAGS)
-            page = browser.new_page(viewport={"width": 1600, "height": 900})
-            page.goto(app.page_url)
-            page.get_by_text("review:").first.wait_for(timeout=60_000)
-            time.sleep(3)
-            session = app.tabs()[0]
-            block = session.client.gui.add_html(BLOCK.format("#ff0000"))
-            page.locator("#bench-block").scroll_into_view_if_needed()
-            time.sleep(1)
-            box = page.locator("#bench-block").bounding_box()
-            canvas = max((c.bounding_box() for c in page.locator("canvas").all()),
-                         key=lambda b: b["width"] * b["height"])
-            regions = {"panel": (box["x"], box["y"], box["width"], box["height"]),
-                       "scene": (canvas["x"], canvas["y"], canvas["width"], canvas["height"])}
-            layer = session.workspace._lines.get("refined_pitch")
-            if layer is None:
-                raise SystemExit("the first frame shows no pitch overlay to toggle")
-            cast = Screencast(page)
-            cast.wait(1.0)
-            times: dict[str, list[float | None]] = {"panel": [], "scene": []}
-            for i in range(2 * args.changes):
-                kind = "panel" if i % 2 == 0 else "scene"
-                n0, t0 = len(cast.frames), time.time()
-                if kind == "panel":
-                    block.content = BLOCK.format("#0000ff" if (i // 2) % 2 == 0 else "#ff0000")
-                else:
-                    layer.visible = not layer.visible
-                cast.wait(1.2)
-                times[kind].append(shown_after(cast, n0, t0, regions[kind]))
-            browser.close()
-        app.stop()
-        app.state.close()
-        print(f"{args.frames} synthetic frames served, background pass running; load average "
-              f"{os.getloadavg()[0]:.1f}")
-        for kind, label in (("panel", "a panel element changed"), ("scene", "a pitch layer shown/hidden")):
-            print(f"{label} -> on screen: {percentiles(times[kind])}")
-        print(f"peak memory of this process (server included): "
-              f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    with served_page(args.frames) as (app, page, _):
+        time.sleep(3)
+        session = app.tabs()[0]
+        block = session.client.gui.add_html(BLOCK.format("#ff0000"))
+        page.locator("#bench-block").scroll_into_view_if_needed()
+        time.sleep(1)
+        box = page.locator("#bench-block").bounding_box()
+        canvas = max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
+        regions = {"panel": (box["x"], box["y"], box["width"], box["height"]),
+                   "scene": (canvas["x"], canvas["y"], canvas["width"], canvas["height"])}
+        layer = session.workspace._lines.get("refined_pitch")
+        if layer is None:
+            raise SystemExit("the first frame shows no pitch overlay to toggle")
+        cast = Screencast(page)
+        cast.wait(1.0)
+        times: dict[str, list[float | None]] = {"panel": [], "scene": []}
+        for i in range(2 * args.changes):
+            kind = "panel" if i % 2 == 0 else "scene"
+            n0, t0 = len(cast.frames), time.time()
+            if kind == "panel":
+                block.content = BLOCK.format("#0000ff" if (i // 2) % 2 == 0 else "#ff0000")
+            else:
+                layer.visible = not layer.visible
+            cast.wait(1.2)
+            times[kind].append(shown_after(cast, n0, t0, regions[kind]))
+    print(f"{args.frames} synthetic frames served, background pass running; load average {os.getloadavg()[0]:.1f}")
+    for kind, label in (("panel", "a panel element changed"), ("scene", "a pitch layer shown/hidden")):
+        print(f"{label} -> on screen: {percentiles(times[kind])}")
+    print(f"peak memory of this process (server included): "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 
 if __name__ == "__main__":
