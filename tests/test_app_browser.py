@@ -569,6 +569,44 @@ def test_the_title_stays_in_view_no_webgl_notice_covers_the_image_and_a_slow_act
     page.close()
 
 
+def test_the_dark_frame_around_the_image_is_the_pages_and_goes_in_the_3d_view(data, browser, serve):
+    """Around the frame the image view shows a dark frame: the page's background behind the
+    canvas (a mesh there filled pixels on every software-WebGL frame); the 3D view is drawn on
+    viser's own background, and coming back brings the frame back."""
+    import numpy as np
+
+    from pnlviz.app.bridge import BACKDROP_RGB
+    from pnlviz.app.modes import Mode
+
+    app = serve(data)
+    page = browser.new_page(viewport={"width": 1600, "height": 900})
+    page.goto(app.page_url)
+    wait_for_text(page, "focal")
+    session = tab(app)
+    box = canvas_box(page)
+
+    def corner() -> np.ndarray:  # the canvas's top-left corner, outside the fitted frame
+        png = page.screenshot(clip={"x": box["x"] + 4, "y": box["y"] + 4, "width": 8, "height": 8})
+        import cv2
+        return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1].reshape(-1, 3).mean(axis=0)
+
+    def background() -> str:
+        return page.evaluate("() => document.querySelector('canvas[data-engine]')"  # the WebGL canvas
+                             ".parentElement.parentElement.style.background")
+
+    wait_until(lambda: background() != "")
+    assert np.abs(corner() - BACKDROP_RGB).max() <= 3, corner()
+    session.queue.enqueue(lambda: session.set_mode(Mode.THREE_D))
+    wait_until(lambda: background() == "")
+    time.sleep(0.5)
+    assert np.abs(corner() - BACKDROP_RGB).max() > 30, corner()  # viser's light background
+    session.queue.enqueue(lambda: session.set_mode(Mode.IMAGE))
+    wait_until(lambda: background() != "")
+    time.sleep(0.5)
+    assert np.abs(corner() - BACKDROP_RGB).max() <= 3, corner()
+    page.close()
+
+
 def test_a_page_from_another_origin_cannot_connect(data, browser, serve):
     """A page served from another local port opens a websocket to the app: refused at the
     handshake, so it reads nothing and changes nothing."""

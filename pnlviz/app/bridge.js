@@ -42,7 +42,7 @@
 (() => {
   const config = () => {
     const el = document.getElementById("pnlviz-bridge");
-    return el ? { input: el.dataset.input, mode: el.dataset.mode } : null;
+    return el ? { input: el.dataset.input, mode: el.dataset.mode, backdrop: el.dataset.backdrop || "" } : null;
   };
   if (window.__pnlvizBridge) return; // one bridge per page, whatever re-renders the panel
 
@@ -176,12 +176,20 @@
     const T = state.T;
     if (isIdentity(T)) {
       st.target.style.transform = "";
-      st.clip.style.background = "";
     } else {
       st.target.style.transformOrigin = "0 0";
       st.target.style.transform = `translate(${T.tx}px, ${T.ty}px) scale(${T.s})`;
-      st.clip.style.background = "rgb(38, 40, 46)"; // what the server shows around the frame
     }
+    paintBackdrop();
+  };
+  // the image view's dark frame around the image: the page's background behind the (transparent)
+  // canvas, not a mesh that every WebGL frame would fill; the 3D view keeps viser's
+  const paintBackdrop = () => {
+    const st = stage();
+    const cfg = config();
+    if (!st || !cfg) return;
+    const colour = cfg.mode === "image" ? cfg.backdrop : "";
+    if (st.clip.style.background !== colour) st.clip.style.background = colour;
   };
   // keep the transform within what the server allows: the zoom limits, the frame's centre on screen
   const clamp = (T) => {
@@ -244,6 +252,7 @@
       state.T = { ...IDENTITY };
       applyTransform();
     }
+    paintBackdrop();
     const el = document.getElementById("pnlviz-view");
     const key = el ? [el.dataset.v, el.dataset.answer, el.dataset.view, el.dataset.points, el.dataset.reach].join("|") : "";
     if (key === seen) return;

@@ -36,6 +36,10 @@ def _script() -> str:
     return resources.files("pnlviz.app").joinpath("bridge.js").read_text(encoding="utf-8")
 
 
+#: The colour around the image in the image view: the page's background there (the bridge paints
+#: it; a mesh around the image cost every WebGL frame the pixels it covers)
+BACKDROP_RGB = (38, 40, 46)
+
 #: The label of the text field the bridge writes to: the page finds the field by it (a label no
 #: other widget has; the bridge hides its row).
 BRIDGE_FIELD = "pnlviz-pointer"
@@ -43,12 +47,14 @@ BRIDGE_FIELD = "pnlviz-pointer"
 
 def bridge_html(input_label: str, mode: Mode | str) -> str:
     """The HTML of the panel element that runs the bridge (once per page) and configures it for
-    the tab's view (a :class:`pnlviz.app.modes.Mode`, or its value; anything else: ValueError).
+    the tab's view (a :class:`pnlviz.app.modes.Mode`, or its value; anything else: ValueError): in
+    the image view the page around the frame takes :data:`BACKDROP_RGB`.
     ``input_label``: the label of the text field it writes to (letters, digits, - and _)."""
     mode = Mode(mode)
     code = base64.b64encode(_script().encode("utf-8")).decode("ascii")
     safe_label = "".join(c for c in input_label if c.isalnum() or c in "-_")
-    return (f'<div id="pnlviz-bridge" data-input="{safe_label}" data-mode="{mode.value}" style="display:none"></div>'
+    return (f'<div id="pnlviz-bridge" data-input="{safe_label}" data-mode="{mode.value}" '
+            f'data-backdrop="rgb{BACKDROP_RGB}" style="display:none"></div>'
             f'<img alt="" src="data:," style="display:none" onerror="eval(atob(\'{code}\'))">')
 
 

@@ -140,6 +140,9 @@ class PnlvizApp:
         # no shadows: the pitch is flat, and a shadow pass (three cascades of viser's default
         # light) would be drawn on every frame, the image view's too
         sc.configure_default_lights(True, cast_shadow=False)
+        # no environment map: its reflections lit the image view's invisible grab meshes on every
+        # frame (about 10 ms of software WebGL each); the lights below light the 3D pitch
+        sc.configure_environment_map(None)
         # light from above the pitch (z points down in this world)
         sc.add_light_ambient("/lights/ambient", intensity=0.6)
         sc.add_light_directional("/lights/sun", intensity=2.0, position=(30.0, 40.0, -100.0))

@@ -2,7 +2,9 @@
 overlays as line segments over it, and the points you grab (observed keypoints, ghosts of the
 missing ones, points of annotated lines) as batched discs with their ids. Every node is created
 once and then updated in place, so an edit sends only what changed and a drag in progress is
-never cut short by a redraw.
+never cut short by a redraw. The dark frame around the image is the page's background
+(:data:`pnlviz.app.bridge.BACKDROP_RGB`, painted by the page script); the mesh there only takes
+the pointer.
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
 select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
@@ -30,8 +32,7 @@ PIN_BOX_PX = 8.5  #: screen pixels: half the side of the box around a pinned key
 #: screen thickness of each layer's lines
 THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
              "detected_lines": 2.0, "residuals": 1.5, "finding_annotated": 5.0, "finding_expected": 2.0}
-BACKDROP_RGB = (38, 40, 46)
-BACKDROP_MARGIN = 6.0  # the dark frame around the image: this many image widths (heights) each side
+BACKDROP_MARGIN = 6.0  # the pick surface around the image: this many image widths (heights) each side
 FRAME_SLOTS = 3  # frames whose pixels are kept in the browser: the one shown and two sent ahead
 SELECTED_RGB = (255, 255, 255)
 LABEL_MIN_GAP_PX = 16.0  # ids closer than this on screen: only the first one shows
@@ -113,8 +114,12 @@ class Workspace:
         return slot
 
     def _frame_backdrop(self, plane: ImagePlane) -> None:
-        """A dark frame around the image (one mesh of four quads, none under the image: no pixel
-        is drawn twice) that pans the view when dragged, like the image itself."""
+        """Around the image, what the pointer hits there (one mesh of four quads, none under the
+        image): a press near a point whose grab mesh the browser's pick missed, or a drag, is
+        routed as one on the image is (a point just outside the frame is still dragged). The
+        dark colour there is the page's: the mesh is an invisible wireframe, which the browser's
+        pick still hits (it tests the triangles) while drawing only its few edges (filled, it
+        cost 13-17 ms of every software-WebGL frame)."""
         w, h = plane.extent
         m = BACKDROP_MARGIN
         x0, x1, y0, y1 = -w / 2, w / 2, -h / 2, h / 2
@@ -126,8 +131,8 @@ class Workspace:
         faces = np.array([[k, k + 1, k + 2] for k in range(0, 16, 4)] + [[k, k + 2, k + 3] for k in range(0, 16, 4)])
         if self._backdrop is None:
             self._backdrop = self.scene.add_mesh_simple(
-                f"{self.root}/backdrop", vertices, faces, color=BACKDROP_RGB, material="toon3", side="double",
-                flat_shading=True, cast_shadow=False, receive_shadow=False)
+                f"{self.root}/backdrop", vertices, faces, wireframe=True, opacity=0.0, side="double",
+                cast_shadow=False, receive_shadow=False)
             self._bind_pan(self._backdrop)
         else:
             update_changed(self._backdrop, vertices=vertices.astype(np.float32))
