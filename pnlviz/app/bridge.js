@@ -24,6 +24,9 @@
 // - The canvas at the device pixel ratio: viser lowers its resolution on a slow machine unless the
 //   URL carries ?fixedDpr=<ratio> (read when the page starts), so a page whose URL carries
 //   another ratio (or none) reloads once with its own window.devicePixelRatio.
+// - The image view's dark frame around the image: the bridge paints the canvas's container in the
+//   colour #pnlviz-bridge names (data-backdrop; the canvas is transparent), and takes it off in
+//   the 3D view. A mesh there would be filled on every WebGL frame.
 // - The arrow keys nudge the selected point by one image pixel (ten with shift) instead of turning
 //   the camera.
 // - Every <label for="..."> points at its input (viser labels inputs whose elements carry no id).

@@ -141,7 +141,7 @@ class PnlvizApp:
         # light) would be drawn on every frame, the image view's too
         sc.configure_default_lights(True, cast_shadow=False)
         # no environment map: its reflections lit the image view's invisible grab meshes on every
-        # frame (about 10 ms of software WebGL each); the lights below light the 3D pitch
+        # frame (about 10 ms of each software-WebGL frame); the lights below light the 3D pitch
         sc.configure_environment_map(None)
         # light from above the pitch (z points down in this world)
         sc.add_light_ambient("/lights/ambient", intensity=0.6)
