@@ -10,7 +10,9 @@ either a panel HTML block's colour or the visibility of the frame's pitch overla
 and the time runs from the server's change to the first frame Chromium composites showing it as
 it ends up (its screencast, as ``bench_app_browser.py`` measures). It says what a layer drawn by
 the page itself (fed through a panel element, as the busy cue is) would cost against a scene
-layer; nothing in the app is changed. Prints p50/p95 of each and the load average.
+layer; nothing in the app is changed. Prints p50/p95 of each and the load average. A third kind
+changes both in one message batch and says whether the page shows them in the same frame (what
+a layer drawn by the page needs to stay on the scene's image).
 """
 
 from __future__ import annotations
@@ -61,18 +63,30 @@ def main() -> None:
         cast = Screencast(page)
         cast.wait(1.0)
         times: dict[str, list[float | None]] = {"panel": [], "scene": []}
-        for i in range(2 * args.changes):
-            kind = "panel" if i % 2 == 0 else "scene"
+        lags: list[float] = []  # both in one batch: the scene's first frame minus the panel's, ms
+        blue = False
+        for i in range(3 * args.changes):
+            kind = ("panel", "scene", "both")[i % 3]
             n0, t0 = len(cast.frames), time.time()
-            if kind == "panel":
-                block.content = BLOCK.format("#0000ff" if (i // 2) % 2 == 0 else "#ff0000")
-            else:
-                layer.visible = not layer.visible
+            with session.client.atomic():
+                if kind in ("panel", "both"):
+                    blue = not blue
+                    block.content = BLOCK.format("#0000ff" if blue else "#ff0000")
+                if kind in ("scene", "both"):
+                    layer.visible = not layer.visible
             cast.wait(1.2)
-            times[kind].append(shown_after(cast, n0, t0, regions[kind]))
+            if kind == "both":
+                panel, scene = (shown_after(cast, n0, t0, regions[k]) for k in ("panel", "scene"))
+                if panel is not None and scene is not None:
+                    lags.append(scene - panel)
+            else:
+                times[kind].append(shown_after(cast, n0, t0, regions[kind]))
     print(f"{args.frames} synthetic frames served, background pass running; load average {os.getloadavg()[0]:.1f}")
     for kind, label in (("panel", "a panel element changed"), ("scene", "a pitch layer shown/hidden")):
         print(f"{label} -> on screen: {percentiles(times[kind])}")
+    same = sum(abs(v) < 1.0 for v in lags)
+    print(f"both in one message batch: shown in the same frame {same} of {len(lags)} times; scene after panel by "
+          f"{', '.join(f'{v:.0f}' for v in sorted(lags))} ms")
     print(f"peak memory of this process (server included): "
           f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
