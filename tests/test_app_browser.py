@@ -573,6 +573,7 @@ def test_the_dark_frame_around_the_image_is_the_pages_and_goes_in_the_3d_view(da
     """Around the frame the image view shows a dark frame: the page's background behind the
     canvas (a mesh there filled pixels on every software-WebGL frame); the 3D view is drawn on
     viser's own background, and coming back brings the frame back."""
+    import cv2
     import numpy as np
 
     from pnlviz.app.bridge import BACKDROP_RGB
@@ -587,7 +588,6 @@ def test_the_dark_frame_around_the_image_is_the_pages_and_goes_in_the_3d_view(da
 
     def corner() -> np.ndarray:  # the canvas's top-left corner, outside the fitted frame
         png = page.screenshot(clip={"x": box["x"] + 4, "y": box["y"] + 4, "width": 8, "height": 8})
-        import cv2
         return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1].reshape(-1, 3).mean(axis=0)
 
     def background() -> str:
