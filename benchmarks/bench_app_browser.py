@@ -97,19 +97,21 @@ class Screencast:
 
 
 @contextlib.contextmanager
-def served_page(frames: int, init_script: str | None = None):
-    """``pnlviz serve``'s app on a fresh ``pnlviz synth`` set of ``frames`` frames (seed 5; its
-    background pass working, as the command runs it) and a headless Chromium page on it at
-    1600x900 (``init_script`` run before the page's own): yields (app, page, browser). The app is
-    stopped and the set removed afterwards."""
+def served_page(frames: int, init_script: str | None = None, data: Path | None = None):
+    """``pnlviz serve``'s app on a fresh ``pnlviz synth`` set of ``frames`` frames (seed 5), or on
+    ``data`` when given (its background pass working, as the command runs it), and a headless
+    Chromium page on it at 1600x900 (``init_script`` run before the page's own): yields (app,
+    page, browser). The app is stopped and the set removed afterwards (``data`` is left as it is;
+    the edits go to a temporary folder)."""
     from pnlviz.app.server import PnlvizApp
     from pnlviz.app.state import AppState
 
     tmp = Path(tempfile.mkdtemp(prefix="pnlviz-bench-"))
     try:
-        data = tmp / "set"
-        subprocess.run([sys.executable, "-m", "pnlviz.cli", "synth", "--out", str(data), "-n", str(frames),
-                        "--seed", "5", "--workers", "2", "--no-progress"], check=True)
+        if data is None:
+            data = tmp / "set"
+            subprocess.run([sys.executable, "-m", "pnlviz.cli", "synth", "--out", str(data), "-n", str(frames),
+                            "--seed", "5", "--workers", "2", "--no-progress"], check=True)
         app = PnlvizApp(AppState(data, edits=tmp / "edits"), port=free_port())
         try:
             with sync_playwright() as pw:
@@ -211,90 +213,69 @@ def main() -> None:
     ap.add_argument("--hide", nargs="*", default=[], help="overlay layers to switch off (e.g. ids ghosts)")
     args = ap.parse_args()
 
-    from pnlviz.app.server import PnlvizApp
-    from pnlviz.app.state import AppState
+    with served_page(args.frames, f"({EVENTS})()", data=args.data) as (app, page, _):
+        deadline = time.time() + 20
+        while time.time() < deadline and not (app.tabs() and app.tabs()[0].view_control.css_canvas):
+            time.sleep(0.2)
+        session = app.tabs()[0]
+        for layer in args.hide:
+            session.queue.enqueue(lambda layer=layer: session.painter.set_layer(layer, False))
+        session.flush()
+        print(f"served {len(app.state.stems)} frames from {app.state.data}; browser canvas {session.view_control.canvas[0]}x"
+              f"{session.view_control.canvas[1]} CSS px, WebGL: "
+              + page.evaluate("() => { const gl = document.createElement('canvas').getContext('webgl');"
+                              "const i = gl.getExtension('WEBGL_debug_renderer_info');"
+                              "return i ? gl.getParameter(i.UNMASKED_RENDERER_WEBGL) : 'unknown'; }"))
+        cast = Screencast(page)
+        box = max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
 
-    tmp = Path(tempfile.mkdtemp(prefix="pnlviz-bench-"))
-    try:
-        data = args.data
-        if data is None:
-            data = tmp / "set"
-            subprocess.run([sys.executable, "-m", "pnlviz.cli", "synth", "--out", str(data), "-n", str(args.frames),
-                            "--seed", "5", "--workers", "2", "--no-progress"], check=True)
-        app = PnlvizApp(AppState(data, edits=tmp / "edits"), port=free_port())
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=shutil.which("chromium"), args=FLAGS)
-            page = browser.new_page(viewport={"width": 1600, "height": 900})
-            page.add_init_script(f"({EVENTS})()")  # before the page's bridge, which keeps a pan's release
-            page.goto(app.page_url)
-            page.get_by_text("review:").first.wait_for(timeout=60_000)
-            deadline = time.time() + 20
-            while time.time() < deadline and not (app.tabs() and app.tabs()[0].view_control.css_canvas):
-                time.sleep(0.2)
-            session = app.tabs()[0]
-            for layer in args.hide:
-                session.queue.enqueue(lambda layer=layer: session.painter.set_layer(layer, False))
-            session.flush()
-            print(f"served {len(app.state.stems)} frames from {data}; browser canvas {session.view_control.canvas[0]}x"
-                  f"{session.view_control.canvas[1]} CSS px, WebGL: "
-                  + page.evaluate("() => { const gl = document.createElement('canvas').getContext('webgl');"
-                                  "const i = gl.getExtension('WEBGL_debug_renderer_info');"
-                                  "return i ? gl.getParameter(i.UNMASKED_RENDERER_WEBGL) : 'unknown'; }"))
-            cast = Screencast(page)
-            box = max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
-
-            def drags(n: int) -> list[float | None]:
-                out = []
-                for i in range(n):
-                    view = session.view()
-                    obs = view.observations
-                    if obs is None or not obs.n_keypoints or not view.result or not view.result.ok:
-                        session.queue.enqueue(lambda: session.step(1))
-                        session.flush()
-                        continue
-                    k = i % obs.n_keypoints
-                    uv = obs.kp_xy[k]
-                    x, y = session.view_control.view2d.to_screen(uv, session.view_control.canvas)
-                    region = (box["x"] + max(0, x - 150), box["y"] + max(0, y - 100), 300, 200)
-                    cast.wait(0.3)
-                    page.mouse.move(box["x"] + x, box["y"] + y)
-                    page.mouse.down()
-                    for step in range(1, 6):
-                        page.mouse.move(box["x"] + x + 2 * step, box["y"] + y + step)
-                        cast.wait(0.04)
-                    page.mouse.up()
-                    out.append(cast.visible_after("up", region))
-                    session.queue.enqueue(lambda: session.step(1))  # a fresh frame for the next drag
+        def drags(n: int) -> list[float | None]:
+            out = []
+            for i in range(n):
+                view = session.view()
+                obs = view.observations
+                if obs is None or not obs.n_keypoints or not view.result or not view.result.ok:
+                    session.queue.enqueue(lambda: session.step(1))
                     session.flush()
-                    cast.wait(0.5)
-                return out
-
-            live = drags(args.drags)
-            session.editor.live_preview = False
-            round_trip = drags(args.drags)
-            session.editor.live_preview = True
-            steps = []
-            for _ in range(args.steps):
-                x, y = box["x"] + session.view_control.canvas[0] / 2, box["y"] + session.view_control.canvas[1] / 3
+                    continue
+                k = i % obs.n_keypoints
+                uv = obs.kp_xy[k]
+                x, y = session.view_control.view2d.to_screen(uv, session.view_control.canvas)
+                region = (box["x"] + max(0, x - 150), box["y"] + max(0, y - 100), 300, 200)
                 cast.wait(0.3)
-                page.keyboard.press("n")
-                steps.append(cast.visible_after("key", (x - 200, y - 100, 400, 200), settle=1.0))
-            pans, zooms = pan_and_zoom(page, session, box, args.gestures)
-            print(f"drag release -> overlay (live preview, as the app runs): {percentiles(live)}")
-            print(f"drag release -> overlay (no preview: release -> save -> recalibrate -> send -> draw): "
-                  f"{percentiles(round_trip)}")
-            print(f"next frame -> image: {percentiles(steps)}")
-            print(f"server-side recalibration of the last drag: {session.editor.last_recalibration_ms:.0f} ms")
-            for name, (steps, during, after, latency) in (("pan (mouse move)", pans), ("zoom (wheel notch)", zooms)):
-                print(f"{name}: server camera pushes per step {during / max(1, steps):.2f} ({during} during {steps} "
-                      f"steps; {after} at the gestures' ends); input -> frame drawn: {percentiles(latency)}")
-            browser.close()
-        app.stop()
-        app.state.close()
-        print(f"peak memory of this process (server + benchmark): "
-              f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+                page.mouse.move(box["x"] + x, box["y"] + y)
+                page.mouse.down()
+                for step in range(1, 6):
+                    page.mouse.move(box["x"] + x + 2 * step, box["y"] + y + step)
+                    cast.wait(0.04)
+                page.mouse.up()
+                out.append(cast.visible_after("up", region))
+                session.queue.enqueue(lambda: session.step(1))  # a fresh frame for the next drag
+                session.flush()
+                cast.wait(0.5)
+            return out
+
+        live = drags(args.drags)
+        session.editor.live_preview = False
+        round_trip = drags(args.drags)
+        session.editor.live_preview = True
+        steps = []
+        for _ in range(args.steps):
+            x, y = box["x"] + session.view_control.canvas[0] / 2, box["y"] + session.view_control.canvas[1] / 3
+            cast.wait(0.3)
+            page.keyboard.press("n")
+            steps.append(cast.visible_after("key", (x - 200, y - 100, 400, 200), settle=1.0))
+        pans, zooms = pan_and_zoom(page, session, box, args.gestures)
+        print(f"drag release -> overlay (live preview, as the app runs): {percentiles(live)}")
+        print(f"drag release -> overlay (no preview: release -> save -> recalibrate -> send -> draw): "
+              f"{percentiles(round_trip)}")
+        print(f"next frame -> image: {percentiles(steps)}")
+        print(f"server-side recalibration of the last drag: {session.editor.last_recalibration_ms:.0f} ms")
+        for name, (steps, during, after, latency) in (("pan (mouse move)", pans), ("zoom (wheel notch)", zooms)):
+            print(f"{name}: server camera pushes per step {during / max(1, steps):.2f} ({during} during {steps} "
+                  f"steps; {after} at the gestures' ends); input -> frame drawn: {percentiles(latency)}")
+    print(f"peak memory of this process (server + benchmark): "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 
 if __name__ == "__main__":

@@ -94,7 +94,6 @@ class Session:
         if client is not None:
             client.camera.on_update(self.view_control.on_camera)
             client.scene.configure_default_lights(True, cast_shadow=False)  # no shadow pass on every frame
-            client.scene.configure_environment_map(None)  # nor reflections (pnlviz.app.server._add_lights)
 
     @property
     def index(self) -> int:

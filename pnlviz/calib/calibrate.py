@@ -44,6 +44,7 @@ image width.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -51,7 +52,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from pnlviz.calib.line_start import CHECKED_CLASSES, LINE_SUBSET, MIN_SPAN_PX, line_sets, lines_suffice
+from pnlviz.calib.line_start import CHECKED_CLASSES, LINE_SUBSET, MIN_SPAN_PX, line_sets
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.pins import PinFailure, pin_camera
 from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_frame, plane_masks, refit_with
@@ -303,19 +304,22 @@ def prior_candidates(data: FrameData, params: CalibParams) -> list[Candidate]:
     return out
 
 
-def line_candidates(data: FrameData, params: CalibParams) -> tuple[list[Candidate], bool]:
+def line_candidates(data: FrameData, params: CalibParams, sets: list | None = None) -> tuple[list[Candidate], bool]:
     """Cameras for frames whose keypoints are too few for a homography but whose straight ground
     lines (with their ground keypoints) fix the plane (:mod:`pnlviz.calib.line_start`): each
     homography of :func:`pnlviz.calib.line_start.line_sets` decomposed, then fitted (focal
     length and pose) to the lines and keypoints it was solved from (the vote then scores it on
     every observation, and PnL's gates choose what it fits). Also whether one of them is settled:
     :data:`pnlviz.calib.line_start.CHECKED_CLASSES` lines or more (more than fix it) that it fits
-    within ``prior_good_rms`` px RMS (no broadcast prior need be tried then)."""
+    within ``prior_good_rms`` px RMS (no broadcast prior need be tried then). ``sets``: the
+    frame's line sets when the caller has them already."""
     obs, W = data.obs, data.obs.width
+    if sets is None:
+        sets = line_sets(obs, data.model, params.px(MIN_SPAN_PX, W))
     tau = params.px(params.vote_tau, W)
     thr = params.ransac_thresholds[-1]
     out, settled = [], False
-    for H, lines, points in line_sets(obs, data.model, params.px(MIN_SPAN_PX, W)):
+    for H, lines, points in sets:
         cam0 = camera_from_plane_homography(H, "ground", W, obs.height, data.model)
         if cam0 is None or _sane(cam0, params):
             continue
@@ -375,12 +379,19 @@ class CameraKind:
     def new_result() -> CalibrationResult:
         return CalibrationResult()
 
+    @functools.cached_property
+    def line_sets(self) -> list:
+        """The frame's line sets (:func:`pnlviz.calib.line_start.line_sets`), found once: whether
+        there are any decides :meth:`too_few`, and :meth:`fallback` starts from them."""
+        obs = self.data.obs
+        return line_sets(obs, self.data.model, self.params.px(MIN_SPAN_PX, obs.width))
+
     def too_few(self) -> str | None:
         obs, p = self.data.obs, self.params
         needed = 2 if p.prior_search and (obs.lines or obs.circles) else p.min_points
         if obs.n_keypoints >= needed:
             return None
-        if p.line_search and lines_suffice(obs, self.data.model, p.px(MIN_SPAN_PX, obs.width)):
+        if p.line_search and self.line_sets:
             return None
         return f"too few keypoints ({obs.n_keypoints} < {needed})"
 
@@ -431,7 +442,7 @@ class CameraKind:
         the broadcast priors (up to 72 fits, about a second) unless a line start is settled
         (:func:`line_candidates`)."""
         p = self.params
-        lines, settled = line_candidates(self.data, p) if p.line_search else ([], False)
+        lines, settled = line_candidates(self.data, p, self.line_sets) if p.line_search else ([], False)
         if settled:
             return lines
         return lines + (prior_candidates(self.data, p) if p.prior_search else [])

@@ -28,8 +28,7 @@ from pnlviz.field.model import FieldModel
 
 from .observations import Observations
 
-__all__ = ["CHECKED_CLASSES", "LINE_SUBSET", "MIN_SPAN_PX", "determined", "ground_lines", "line_homography", "line_sets",
-           "lines_suffice"]
+__all__ = ["CHECKED_CLASSES", "LINE_SUBSET", "MIN_SPAN_PX", "determined", "ground_lines", "line_homography", "line_sets"]
 
 #: an image line is fitted only to points spanning at least this far (px at 960 px width)
 MIN_SPAN_PX = 20.0
@@ -63,12 +62,6 @@ def ground_lines(obs: Observations, model: FieldModel, min_span: float) -> dict[
         world = np.cross([seg.start[0], seg.start[1], 1.0], [seg.end[0], seg.end[1], 1.0])
         out[name] = (_fit_image_line(pts), world)
     return out
-
-
-def lines_suffice(obs: Observations, model: FieldModel, min_span: float) -> bool:
-    """Whether the frame's ground lines and ground keypoints can give a homography (the first of
-    :func:`line_sets`)."""
-    return bool(line_sets(obs, model, min_span, first_only=True))
 
 
 def _rows(image_lines: np.ndarray, pitch_lines: np.ndarray, image_points: np.ndarray,
@@ -131,8 +124,7 @@ def _cross_matrix(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def line_sets(obs: Observations, model: FieldModel, min_span: float,
-              first_only: bool = False) -> list[tuple[np.ndarray, list[str], np.ndarray]]:
+def line_sets(obs: Observations, model: FieldModel, min_span: float) -> list[tuple[np.ndarray, list[str], np.ndarray]]:
     """The homographies to start from (pitch metres -> pixels), each with the line classes and
     the keypoints (indices) it was solved from: every ground line and ground keypoint that is not
     derived from the lines (``Observations.derived``: it repeats them), then each such set with
@@ -145,7 +137,7 @@ def line_sets(obs: Observations, model: FieldModel, min_span: float,
     names = list(lines)
     items = [("line", n) for n in names] + [("point", int(k)) for k in on_ground]
     out = []
-    for drop in [None] + (items if len(items) >= 5 and not first_only else []):
+    for drop in [None] + (items if len(items) >= 5 else []):
         keep = [n for n in names if drop != ("line", n)]
         pts = [k for k in on_ground if drop != ("point", int(k))]
         if len(keep) + len(pts) < 4 or not determined(np.array([lines[n][1] for n in keep]), obs.kp_xyz[pts, :2]):
