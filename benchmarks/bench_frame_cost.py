@@ -10,7 +10,8 @@ This keeps the page rendering for ``--seconds`` (the server toggles an overlay l
 150 ms) and prints the mean interval between the page's animation frames: as the app runs, then
 with the frame's image hidden (what drawing the image's pixels costs), alternately for
 ``--rounds`` rounds. The app is served on a ``pnlviz synth`` set with its background pass
-working, as ``pnlviz serve`` runs; nothing in the app is changed but the image's visibility.
+working, as ``pnlviz serve`` runs; nothing in the app is changed but the image's visibility (the page's frame layer,
+``pnlviz/app/pageframes.js``: since 2026-12-06 the page draws the image behind the canvas).
 """
 
 from __future__ import annotations
@@ -43,7 +44,10 @@ def main() -> None:
     with served_page(args.frames, f"({FRAMES})()") as (app, page, _):
         time.sleep(5)  # the first frame's nodes made
         tab = app.tabs()[0]
-        images = [slot["handle"] for slot in tab.workspace._slots if slot["visible"]]
+
+        def image(visible: bool) -> None:  # the page's frame layer (pnlviz/app/pageframes.js)
+            page.evaluate(f"() => {{ document.getElementById('pnlviz-frames').style.visibility = "
+                          f"'{'visible' if visible else 'hidden'}'; }}")
 
         def interval() -> tuple[float, int]:
             page.evaluate("() => { window.__frames = []; }")
@@ -56,12 +60,10 @@ def main() -> None:
         rows: dict[str, list[tuple[float, int]]] = {"as the app runs": [], "the image hidden": []}
         for _ in range(args.rounds):
             rows["as the app runs"].append(interval())
-            for h in images:
-                h.visible = False
+            image(False)
             page.wait_for_timeout(600)
             rows["the image hidden"].append(interval())
-            for h in images:
-                h.visible = True
+            image(True)
             page.wait_for_timeout(600)
         canvas = tab.view_control.canvas
     with open("/proc/loadavg") as f:

@@ -28,7 +28,9 @@
 //   colour #pnlviz-bridge names (data-backdrop; the canvas is transparent), and takes it off in
 //   the 3D view. A mesh there would be filled on every WebGL frame.
 // - The arrow keys nudge the selected point by one image pixel (ten with shift) instead of turning
-//   the camera.
+//   the camera. viser's own camera moves in the image view are done here too, as the page's pan
+//   and zoom: a right (or middle) drag pans, W / S zoom, A / D / Q / E pan. viser's camera would
+//   move the overlays without the frame the page draws behind them (pageframes.js).
 // - Every <label for="..."> points at its input (viser labels inputs whose elements carry no id).
 // - The keys work at the window level except while typing in a text field: Enter and Escape leave
 //   a field; a dropdown gives the keyboard back once a choice is made, and its search starts from
@@ -93,6 +95,7 @@
     }
     return best;
   };
+  state.glCanvas = glCanvas; // for the frame layer (pageframes.js)
   const stage = () => {
     const canvas = glCanvas();
     if (!canvas || !canvas.parentElement || !canvas.parentElement.parentElement) return null;
@@ -228,11 +231,23 @@
     state.T = clamp({ s, tx: f * (T.tx - p[0]) + p[0], ty: f * (T.ty - p[1]) + p[1] });
     applyTransform();
     frameDrawn(timeStamp);
+    sendWhenIdle();
+  };
+  // the wheel's (or the keys') gesture goes to the server once they have rested for idleMs
+  const sendWhenIdle = () => {
     clearTimeout(state.wheelTimer);
     state.wheelTimer = setTimeout(() => {
       state.wheelTimer = null;
       endGesture();
     }, state.idleMs);
+  };
+  // the view moved by (dx, dy) CSS px by a key (held: repeated); sent when the keys rest
+  const panBy = (dx, dy, timeStamp) => {
+    const T = state.T;
+    state.T = clamp({ s: T.s, tx: T.tx + dx, ty: T.ty + dy });
+    applyTransform();
+    frameDrawn(timeStamp);
+    sendWhenIdle();
   };
   // a gesture ended: its whole transform goes to the server, once (later if one is in the air)
   const endGesture = () => {
@@ -315,6 +330,14 @@
       state.swallowClick = false;
       if (state.press) finishPress(); // its release never came (the window lost the pointer)
       if (state.boxPress) finishBox(false);
+      if (imageMode() && (event.button === 1 || event.button === 2) && canvasOf(event.target)) {
+        // a right (or middle) drag pans too, here: viser's camera would move the overlays alone,
+        // without the frame the page draws behind them (pageframes.js)
+        event.stopImmediatePropagation();
+        state.press = { id: event.pointerId, x0: event.clientX, y0: event.clientY, x: event.clientX, y: event.clientY,
+                        panning: false, mask: event.button === 2 ? 2 : 4 };
+        return;
+      }
       const plain = plainLeft(event);
       if (!imageMode() || !(plain || ctrlLeft(event)) || !canvasOf(event.target)) return;
       const p = local(event);
@@ -330,7 +353,7 @@
         return;
       }
       state.press = { id: event.pointerId, x0: event.clientX, y0: event.clientY, x: event.clientX, y: event.clientY,
-                      panning: false };
+                      panning: false, mask: 1 };
     },
     { capture: true },
   );
@@ -347,7 +370,7 @@
     "pointermove",
     (event) => {
       const press = state.press;
-      if (press && event.pointerId === press.id && !(event.buttons & 1)) finishPress(); // released unseen
+      if (press && event.pointerId === press.id && !(event.buttons & press.mask)) finishPress(); // released unseen
       else if (press && event.pointerId === press.id) {
         event.stopImmediatePropagation(); // viser sees no move: no drag of the image starts
         if (!press.panning && Math.max(Math.abs(event.clientX - press.x0), Math.abs(event.clientY - press.y0)) > 3) {
@@ -482,6 +505,10 @@
   };
 
   const ARROWS = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, -1], ArrowDown: [0, 1] };
+  // viser's camera keys, in the image view: A / D pan left / right, Q / E down / up (the frame
+  // moves the other way), W / S zoom in / out around the canvas's centre: [dx, dy, zoom]
+  const CAMERA_KEYS = { KeyA: [1, 0, 0], KeyD: [-1, 0, 0], KeyQ: [0, -1, 0], KeyE: [0, 1, 0], KeyW: [0, 0, 1], KeyS: [0, 0, -1] };
+  const KEY_PAN_PX = 40;
   window.addEventListener(
     "wheel",
     (event) => {
@@ -567,6 +594,18 @@
         event.preventDefault();
         event.stopImmediatePropagation();
         send();
+        return;
+      }
+      if (event.code in CAMERA_KEYS) {
+        // viser's camera keys, done here (they would move the overlays without the frame behind)
+        const [dx, dy, zoom] = CAMERA_KEYS[event.code];
+        event.preventDefault();
+        event.stopImmediatePropagation();
+        const st = stage();
+        if (!st) return;
+        const box = st.clip.getBoundingClientRect();
+        if (zoom) zoomAt(zoom * Math.log(Math.SQRT2) / 2, [box.width / 2, box.height / 2], event.timeStamp);
+        else panBy(dx * KEY_PAN_PX, dy * KEY_PAN_PX, event.timeStamp);
         return;
       }
       if (event.key !== "+" && event.key !== "=" && event.key !== "-" && event.key !== "_") return;

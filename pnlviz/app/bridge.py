@@ -33,7 +33,9 @@ from pnlviz.app.modes import Mode
 
 
 def _script() -> str:
-    return resources.files("pnlviz.app").joinpath("bridge.js").read_text(encoding="utf-8")
+    """The page's scripts: the pointer bridge, then the frame layer (``pageframes.js``)."""
+    files = resources.files("pnlviz.app")
+    return "\n".join(files.joinpath(name).read_text(encoding="utf-8") for name in ("bridge.js", "pageframes.js"))
 
 
 #: The colour around the image in the image view: the page's background there (the bridge paints

@@ -11,7 +11,10 @@ A hidden element of the tab's panel, ``#pnlviz-view``, carries in its data attri
   limits and the frame size (the page keeps its transform within what the server would allow);
 * ``data-reach``: the screen radius (CSS px) within which a press grabs a point, and
   ``data-points``: every grabbable point, image pixels ``x,y,x,y,...`` (a press within reach of
-  one is left to viser: a point drag; any other plain left press on the canvas is a pan).
+  one is left to viser: a point drag; any other plain left press on the canvas is a pan);
+* ``data-frame``: the frame to draw behind the canvas, ``slot,version`` (its pixels are in the
+  slot's panel element: :mod:`pnlviz.app.pageframes`), so that the page places and swaps it with
+  the view and the overlays it belongs to.
 
 A push announces itself inside the camera's atomic message batch
 (:meth:`pnlviz.app.viewcontrol.ViewControl.push`), so the page gets the new version with the
@@ -27,11 +30,12 @@ from pnlviz.app.points import GRAB_PX
 
 
 def page_data(version: int, answer: int, applied: bool, view: View2D | None, canvas: tuple[int, int],
-              plane, reach: float, points: np.ndarray) -> str:
+              plane, reach: float, points: np.ndarray, frame: str = "") -> str:
     """The ``#pnlviz-view`` element for these values (``plane``: the frame's
-    :class:`pnlviz.app.view2d.ImagePlane`, None before the first frame)."""
+    :class:`pnlviz.app.view2d.ImagePlane`, None before the first frame; ``frame``: the slot shown,
+    :meth:`pnlviz.app.pageframes.FrameSlots.page_state`)."""
     attrs = {"v": str(int(version)), "answer": str(int(answer)), "applied": "1" if applied else "0",
-             "canvas": f"{int(canvas[0])},{int(canvas[1])}"}
+             "canvas": f"{int(canvas[0])},{int(canvas[1])}", "frame": frame}
     if view is not None and plane is not None:
         fit = View2D.fit(plane, canvas).zoom
         attrs["view"] = f"{view.cu:.4f},{view.cv:.4f},{view.zoom:.6g}"
@@ -77,7 +81,8 @@ class PageSync:
         reach = GRAB_PX * ws.world_per_px / plane.scale * view.zoom if view is not None and plane is not None else 0.0
         nodes = [n for n in ws.points.values() if n.keys and len(n.uv)]
         points = np.concatenate([n.uv for n in nodes]) if nodes else np.zeros((0, 2))
-        return page_data(control.version, self.answer, self.applied, view, control.canvas, plane, reach, points)
+        return page_data(control.version, self.answer, self.applied, view, control.canvas, plane, reach, points,
+                         ws.frames.page_state())
 
 
 __all__ = ["PageSync", "page_data"]

@@ -23,10 +23,11 @@ MAP_CROP = 0.6  # the share of the map's width shown, around the chosen keypoint
 MAP_TEXT_SCALE = 0.55  # the ids' font scale on it
 
 #: every key of the app: (keys, what), for the help section (the bridge handles + and -, the
-#: arrows; viser's camera keys W A S D Q E pan and zoom the image view too)
+#: arrows, and viser's camera keys W A S D Q E, which pan and zoom the image view in the page)
 KEYS = (
     ("wheel, + / -", "zoom around the pointer"),
     ("drag the image, right-drag", "pan"),
+    ("W / S, A / D / Q / E", "zoom in / out; pan left / right / down / up"),
     ("0 / 1", "fit the frame / native resolution (1 image pixel = 1 screen pixel)"),
     ("V", "image view <-> 3D view (the pitch, the camera frustum)"),
     ("N / P", "next / previous frame (of the filter)"),

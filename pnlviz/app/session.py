@@ -25,6 +25,7 @@ from pnlviz.app.editing import Editor, EditorTab
 from pnlviz.app.frameorder import FrameOrder, visible_order
 from pnlviz.app.host import TabHandle
 from pnlviz.app.modes import Filter, Mode, Sort, labels
+from pnlviz.app.pageframes import FrameSlots
 from pnlviz.app.pagesync import PageSync
 from pnlviz.app.panels import Panels
 from pnlviz.app.playback import ClipPlayer, ClipWidgets
@@ -90,7 +91,8 @@ class Session:
         #: the image view as the page's bridge needs it (pans and zooms in the page: pnlviz.app.pagesync)
         self.page = PageSync(gui, self.workspace, self.view_control) if client is not None else None
         if self.page is not None:
-            self.workspace.on_points = self.page.sync
+            self.workspace.frames = FrameSlots(gui)  # the frame's pixels, drawn by the page
+            self.workspace.on_change = self.page.sync
         if client is not None:
             client.camera.on_update(self.view_control.on_camera)
             client.scene.configure_default_lights(True, cast_shadow=False)  # no shadow pass on every frame

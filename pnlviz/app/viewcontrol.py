@@ -227,8 +227,9 @@ class ViewControl:
 
     def camera_moved(self, position, wxyz, look_at, canvas: tuple[int, int]) -> None:
         """Keep the image view an image view: looking straight at the frame, within the zoom
-        limits. viser's own controls may pan (right-drag, A/D/Q/E) and zoom (W/S); anything else
-        (an orbit, a dolly through the image) is put back."""
+        limits. In the image view the page's bridge takes viser's own pans and zooms (right drag,
+        W A S D Q E) as its own gestures; whatever else moves the camera (a touch gesture) may pan
+        and zoom; anything else (an orbit, a dolly through the image) is put back."""
         plane = self.workspace.plane
         if self.mode is not Mode.IMAGE or plane is None or min(canvas) <= 0 or self.view2d is None:
             return

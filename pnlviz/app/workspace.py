@@ -1,10 +1,10 @@
-"""The image view's scene nodes for one tab: the frame on its plane (sent once per frame), the
-overlays as line segments over it, and the points you grab (observed keypoints, ghosts of the
-missing ones, points of annotated lines) as batched discs with their ids. Every node is created
-once and then updated in place, so an edit sends only what changed and a drag in progress is
-never cut short by a redraw. The dark frame around the image is the page's background
-(:data:`pnlviz.app.bridge.BACKDROP_RGB`, painted by the page script); the mesh there only takes
-the pointer.
+"""The image view's scene nodes for one tab: the overlays as line segments over the frame, and the
+points you grab (observed keypoints, ghosts of the missing ones, points of annotated lines) as
+batched discs with their ids. Every node is created once and then updated in place, so an edit
+sends only what changed and a drag in progress is never cut short by a redraw. The frame's
+pixels are drawn by the page behind the transparent canvas (sent once per frame:
+:mod:`pnlviz.app.pageframes`), and the dark frame around them is the page's background
+(:data:`pnlviz.app.bridge.BACKDROP_RGB`); in the scene, invisible surfaces there take the pointer.
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
 select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
@@ -21,6 +21,7 @@ import numpy as np
 
 from pnlviz.app.handles import update_changed
 from pnlviz.app.modes import PointKind, Selection, WorkspaceEvents
+from pnlviz.app.pageframes import FrameSlots
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
 from pnlviz.app.points import DragRoute, PointNodes
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
@@ -33,7 +34,6 @@ PIN_BOX_PX = 8.5  #: screen pixels: half the side of the box around a pinned key
 THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
              "detected_lines": 2.0, "residuals": 1.5, "finding_annotated": 5.0, "finding_expected": 2.0}
 BACKDROP_MARGIN = 6.0  # the pick surface around the image: this many image widths (heights) each side
-FRAME_SLOTS = 3  # frames whose pixels are kept in the browser: the one shown and two sent ahead
 SELECTED_RGB = (255, 255, 255)
 LABEL_MIN_GAP_PX = 16.0  # ids closer than this on screen: only the first one shows
 
@@ -46,9 +46,10 @@ class Workspace:
         self.plane: ImagePlane | None = None
         self.image_key: Hashable | None = None  # what the pixels on the plane are (the frame's stem)
         self.world_per_px = 0.01  # scene units per screen pixel at the current zoom
-        self._slots: list[dict] = []  # image nodes: the frame shown, and frames sent ahead (hidden)
-        self._clock = 0
-        self._backdrop = None
+        #: the frames' pixels in the page (:mod:`pnlviz.app.pageframes`; a tab with a browser gives
+        #: it the panel to send them through)
+        self.frames = FrameSlots()
+        self._pick: dict[str, Any] = {}  # the invisible surfaces the pointer hits: "frame", "backdrop"
         self._ring = self._pin_boxes = None
         self.pins: tuple[dict, Markers] = ({}, Markers())  # pinned id -> flagged, and where the keypoints are
         self._lines: dict[str, object] = {}
@@ -61,81 +62,58 @@ class Workspace:
         self._label_rank: dict[object, int] = {}
         self.selected: Selection | None = None
         self.also: list[Selection] = []  # more selected keypoints (Ctrl+click)
-        self.on_points: Callable[[], None] | None = None  # the points or their grab size changed
+        #: what the page is told changed: the frame shown, the points or their grab size
+        self.on_change: Callable[[], None] | None = None
 
     # ------------------------------------------------------------------ the frame
     def show_image(self, key: Hashable, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> bool:
         """Show the frame ``key`` (its pixels, or a function that reads them when they are not
-        in the browser yet). A frame preloaded with :meth:`preload` is shown at once, with no
+        in the page yet). A frame preloaded with :meth:`preload` is shown at once, with no
         image sent. True if anything changed."""
         if key == self.image_key:
             return False
-        slot = next((sl for sl in self._slots if sl["key"] == key), None)
-        if slot is None:
-            slot = self._load(key, image_rgb() if callable(image_rgb) else image_rgb)
-        for sl in self._slots:
-            if sl is not slot and sl["visible"]:
-                sl["handle"].visible, sl["handle"].position, sl["visible"] = False, (0.0, 0.0, PLANE_Z + 50.0), False
-        slot["handle"].position, slot["handle"].visible, slot["visible"] = (0.0, 0.0, PLANE_Z), True, True
-        slot["used"] = self._clock = self._clock + 1
-        if slot["plane"] != self.plane:
-            self._frame_backdrop(slot["plane"])
-        self.plane, self.image_key = slot["plane"], key
+        plane = self.frames.show(key, image_rgb)
+        if plane != self.plane:
+            self._pick_surfaces(plane)
+        self.plane, self.image_key = plane, key
+        if self.on_change is not None:
+            self.on_change()
         return True
 
     def holds(self, key: Hashable) -> bool:
-        """Whether frame ``key``'s pixels are in the browser already (shown or sent ahead)."""
-        return any(sl["key"] == key for sl in self._slots)
+        """Whether frame ``key``'s pixels are in the page already (shown or sent ahead)."""
+        return self.frames.holds(key)
 
     def preload(self, key: Hashable, image_rgb: Callable[[], np.ndarray]) -> None:
         """Send frame ``key``'s pixels ahead, hidden, so that going there shows them at once."""
-        if all(sl["key"] != key for sl in self._slots):
-            self._load(key, image_rgb())
+        self.frames.preload(key, image_rgb)
 
-    def _load(self, key: Hashable, image_rgb: np.ndarray) -> dict:
-        """Pixels into a hidden slot (a new one while there are fewer than :data:`FRAME_SLOTS`,
-        else the one shown longest ago)."""
-        H, W = image_rgb.shape[:2]
-        plane = ImagePlane(W, H)
-        w, h = plane.extent
-        if len(self._slots) < FRAME_SLOTS:
-            handle = self.scene.add_image(f"{self.root}/frame{len(self._slots)}", image_rgb, w, h, format="jpeg",
-                                          jpeg_quality=90, position=(0.0, 0.0, PLANE_Z + 50.0), visible=False,
-                                          cast_shadow=False, receive_shadow=False)
-            slot = {"handle": handle, "visible": False, "used": 0, "key": key, "plane": plane}
-            self._bind_frame(handle)
-            self._slots.append(slot)  # complete before anyone can see it
-        else:
-            slot = min((sl for sl in self._slots if not sl["visible"]), key=lambda sl: sl["used"])
-            if slot["plane"] != plane:
-                slot["handle"].render_width, slot["handle"].render_height = w, h
-            slot["handle"].image = image_rgb
-        slot.update(key=key, plane=plane)
-        return slot
-
-    def _frame_backdrop(self, plane: ImagePlane) -> None:
-        """Around the image, what the pointer hits there (one mesh of four quads, none under the
-        image): a press near a point whose grab mesh the browser's pick missed, or a drag, is
-        routed as one on the image is (a point just outside the frame is still dragged). The
-        dark colour there is the page's: the mesh is an invisible wireframe, which the browser's
-        pick still hits (it tests the triangles) while drawing only its few edges (filled, it
-        cost 13-17 ms of every software-WebGL frame)."""
+    def _pick_surfaces(self, plane: ImagePlane) -> None:
+        """What the pointer hits in the scene: a quad where the image is (the page draws the
+        pixels behind the canvas) and, around it, a mesh of four quads. A press there near a point
+        whose grab mesh the browser's pick missed, or a drag, is routed as one on the image is (a
+        point just outside the frame is still dragged). Both are invisible wireframes: the
+        browser's pick tests their triangles while drawing fills only a few edges (filled, the
+        mesh around the image cost 13-17 ms of every software-WebGL frame)."""
         w, h = plane.extent
         m = BACKDROP_MARGIN
         x0, x1, y0, y1 = -w / 2, w / 2, -h / 2, h / 2
         X0, X1, Y0, Y1 = x0 - m * w, x1 + m * w, y0 - m * h, y1 + m * h
-        quads = [(X0, Y0, X1, y0), (X0, y1, X1, Y1), (X0, y0, x0, y1), (x1, y0, X1, y1)]  # top, bottom, left, right
-        vertices = np.array([[[a, b, 0.0], [c, b, 0.0], [c, d, 0.0], [a, d, 0.0]] for a, b, c, d in quads])
-        vertices = vertices.reshape(-1, 3)
-        vertices[:, 2] = PLANE_Z + 0.01
-        faces = np.array([[k, k + 1, k + 2] for k in range(0, 16, 4)] + [[k, k + 2, k + 3] for k in range(0, 16, 4)])
-        if self._backdrop is None:
-            self._backdrop = self.scene.add_mesh_simple(
-                f"{self.root}/backdrop", vertices, faces, wireframe=True, opacity=0.0, side="double",
-                cast_shadow=False, receive_shadow=False)
-            self._bind_pan(self._backdrop)
-        else:
-            update_changed(self._backdrop, vertices=vertices.astype(np.float32))
+        around = [(X0, Y0, X1, y0), (X0, y1, X1, Y1), (X0, y0, x0, y1), (x1, y0, X1, y1)]  # top, bottom, left, right
+        for name, quads, depth in (("frame", [(x0, y0, x1, y1)], 0.0), ("backdrop", around, 0.01)):
+            vertices = np.array([[[a, b, 0.0], [c, b, 0.0], [c, d, 0.0], [a, d, 0.0]] for a, b, c, d in quads])
+            vertices = vertices.reshape(-1, 3).astype(np.float32)
+            vertices[:, 2] = PLANE_Z + depth
+            n = 4 * len(quads)
+            faces = np.array([[k, k + 1, k + 2] for k in range(0, n, 4)] + [[k, k + 2, k + 3] for k in range(0, n, 4)])
+            node = self._pick.get(name)
+            if node is None:
+                self._pick[name] = node = self.scene.add_mesh_simple(
+                    f"{self.root}/{name}", vertices, faces, wireframe=True, opacity=0.0, side="double",
+                    cast_shadow=False, receive_shadow=False)
+                (self._bind_frame if name == "frame" else self._bind_pan)(node)
+            else:
+                update_changed(node, vertices=vertices)
 
     def _bind_frame(self, node) -> None:
         ev = self.events
@@ -203,8 +181,8 @@ class Workspace:
         self.pins = ({k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}, observed)
         self._show_pins()
         self._show_selection()
-        if self.on_points is not None:
-            self.on_points()
+        if self.on_change is not None:
+            self.on_change()
 
     def _show_pins(self) -> None:
         """A box around each pinned keypoint, black, orange where the camera cannot agree with it."""

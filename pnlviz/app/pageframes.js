@@ -1,0 +1,141 @@
+// pnlviz's frame layer: the frame's pixels drawn by the page, behind viser's transparent WebGL
+// canvas (pnlviz/app/pageframes.py says why: in software WebGL the image plane cost 37-40 ms of
+// every frame the browser drew).
+//
+// - The pixels: hidden panel elements of class pnlviz-frame, one per slot (data-slot, data-n: the
+//   version of its pixels, data-size: "W,H", data-src: a JPEG data URL). Each version is decoded
+//   once, off screen, as it arrives; a frame sent ahead is ready when it is shown.
+// - What to show and where: #pnlviz-view (pnlviz/app/pagesync.py): data-frame "slot,version",
+//   data-view the image pixel at the canvas centre and the zoom (CSS px per image px), data-canvas
+//   the canvas size the server computed with. The WebGL camera looks straight at the image with a
+//   fixed vertical field of view, so the canvas's real height scales the zoom. An image spans
+//   pixels -0.5 .. W - 0.5 (integer coordinates are pixel centres).
+// - The layer sits in the element the pointer bridge moves with its CSS transform (bridge.js), so
+//   a pan or zoom in the page moves the image with the overlays; it takes no pointer events.
+// - Shown in the image view only (#pnlviz-bridge data-mode).
+// window.__pnlvizFrames exposes its state (slots decoded, swaps, what is shown) to tests.
+(() => {
+  if (window.__pnlvizFrames || !window.__pnlvizBridge || window.__pnlvizBridge.reloading) return;
+  const state = { slots: new Map(), shown: "", decoded: 0, swaps: 0, layer: null, placed: "", swapQueued: false };
+  window.__pnlvizFrames = state;
+
+  const glCanvas = () => window.__pnlvizBridge.glCanvas(); // the WebGL canvas, as the bridge finds it
+  // the layer: first child of the canvas's wrapper, which becomes a stacking context so that the
+  // layer (z-index -1) is drawn over the page's background and under the canvas
+  const layer = () => {
+    const canvas = glCanvas();
+    if (!canvas || !canvas.parentElement) return null;
+    const target = canvas.parentElement;
+    if (!state.layer || state.layer.parentElement !== target) {
+      const el = document.createElement("div");
+      el.id = "pnlviz-frames";
+      Object.assign(el.style, { position: "absolute", left: "0", top: "0", width: "0", height: "0", zIndex: "-1",
+        pointerEvents: "none", overflow: "visible" });
+      if (getComputedStyle(target).position === "static") target.style.position = "relative";
+      target.style.zIndex = "0";
+      target.insertBefore(el, target.firstChild);
+      state.layer = el;
+      state.placed = "";
+      for (const s of state.slots.values()) el.appendChild(s.img);
+    }
+    return state.layer;
+  };
+
+  // new pixels in a slot: decoded off screen; the slot's previous image stays until then
+  const readSlots = () => {
+    for (const el of document.querySelectorAll(".pnlviz-frame")) {
+      const slot = el.dataset.slot;
+      const n = el.dataset.n;
+      const old = state.slots.get(slot);
+      if (old && old.n === n) continue;
+      const img = new Image();
+      Object.assign(img.style, { position: "absolute", display: "none", maxWidth: "none", userSelect: "none" });
+      img.draggable = false;
+      img.alt = "";
+      const [W, H] = (el.dataset.size || "0,0").split(",").map(Number);
+      const entry = { n, img, W, H, ready: false };
+      state.slots.set(slot, entry);
+      img.src = el.dataset.src;
+      img.decode().catch(() => {}).then(() => {
+        if (state.slots.get(slot) !== entry) return; // replaced while decoding
+        entry.ready = true;
+        state.decoded += 1;
+        if (old && old.img.parentElement) old.img.remove();
+        const l = layer();
+        if (l) l.appendChild(img);
+        update();
+      });
+    }
+  };
+
+  const update = (swapping = false) => {
+    const l = layer();
+    const view = document.getElementById("pnlviz-view");
+    const cfg = document.getElementById("pnlviz-bridge");
+    const canvas = glCanvas();
+    if (!l || !view || !canvas) return;
+    const d = view.dataset;
+    const [slot, n] = (d.frame || "").split(",");
+    const entry = state.slots.get(slot);
+    const nums = (t) => (t ? t.split(",").map(Number) : []);
+    const [cu, cv, zoom] = nums(d.view);
+    const [, Hs] = nums(d.canvas);
+    const imageMode = !cfg || cfg.dataset.mode === "image";
+    const ok = imageMode && entry && entry.ready && entry.n === n && Number.isFinite(zoom) && Hs > 0;
+    if (!ok) {
+      // not decoded yet: what was shown stays (a frame not sent ahead shows once it is decoded)
+      if (!imageMode) {
+        for (const s of state.slots.values()) s.img.style.display = "none";
+        state.placed = ""; // placed again when the image view comes back
+      }
+      return;
+    }
+    const Wa = canvas.clientWidth;
+    const Ha = canvas.clientHeight;
+    const z = zoom * Ha / Hs;
+    const key = [slot, n, cu, cv, z, Wa, Ha].join("|");
+    if (key === state.placed) return;
+    const shown = `${slot},${n}`;
+    if (shown !== state.shown && !swapping) {
+      // another frame: swapped at the next animation frame, the one that draws its overlays (a
+      // batch of scene changes is applied in one frame and drawn in the next; a view moves in
+      // the frame it arrives, as the bridge's transform comes off)
+      if (!state.swapQueued) {
+        state.swapQueued = true;
+        requestAnimationFrame(() => {
+          state.swapQueued = false;
+          update(true);
+        });
+      }
+      return;
+    }
+    state.placed = key;
+    // a transform, not left/top/width/height: the browser snaps a box's edges to whole pixels
+    // (half a pixel off the overlays), not a transformed image's
+    Object.assign(entry.img.style, {
+      left: "0", top: "0", width: `${entry.W}px`, height: `${entry.H}px`, transformOrigin: "0 0",
+      transform: `translate(${Wa / 2 + (-0.5 - cu) * z}px, ${Ha / 2 + (-0.5 - cv) * z}px) scale(${z})`,
+      display: "block",
+    });
+    for (const s of state.slots.values()) if (s !== entry) s.img.style.display = "none";
+    if (shown !== state.shown) {
+      state.shown = shown;
+      state.swaps += 1;
+    }
+  };
+
+  const onMutation = () => {
+    readSlots();
+    update();
+  };
+  onMutation();
+  new MutationObserver(onMutation).observe(document.body, {
+    childList: true, subtree: true, attributes: true, attributeFilter: ["data-frame", "data-view", "data-mode"],
+  });
+  const watch = () => {
+    const canvas = glCanvas();
+    if (!canvas) return setTimeout(watch, 200);
+    new ResizeObserver(() => update()).observe(canvas);
+  };
+  watch();
+})();

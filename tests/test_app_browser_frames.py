@@ -1,0 +1,139 @@
+"""The frame's pixels drawn by the page behind the WebGL canvas (pnlviz/app/pageframes.js), in real
+headless Chromium: the image is where the camera puts the overlays, pixel for pixel; the next
+frame, sent ahead, is shown with no pixels sent; viser's own camera moves (right drag, W A S D Q
+E) are the page's pans and zooms, so the image moves with the overlays."""
+
+import time
+
+import cv2
+import numpy as np
+
+import test_app_browser as base
+from test_app_browser import open_page, settle, tab, wait_until
+from test_app_browser_rate import canvas_box, empty_spot, quiet
+
+chromium, browser, data = base.chromium, base.browser, base.data  # the fixtures of the browser tests
+pytestmark = base.pytestmark
+
+#: the frame layer's state in the page: the slot shown ("slot,version") and the slots decoded
+FRAMES = "() => { const f = window.__pnlvizFrames; return {shown: f.shown, swaps: f.swaps, " \
+         "slots: [...f.slots.entries()].map(([s, e]) => `${s},${e.n}`)}; }"
+
+
+def shown_image_rect(page) -> dict:
+    return page.evaluate("() => { const i = [...document.querySelectorAll('#pnlviz-frames img')]"
+                         ".find((i) => i.style.display === 'block'); const r = i.getBoundingClientRect();"
+                         " return {x: r.x, y: r.y, width: r.width, height: r.height}; }")
+
+
+def expected_rect(session, box) -> np.ndarray:
+    """Where the server's camera puts the frame on the page: x, y, width, height (CSS px)."""
+    plane = session.workspace.plane
+    control = session.view_control
+    corners = control.view2d.to_screen(np.array([[-0.5, -0.5], [plane.W - 0.5, plane.H - 0.5]]), control.canvas)
+    return np.array([box["x"] + corners[0, 0], box["y"] + corners[0, 1], *(corners[1] - corners[0])])
+
+
+def best_shift(page, session, rect) -> tuple[tuple[int, int], float]:
+    """The whole-pixel shift (within 3) at which a screenshot of the frame's area best matches the
+    frame's own pixels resampled to where ``rect`` (x, y, width, height: CSS px) puts them, and the
+    median difference there (the overlays cover a small part)."""
+    x0, y0 = int(np.floor(rect[0])), int(np.floor(rect[1]))
+    w, h = int(rect[2]), int(rect[3])
+    shot = cv2.imdecode(np.frombuffer(page.screenshot(clip={"x": x0, "y": y0, "width": w, "height": h}), np.uint8),
+                        cv2.IMREAD_GRAYSCALE).astype(float)
+    frame = cv2.cvtColor(session.app.state.image(session.stem), cv2.COLOR_BGR2GRAY).astype(np.float32)
+    z = rect[2] / frame.shape[1]  # screen pixels per image pixel
+    if z < 1:
+        frame = cv2.GaussianBlur(frame, (0, 0), 0.5 / z)
+    # screenshot pixel (j, i) has its centre at page (x0 + j + 0.5, y0 + i + 0.5): frame pixel
+    # u = (x - rect.x) / z - 0.5 (integer coordinates are pixel centres)
+    M = np.array([[1 / z, 0, (x0 + 0.5 - rect[0]) / z - 0.5], [0, 1 / z, (y0 + 0.5 - rect[1]) / z - 0.5]])
+    expected = cv2.warpAffine(frame, M, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP).astype(float)
+    m = 3
+    scores = {(dx, dy): float(np.median(np.abs(np.roll(shot, (dy, dx), (0, 1)) - expected)[m:-m, m:-m]))
+              for dx in range(-m, m + 1) for dy in range(-m, m + 1)}
+    best = min(scores, key=scores.get)
+    return best, scores[best]
+
+
+def test_the_page_draws_the_frame_where_the_camera_puts_it_and_next_sends_no_pixels(data, browser, serve):
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    quiet(page, session)
+    box = canvas_box(page)
+    wait_until(lambda: page.evaluate(FRAMES)["shown"] != "")
+    rect = shown_image_rect(page)
+    np.testing.assert_allclose([rect["x"], rect["y"], rect["width"], rect["height"]], expected_rect(session, box),
+                               atol=0.6)
+    shift, diff = best_shift(page, session, expected_rect(session, box))
+    assert shift == (0, 0) and diff < 12, (shift, diff)  # the frame's pixels, where its overlays are
+
+    # the next frame was sent ahead: showing it sends no pixels, the page swaps in what it decoded
+    nxt = app.state.stems[session.index + 1]
+    wait_until(lambda: session.workspace.holds(nxt) and len(page.evaluate(FRAMES)["slots"]) >= 2)
+    before, sent = page.evaluate(FRAMES), session.workspace.frames.sent
+    page.keyboard.press("n")
+    wait_until(lambda: session.stem == nxt and page.evaluate(FRAMES)["shown"] != before["shown"])
+    now = page.evaluate(FRAMES)
+    assert now["shown"] in before["slots"] and now["swaps"] == before["swaps"] + 1
+    assert session.workspace.frames.page_state() == now["shown"]
+    quiet(page, session)
+    assert session.workspace.frames.sent <= sent + 1  # at most the frame after it, sent ahead
+    shift, diff = best_shift(page, session, expected_rect(session, box))
+    assert shift == (0, 0) and diff < 12, (shift, diff)
+
+
+def test_a_right_drag_and_the_camera_keys_pan_and_zoom_the_frame_with_its_overlays(data, browser, serve):
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    control = session.view_control
+    quiet(page, session)
+    box = canvas_box(page)
+
+    # a right drag away from the points: the page's pan, one camera push, the frame under the hand
+    start = empty_spot(session, (200, 150))
+    before, pushes = control.view2d, control.pushes
+    grabbed = before.to_pixel(start, control.canvas)
+    x, y = box["x"] + start[0], box["y"] + start[1]
+    page.mouse.move(x, y)
+    page.mouse.down(button="right")
+    for k in range(1, 11):
+        page.mouse.move(x + 4 * k, y + 2.5 * k)
+        time.sleep(0.03)
+    assert abs(page.evaluate("() => window.__pnlvizBridge.T.tx") - 40) < 1e-6  # moved in the page
+    page.mouse.up(button="right")
+    wait_until(lambda: control.pushes > pushes)
+    quiet(page, session)
+    assert control.pushes == pushes + 1 and control.view2d.zoom == before.zoom
+    assert np.hypot(*(control.view2d.to_pixel(start + [40, 25], control.canvas) - grabbed)) < 1.0
+    assert not app.state.edits.get(session.stem).get("keypoints")  # a pan moved no point
+    rect = shown_image_rect(page)
+    np.testing.assert_allclose([rect["x"], rect["y"], rect["width"], rect["height"]], expected_rect(session, box),
+                               atol=0.6)
+
+    # W zooms in around the canvas's centre, A pans the frame right: the page's gestures
+    page.mouse.move(box["x"] + 5, box["y"] + 5)
+    before, pushes = control.view2d, control.pushes
+    centre = np.array(control.canvas) / 2
+    under = before.to_pixel(centre, control.canvas)
+    page.keyboard.press("w")
+    wait_until(lambda: control.pushes > pushes)
+    quiet(page, session)
+    np.testing.assert_allclose(control.view2d.zoom / before.zoom, 2 ** 0.25, rtol=1e-6)
+    assert np.hypot(*(control.view2d.to_pixel(centre, control.canvas) - under)) < 1.0
+    before, pushes = control.view2d, control.pushes
+    page.keyboard.press("a")
+    wait_until(lambda: control.pushes > pushes)
+    quiet(page, session)
+    assert control.view2d.zoom == before.zoom
+    np.testing.assert_allclose(control.view2d.to_pixel(centre + [40, 0], control.canvas),
+                               before.to_pixel(centre, control.canvas), atol=0.5)
+    rect = shown_image_rect(page)
+    np.testing.assert_allclose([rect["x"], rect["y"], rect["width"], rect["height"]], expected_rect(session, box),
+                               atol=0.6)
+    shift, diff = best_shift(page, session, expected_rect(session, box))
+    assert shift == (0, 0) and diff < 12, (shift, diff)
+    settle(session)
