@@ -52,6 +52,7 @@
       Object.assign(img.style, { position: "absolute", display: "none", maxWidth: "none", userSelect: "none" });
       img.draggable = false;
       img.alt = "";
+      img.dataset.slot = slot;
       const [W, H] = (el.dataset.size || "0,0").split(",").map(Number);
       const entry = { n, img, W, H, ready: false };
       state.slots.set(slot, entry);
@@ -60,9 +61,10 @@
         if (state.slots.get(slot) !== entry) return; // replaced while decoding
         entry.ready = true;
         state.decoded += 1;
-        if (old && old.img.parentElement) old.img.remove();
         const l = layer();
-        if (l) l.appendChild(img);
+        if (!l) return;
+        for (const other of [...l.children]) if (other.dataset.slot === slot) other.remove(); // the slot's older pixels
+        l.appendChild(img);
         update();
       });
     }

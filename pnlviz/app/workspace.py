@@ -21,8 +21,8 @@ import numpy as np
 
 from pnlviz.app.handles import update_changed
 from pnlviz.app.modes import PointKind, Selection, WorkspaceEvents
-from pnlviz.app.pageframes import FrameSlots
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
+from pnlviz.app.pageframes import FrameSlots
 from pnlviz.app.points import DragRoute, PointNodes
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
 from pnlviz.viz import ring
