@@ -8,6 +8,7 @@ import time
 import cv2
 import numpy as np
 
+from pnlviz.app.modes import Mode
 import test_app_browser as base
 from test_app_browser import open_page, settle, tab, wait_until
 from test_app_browser_rate import canvas_box, empty_spot, quiet
@@ -81,6 +82,16 @@ def test_the_page_draws_the_frame_where_the_camera_puts_it_and_next_sends_no_pix
     assert session.workspace.frames.page_state() == now["shown"]
     quiet(page, session)
     assert session.workspace.frames.sent <= sent + 1  # at most the frame after it, sent ahead
+    shift, diff = best_shift(page, session, expected_rect(session, box))
+    assert shift == (0, 0) and diff < 12, (shift, diff)
+
+    # the 3D view draws no frame behind its scene; back in the image view, the frame is there again
+    shown = "() => [...document.querySelectorAll('#pnlviz-frames img')].filter((i) => i.style.display === 'block').length"
+    session.queue.enqueue(lambda: session.set_mode(Mode.THREE_D))
+    wait_until(lambda: page.evaluate(shown) == 0)
+    session.queue.enqueue(lambda: session.set_mode(Mode.IMAGE))
+    wait_until(lambda: page.evaluate(shown) == 1)
+    quiet(page, session)
     shift, diff = best_shift(page, session, expected_rect(session, box))
     assert shift == (0, 0) and diff < 12, (shift, diff)
 
