@@ -10,6 +10,10 @@
 //   the canvas size the server computed with. The WebGL camera looks straight at the image with a
 //   fixed vertical field of view, so the canvas's real height scales the zoom. An image spans
 //   pixels -0.5 .. W - 0.5 (integer coordinates are pixel centres).
+// - A new frame is swapped in at the animation frame after its message batch arrives: viser
+//   applies a batch in one frame and draws its lines and ids in the next, so the image changes
+//   with its lines. A view change (a pan's answer) is placed at once: the camera moves in the
+//   frame the batch arrives, as the bridge's transform comes off.
 // - The layer sits in the element the pointer bridge moves with its CSS transform (bridge.js), so
 //   a pan or zoom in the page moves the image with the overlays; it takes no pointer events.
 // - Shown in the image view only (#pnlviz-bridge data-mode).

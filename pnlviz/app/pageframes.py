@@ -10,9 +10,11 @@ release, the next frame, a pan) waits for two or three such frames.
 How: each of :data:`FRAME_SLOTS` hidden panel elements carries one frame's JPEG as a data URL
 (``data-src``), with its size and a version that changes with its pixels. The page decodes each
 slot once; the slot to show, and its version, come with the view in ``#pnlviz-view``
-(:mod:`pnlviz.app.pagesync`), so the page places it from the same numbers as the camera and
-swaps it in the message batch of the overlays drawn over it. A frame sent ahead (hidden) is
-shown with no pixels sent. The scene keeps an invisible surface where the image is, which takes
+(:mod:`pnlviz.app.pagesync`), in the message batch of the overlays drawn over it, so the page
+places it from the same numbers as the camera and swaps it in the animation frame that draws
+those overlays (viser applies a batch in one frame and draws it in the next). A frame sent ahead
+(hidden) is shown with no pixels sent. Measured: a frame of the image view 79 -> 46 ms
+(``benchmarks/bench_frame_cost.py``; docs/app.md, "What a frame costs"). The scene keeps an invisible surface where the image is, which takes
 the clicks (:class:`pnlviz.app.workspace.Workspace`).
 
 A tab without a browser (tests, the command line) keeps the bookkeeping and sends nothing.
