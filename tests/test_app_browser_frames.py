@@ -3,15 +3,14 @@ headless Chromium: the image is where the camera puts the overlays, pixel for pi
 frame, sent ahead, is shown with no pixels sent; viser's own camera moves (right drag, W A S D Q
 E) are the page's pans and zooms, so the image moves with the overlays."""
 
-import time
 
 import cv2
 import numpy as np
 
 from pnlviz.app.modes import Mode
 import test_app_browser as base
-from test_app_browser import open_page, settle, tab, wait_until
-from test_app_browser_rate import canvas_box, empty_spot, quiet
+from test_app_browser import open_page, tab, wait_until
+from test_app_browser_rate import canvas_box, empty_spot, press_and_move, quiet
 
 chromium, browser, data = base.chromium, base.browser, base.data  # the fixtures of the browser tests
 pytestmark = base.pytestmark
@@ -108,12 +107,7 @@ def test_a_right_drag_and_the_camera_keys_pan_and_zoom_the_frame_with_its_overla
     start = empty_spot(session, (200, 150))
     before, pushes = control.view2d, control.pushes
     grabbed = before.to_pixel(start, control.canvas)
-    x, y = box["x"] + start[0], box["y"] + start[1]
-    page.mouse.move(x, y)
-    page.mouse.down(button="right")
-    for k in range(1, 11):
-        page.mouse.move(x + 4 * k, y + 2.5 * k)
-        time.sleep(0.03)
+    press_and_move(page, box, start, button="right")
     assert abs(page.evaluate("() => window.__pnlvizBridge.T.tx") - 40) < 1e-6  # moved in the page
     page.mouse.up(button="right")
     wait_until(lambda: control.pushes > pushes)
@@ -147,4 +141,3 @@ def test_a_right_drag_and_the_camera_keys_pan_and_zoom_the_frame_with_its_overla
                                atol=0.6)
     shift, diff = best_shift(page, session, expected_rect(session, box))
     assert shift == (0, 0) and diff < 12, (shift, diff)
-    settle(session)

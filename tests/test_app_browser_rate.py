@@ -50,6 +50,18 @@ def empty_spot(session, start, step=(40, 25)):
     raise AssertionError("no empty spot on the canvas")
 
 
+def press_and_move(page, box, start, button: str = "left") -> tuple[float, float]:
+    """Press ``button`` at canvas point ``start`` and move the pointer by (40, 25) CSS px in ten
+    steps, not released; where the press was on the page."""
+    x, y = box["x"] + start[0], box["y"] + start[1]
+    page.mouse.move(x, y)
+    page.mouse.down(button=button)
+    for k in range(1, 11):
+        page.mouse.move(x + 4 * k, y + 2.5 * k)
+        time.sleep(0.03)
+    return x, y
+
+
 def test_wheel_zoom_and_drag_pan_push_the_camera_once_per_gesture_to_where_the_page_showed(data, browser, serve):
     app = serve(data)
     page = open_page(browser, app, "focal")
@@ -85,12 +97,7 @@ def test_wheel_zoom_and_drag_pan_push_the_camera_once_per_gesture_to_where_the_p
     start = empty_spot(session, (200, 150))
     before, pushes = control.view2d, control.pushes
     grabbed = before.to_pixel(start, control.canvas)
-    x, y = box["x"] + start[0], box["y"] + start[1]
-    page.mouse.move(x, y)
-    page.mouse.down()
-    for k in range(1, 11):
-        page.mouse.move(x + 4 * k, y + 2.5 * k)
-        time.sleep(0.03)
+    x, y = press_and_move(page, box, start)
     assert control.pushes == pushes  # the image followed the hand in the page only
     assert abs(page.evaluate(BRIDGE)["T"]["tx"] - 40) < 1e-6
     page.mouse.up()

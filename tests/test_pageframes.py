@@ -27,15 +27,14 @@ class Panel:
 
 def image(value: int, w: int = 64, h: int = 48) -> np.ndarray:
     out = np.zeros((h, w, 3), np.uint8)
-    out[..., 0] = value  # red
+    out[..., 0] = value  # blue (the frame reader's BGR order)
     return out
 
 
 def decoded(html: str) -> np.ndarray:
-    """The RGB pixels of a slot's data URL."""
+    """The BGR pixels of a slot's data URL."""
     url = re.search(r'data-src="data:image/jpeg;base64,([^"]+)"', html).group(1)
-    bgr = cv2.imdecode(np.frombuffer(base64.b64decode(url), np.uint8), cv2.IMREAD_COLOR)
-    return bgr[..., ::-1]
+    return cv2.imdecode(np.frombuffer(base64.b64decode(url), np.uint8), cv2.IMREAD_COLOR)
 
 
 def test_a_frame_goes_to_the_page_once_and_a_frame_sent_ahead_is_shown_with_nothing_sent():
@@ -46,7 +45,7 @@ def test_a_frame_goes_to_the_page_once_and_a_frame_sent_ahead_is_shown_with_noth
     assert plane == ImagePlane(64, 48) and slots.sent == 1 and len(panel.elements) == 1
     html = panel.elements[0].content
     assert f'class="{FRAME_CLASS}"' in html and 'data-slot="0"' in html and 'data-size="64,48"' in html
-    assert np.abs(decoded(html).astype(int) - image(200)).max() <= 3  # the frame's own pixels, RGB
+    assert np.abs(decoded(html).astype(int) - image(200)).max() <= 3  # the frame's own pixels, in order
     assert slots.page_state() == "0,1" and slots.shown_key == "a"
 
     slots.preload("b", lambda: image(100, 32, 24))

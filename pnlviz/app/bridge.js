@@ -95,7 +95,7 @@
     }
     return best;
   };
-  state.glCanvas = glCanvas; // for the frame layer (pageframes.js)
+  state.glCanvas = glCanvas; // for the frame layer (pageframes.js), as are readView and imageMode
   const stage = () => {
     const canvas = glCanvas();
     if (!canvas || !canvas.parentElement || !canvas.parentElement.parentElement) return null;
@@ -160,6 +160,7 @@
     const cfg = config();
     return !!cfg && cfg.mode === "image";
   };
+  state.imageMode = imageMode;
 
   // ---- the view as the server last told it (#pnlviz-view)
   const readView = () => {
@@ -170,9 +171,10 @@
     return {
       v: Number(d.v), answer: Number(d.answer), applied: d.applied === "1", view: nums(d.view),
       limits: nums(d.limits), canvas: nums(d.canvas), reach: Number(d.reach || 0),
-      pointsText: d.points || "", points: nums(d.points),
+      pointsText: d.points || "", points: nums(d.points), frame: d.frame || "",
     };
   };
+  state.readView = readView;
 
   // ---- the CSS transform: a canvas point p shows what the render has at (p - t) / s
   const isIdentity = (T) => Math.abs(T.s - 1) < 1e-9 && Math.abs(T.tx) < 1e-6 && Math.abs(T.ty) < 1e-6;

@@ -120,11 +120,10 @@ class Painter:
 
     # ------------------------------------------------------------------ the image
     def pixels(self, stem: str) -> np.ndarray:
-        """The frame as the browser shows it: its image (RGB), or a neutral canvas of its size."""
+        """The frame as the browser shows it: its image (BGR, as read), or a neutral canvas of its
+        size."""
         image = self.tab.state.image(stem)
-        if image is None:
-            image = blank_canvas(*self.tab.state.frame_size(stem))
-        return np.ascontiguousarray(image[:, :, ::-1])
+        return image if image is not None else blank_canvas(*self.tab.state.frame_size(stem))
 
     def show_image(self, view: FrameView) -> None:
         workspace = self.tab.workspace

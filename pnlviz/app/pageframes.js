@@ -23,7 +23,8 @@
   const state = { slots: new Map(), shown: "", decoded: 0, swaps: 0, layer: null, placed: "", swapQueued: false };
   window.__pnlvizFrames = state;
 
-  const glCanvas = () => window.__pnlvizBridge.glCanvas(); // the WebGL canvas, as the bridge finds it
+  const bridge = window.__pnlvizBridge;
+  const glCanvas = () => bridge.glCanvas(); // the WebGL canvas, as the bridge finds it
   // the layer: first child of the canvas's wrapper, which becomes a stacking context so that the
   // layer (z-index -1) is drawn over the page's background and under the canvas
   const layer = () => {
@@ -76,17 +77,14 @@
 
   const update = (swapping = false) => {
     const l = layer();
-    const view = document.getElementById("pnlviz-view");
-    const cfg = document.getElementById("pnlviz-bridge");
+    const d = bridge.readView(); // #pnlviz-view, as the bridge reads it
     const canvas = glCanvas();
-    if (!l || !view || !canvas) return;
-    const d = view.dataset;
-    const [slot, n] = (d.frame || "").split(",");
+    if (!l || !d || !canvas) return;
+    const [slot, n] = d.frame.split(",");
     const entry = state.slots.get(slot);
-    const nums = (t) => (t ? t.split(",").map(Number) : []);
-    const [cu, cv, zoom] = nums(d.view);
-    const [, Hs] = nums(d.canvas);
-    const imageMode = !cfg || cfg.dataset.mode === "image";
+    const [cu, cv, zoom] = d.view;
+    const Hs = d.canvas[1];
+    const imageMode = bridge.imageMode();
     const ok = imageMode && entry && entry.ready && entry.n === n && Number.isFinite(zoom) && Hs > 0;
     if (!ok) {
       // not decoded yet: what was shown stays (a frame not sent ahead shows once it is decoded)

@@ -35,19 +35,19 @@ JPEG_QUALITY = 90
 FRAME_CLASS = "pnlviz-frame"  #: the class of the slots' panel elements (the page finds them by it)
 
 
-def frame_pixels(image_rgb) -> np.ndarray:
-    """``image_rgb`` as an array, checked: H x W x 3 uint8 (else ValueError)."""
-    image = np.asarray(image_rgb)
+def frame_pixels(image_bgr) -> np.ndarray:
+    """``image_bgr`` as an array, checked: H x W x 3 uint8 (else ValueError)."""
+    image = np.asarray(image_bgr)
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
         raise ValueError(f"a frame's pixels are H x W x 3 uint8, not {image.shape} {image.dtype}")
     return image
 
 
-def frame_html(slot: int, version: int, image_rgb: np.ndarray, quality: int = JPEG_QUALITY) -> str:
-    """The hidden panel element carrying ``image_rgb`` (H x W x 3, RGB, uint8) in slot ``slot``
-    at ``version``."""
-    image = frame_pixels(image_rgb)
-    ok, jpeg = cv2.imencode(".jpg", np.ascontiguousarray(image[:, :, ::-1]), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+def frame_html(slot: int, version: int, image_bgr: np.ndarray, quality: int = JPEG_QUALITY) -> str:
+    """The hidden panel element carrying ``image_bgr`` (H x W x 3, BGR as the frame reader gives
+    it, uint8) in slot ``slot`` at ``version``."""
+    image = frame_pixels(image_bgr)
+    ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:
         raise ValueError("the frame could not be encoded as JPEG")
     url = "data:image/jpeg;base64," + base64.b64encode(jpeg.tobytes()).decode("ascii")
@@ -84,27 +84,27 @@ class FrameSlots:
         """Whether frame ``key``'s pixels are in the page already (shown or sent ahead)."""
         return any(sl["key"] == key for sl in self._slots)
 
-    def show(self, key: Hashable, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> ImagePlane:
+    def show(self, key: Hashable, image_bgr: np.ndarray | Callable[[], np.ndarray]) -> ImagePlane:
         """Show frame ``key`` (its pixels, or a function that reads them when the page does not hold
         them yet); its plane."""
         i = next((i for i, sl in enumerate(self._slots) if sl["key"] == key), None)
         if i is None:
-            i = self._load(key, image_rgb() if callable(image_rgb) else image_rgb)
+            i = self._load(key, image_bgr() if callable(image_bgr) else image_bgr)
         self._clock += 1
         self._slots[i]["used"] = self._clock
         self.shown = i
         return self._slots[i]["plane"]
 
-    def preload(self, key: Hashable, image_rgb: Callable[[], np.ndarray]) -> None:
+    def preload(self, key: Hashable, image_bgr: Callable[[], np.ndarray]) -> None:
         """Send frame ``key``'s pixels ahead, hidden, so that showing it sends nothing."""
         if not self.holds(key):
-            self._load(key, image_rgb())
+            self._load(key, image_bgr())
 
-    def _load(self, key: Hashable, image_rgb: np.ndarray) -> int:
+    def _load(self, key: Hashable, image_bgr: np.ndarray) -> int:
         """Pixels into a slot: a new one while there are fewer than ``capacity``, else the one
         shown longest ago (never the one shown). Pixels that are not a frame are refused before
         anything changes."""
-        image = frame_pixels(image_rgb)
+        image = frame_pixels(image_bgr)
         if len(self._slots) >= self.capacity:
             i = min((j for j in range(len(self._slots)) if j != self.shown), key=lambda j: self._slots[j]["used"])
         else:

@@ -44,7 +44,6 @@ class Workspace:
     def __init__(self, scene, root: str, events: WorkspaceEvents):
         self.scene, self.root, self.events = scene, f"{root}/image_view", events
         self.plane: ImagePlane | None = None
-        self.image_key: Hashable | None = None  # what the pixels on the plane are (the frame's stem)
         self.world_per_px = 0.01  # scene units per screen pixel at the current zoom
         #: the frames' pixels in the page (:mod:`pnlviz.app.pageframes`; a tab with a browser gives
         #: it the panel to send them through)
@@ -66,16 +65,21 @@ class Workspace:
         self.on_change: Callable[[], None] | None = None
 
     # ------------------------------------------------------------------ the frame
-    def show_image(self, key: Hashable, image_rgb: np.ndarray | Callable[[], np.ndarray]) -> bool:
-        """Show the frame ``key`` (its pixels, or a function that reads them when they are not
-        in the page yet). A frame preloaded with :meth:`preload` is shown at once, with no
-        image sent. True if anything changed."""
+    @property
+    def image_key(self) -> Hashable | None:
+        """The frame shown (its stem), None before the first."""
+        return self.frames.shown_key
+
+    def show_image(self, key: Hashable, image_bgr: np.ndarray | Callable[[], np.ndarray]) -> bool:
+        """Show the frame ``key`` (its pixels, BGR as the frame reader gives them, or a function
+        that reads them when they are not in the page yet). A frame preloaded with
+        :meth:`preload` is shown at once, with no image sent. True if anything changed."""
         if key == self.image_key:
             return False
-        plane = self.frames.show(key, image_rgb)
+        plane = self.frames.show(key, image_bgr)
         if plane != self.plane:
             self._pick_surfaces(plane)
-        self.plane, self.image_key = plane, key
+        self.plane = plane
         if self.on_change is not None:
             self.on_change()
         return True
@@ -84,9 +88,9 @@ class Workspace:
         """Whether frame ``key``'s pixels are in the page already (shown or sent ahead)."""
         return self.frames.holds(key)
 
-    def preload(self, key: Hashable, image_rgb: Callable[[], np.ndarray]) -> None:
+    def preload(self, key: Hashable, image_bgr: Callable[[], np.ndarray]) -> None:
         """Send frame ``key``'s pixels ahead, hidden, so that going there shows them at once."""
-        self.frames.preload(key, image_rgb)
+        self.frames.preload(key, image_bgr)
 
     def _pick_surfaces(self, plane: ImagePlane) -> None:
         """What the pointer hits in the scene: a quad where the image is (the page draws the
