@@ -199,7 +199,10 @@ def test_training_is_deterministic_and_cache_folder_round_trips(tmp_path):
     for a, b, ann_a, ann_b in zip(first.images, again.images, first.annotations, again.annotations):
         assert np.array_equal(a, b) and ann_a.keys() == ann_b.keys()
         assert all(np.array_equal(ann_a[k], ann_b[k]) for k in ann_a)
-    cfg = TrainConfig(frames=3, size=SMOKE_SIZE, input_size=SMOKE_SIZE, epochs=2, batch_size=2, seed=7)
+    # One thread: the bits are only guaranteed where no reduction is split between threads. With two,
+    # a CI run once gave the same loss history and different final weights (the last backward's sums
+    # added in another order).
+    cfg = TrainConfig(frames=3, size=SMOKE_SIZE, input_size=SMOKE_SIZE, epochs=2, batch_size=2, seed=7, threads=1)
     ra = train(cfg, tmp_path / "a.pt", progress=False, log=None, cache=first)
     rb = train(cfg, tmp_path / "b.pt", progress=False, log=None, cache=again)
     assert ra.history == rb.history
