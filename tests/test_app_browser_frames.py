@@ -1,13 +1,16 @@
 """The frame's pixels drawn by the page behind the WebGL canvas (pnlviz/app/pageframes.js), in real
 headless Chromium: the image is where the camera puts the overlays, pixel for pixel; the next
 frame, sent ahead, is shown with no pixels sent; viser's own camera moves (right drag, W A S D Q
-E) are the page's pans and zooms, so the image moves with the overlays."""
+E) are the page's pans and zooms, so the image moves with the overlays. The keypoints' ids, also
+the page's, are by their points, the crowded ones hidden by the workspace's rule at every zoom."""
 
 
 import cv2
 import numpy as np
 
 from pnlviz.app.modes import Mode
+from pnlviz.app.view2d import declutter
+from pnlviz.app.workspace import LABEL_MIN_GAP_PX
 import test_app_browser as base
 from test_app_browser import open_page, tab, wait_until
 from test_app_browser_rate import canvas_box, empty_spot, press_and_move, quiet
@@ -141,3 +144,69 @@ def test_a_right_drag_and_the_camera_keys_pan_and_zoom_the_frame_with_its_overla
                                atol=0.6)
     shift, diff = best_shift(page, session, expected_rect(session, box))
     assert shift == (0, 0) and diff < 12, (shift, diff)
+
+
+#: the ids the page shows: text, and the bottom-left corner of each (page CSS px)
+IDS = ("() => [...document.querySelectorAll('#pnlviz-ids span')].filter((s) => s.style.display !== 'none')"
+       ".map((s) => { const r = s.getBoundingClientRect(); return [s.textContent, r.left, r.bottom]; })")
+IDS_LAYER = "() => { const l = document.getElementById('pnlviz-ids'); return l ? l.style.display : 'missing'; }"
+
+
+def expected_ids(session, box) -> tuple[list, int]:
+    """The workspace's ids where the server's camera puts their points (the bottom-left corner 3 px
+    right of and above the point), those too close to one before them left out by
+    :func:`pnlviz.app.view2d.declutter`; and how many were left out."""
+    control = session.view_control
+    labels = session.workspace.id_labels
+    xy = control.view2d.to_screen(np.array([[u, v] for _, u, v in labels]).reshape(-1, 2), control.canvas)
+    keep = declutter(xy, LABEL_MIN_GAP_PX)
+    shown = [(t, box["x"] + x + 3, box["y"] + y - 3) for (t, _, _), (x, y), k in zip(labels, xy, keep) if k]
+    return shown, int(np.sum(~keep))
+
+
+def assert_ids_match(page, session, box) -> int:
+    """The page shows exactly the expected ids, each within a pixel of its place; how many it hides."""
+    want, hidden = expected_ids(session, box)
+    wait_until(lambda: [t for t, _, _ in page.evaluate(IDS)] == [t for t, _, _ in want])
+    got = page.evaluate(IDS)
+    np.testing.assert_allclose([g[1:] for g in got], [w[1:] for w in want], atol=1.0)
+    return hidden
+
+
+def test_the_page_writes_each_id_by_its_point_and_hides_crowded_ones_at_every_zoom(data, browser, serve):
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    control = session.view_control
+    quiet(page, session)
+    box = canvas_box(page)
+    wait_until(lambda: len(session.workspace.id_labels) > 0)
+    counts = {}
+    for step, key in enumerate(["", "s", "s", "s", "w", "w", "w", "w", "w", "w", "n"]):
+        if key:
+            pushes, stem = control.pushes, session.stem
+            page.mouse.move(box["x"] + 5, box["y"] + 5)
+            page.keyboard.press(key)
+            wait_until(lambda: control.pushes > pushes or session.stem != stem)
+            quiet(page, session)
+        hidden = assert_ids_match(page, session, box)
+        counts[step] = (len(session.workspace.id_labels) - hidden, hidden)
+    # zoomed out, crowded ids were hidden; zoomed in, they show again
+    assert counts[3][1] > 0 and counts[9][0] > counts[3][0], counts
+    # the ghosts' ids end in "?", the observed ones are the workspace's labels
+    texts = [t for t, _, _ in session.workspace.id_labels]
+    assert any(t.endswith("?") for t in texts) and any(t.isdigit() for t in texts)
+
+    # the 3D view shows no ids; switched off, none; back on, the same again
+    session.queue.enqueue(lambda: session.set_mode(Mode.THREE_D))
+    wait_until(lambda: page.evaluate(IDS_LAYER) == "none")
+    session.queue.enqueue(lambda: session.set_mode(Mode.IMAGE))
+    wait_until(lambda: page.evaluate(IDS_LAYER) == "block")
+    quiet(page, session)
+    assert_ids_match(page, session, box)
+    session.queue.enqueue(lambda: session.painter.set_layer("ids", False))
+    wait_until(lambda: page.evaluate(IDS) == [])
+    assert session.workspace.id_labels == []
+    session.queue.enqueue(lambda: session.painter.set_layer("ids", True))
+    wait_until(lambda: len(page.evaluate(IDS)) > 0)
+    assert_ids_match(page, session, box)

@@ -230,6 +230,22 @@ def test_drag_end_recalibrates_on_the_server(data, serve):
     assert tab.editor.last_recalibration_ms > 0 and tab.editor.grabs == tab.editor.releases == 1
 
 
+def test_the_ids_written_over_the_frame_are_the_points_shown_observed_first(data, serve):
+    app = serve(data)
+    tab = app.session()
+    tab.goto(app.state.find("00002"))
+    tab.flush()
+    ws = tab.workspace
+    observed, ghosts = ws.points[PointKind.KEYPOINTS], ws.points[PointKind.GHOSTS]
+    assert len(observed.keys) and len(ghosts.keys)
+    want = sorted((str(k), tuple(uv)) for k, uv in zip(observed.keys, observed.uv))
+    want += sorted((f"{k}?", tuple(uv)) for k, uv in zip(ghosts.keys, ghosts.uv))
+    assert [(t, (u, v)) for t, u, v in ws.id_labels] == want
+    tab.painter.set_layer("ids", False)
+    tab.flush()
+    assert ws.id_labels == []
+
+
 def test_annotation_and_detections_merge_with_the_side_convention_resolved(shared_dir, tmp_path):
     """PnLCalib's detections name the near goal 'left'; WC14 annotations name the true side.
     Merged, they must not fight: 'both' scores at least as well as either alone."""

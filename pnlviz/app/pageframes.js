@@ -17,10 +17,19 @@
 // - The layer sits in the element the pointer bridge moves with its CSS transform (bridge.js), so
 //   a pan or zoom in the page moves the image with the overlays; it takes no pointer events.
 // - Shown in the image view only (#pnlviz-bridge data-mode).
+// - The keypoints' ids are the page's too, in a layer over the canvas (#pnlviz-view data-ids:
+//   "text,u,v;..." in image pixels, most important first). An id closer than MIN_GAP CSS px on
+//   screen to one before it is hidden, at every zoom (pnlviz.app.view2d.declutter is the same
+//   rule; a test holds them to each other). New ids come in with the frame's swap, at the
+//   animation frame after their batch; a view change moves them at once.
 // window.__pnlvizFrames exposes its state (slots decoded, swaps, what is shown) to tests.
 (() => {
   if (window.__pnlvizFrames || !window.__pnlvizBridge || window.__pnlvizBridge.reloading) return;
-  const state = { slots: new Map(), shown: "", decoded: 0, swaps: 0, layer: null, placed: "", swapQueued: false };
+  const MIN_GAP = 16; // pnlviz.app.workspace.LABEL_MIN_GAP_PX
+  const state = {
+    slots: new Map(), shown: "", decoded: 0, swaps: 0, layer: null, placed: "", swapQueued: false,
+    idsLayer: null, ids: "", idsPlaced: "", idsShown: 0,
+  };
   window.__pnlvizFrames = state;
 
   const bridge = window.__pnlvizBridge;
@@ -44,6 +53,56 @@
       for (const s of state.slots.values()) el.appendChild(s.img);
     }
     return state.layer;
+  };
+
+  // the ids' layer: over the canvas, in the same element, so the bridge's transform moves it too
+  const idsLayer = () => {
+    const canvas = glCanvas();
+    if (!canvas || !canvas.parentElement) return null;
+    const target = canvas.parentElement;
+    if (!state.idsLayer || state.idsLayer.parentElement !== target) {
+      const el = document.createElement("div");
+      el.id = "pnlviz-ids";
+      Object.assign(el.style, { position: "absolute", left: "0", top: "0", width: "0", height: "0", zIndex: "1",
+        pointerEvents: "none", overflow: "visible", font: "600 11px/13px sans-serif", color: "#1a1a1a" });
+      target.appendChild(el);
+      state.idsLayer = el;
+      state.idsPlaced = "";
+    }
+    return state.idsLayer;
+  };
+
+  // the ids of `text` ("text,u,v;...") placed for the view (cu, cv) at z CSS px per image px; the
+  // anchor of each is its bottom-left corner, a little off the point
+  const placeIds = (text, cu, cv, z, Wa, Ha) => {
+    const l = idsLayer();
+    if (!l) return;
+    const key = [text, cu, cv, z, Wa, Ha].join("|");
+    if (key === state.idsPlaced) return;
+    state.idsPlaced = key;
+    const entries = text ? text.split(";").map((e) => e.split(",")) : [];
+    const kept = [];
+    let shown = 0;
+    entries.forEach(([label, u, v], i) => {
+      const x = Wa / 2 + (Number(u) - cu) * z;
+      const y = Ha / 2 + (Number(v) - cv) * z;
+      const show = kept.every(([a, b]) => Math.hypot(a - x, b - y) >= MIN_GAP);
+      if (show) kept.push([x, y]);
+      let el = l.children[i];
+      if (!el) {
+        el = document.createElement("span");
+        Object.assign(el.style, { position: "absolute", left: "0", top: "0", padding: "0 2px", whiteSpace: "nowrap",
+          background: "rgba(255, 255, 255, 0.85)", borderRadius: "2px" });
+        l.appendChild(el);
+      }
+      if (el.textContent !== label) el.textContent = label;
+      el.style.opacity = label.endsWith("?") ? "0.7" : "1"; // a ghost's id, as its disc, is fainter
+      el.style.transform = `translate(${(x + 3).toFixed(1)}px, ${(y - 3).toFixed(1)}px) translateY(-100%)`;
+      el.style.display = show ? "block" : "none";
+      shown += show;
+    });
+    for (let i = entries.length; i < l.children.length; i += 1) l.children[i].style.display = "none";
+    state.idsShown = shown;
   };
 
   // new pixels in a slot: decoded off screen; the slot's previous image stays until then
@@ -75,42 +134,57 @@
     }
   };
 
+  // another frame, or other ids: swapped in at the next animation frame, the one that draws their
+  // overlays (a batch of scene changes is applied in one frame and drawn in the next; a view moves
+  // in the frame it arrives, as the bridge's transform comes off)
+  const swapSoon = () => {
+    if (state.swapQueued) return;
+    state.swapQueued = true;
+    requestAnimationFrame(() => {
+      state.swapQueued = false;
+      update(true);
+    });
+  };
+
   const update = (swapping = false) => {
-    const l = layer();
     const d = bridge.readView(); // #pnlviz-view, as the bridge reads it
     const canvas = glCanvas();
-    if (!l || !d || !canvas) return;
-    const [slot, n] = d.frame.split(",");
-    const entry = state.slots.get(slot);
+    if (!d || !canvas) return;
     const [cu, cv, zoom] = d.view;
     const Hs = d.canvas[1];
     const imageMode = bridge.imageMode();
-    const ok = imageMode && entry && entry.ready && entry.n === n && Number.isFinite(zoom) && Hs > 0;
-    if (!ok) {
+    const viewOk = imageMode && Number.isFinite(zoom) && Hs > 0;
+    const Wa = canvas.clientWidth;
+    const Ha = canvas.clientHeight;
+    const z = viewOk ? zoom * Ha / Hs : 0;
+    const ids = idsLayer();
+    if (ids) ids.style.display = viewOk ? "block" : "none";
+    if (viewOk) {
+      if (swapping) state.ids = d.ids;
+      else if (d.ids !== state.ids) swapSoon();
+      placeIds(state.ids, cu, cv, z, Wa, Ha);
+    }
+    placeFrame(d, swapping, viewOk, cu, cv, z, Wa, Ha);
+  };
+
+  const placeFrame = (d, swapping, viewOk, cu, cv, z, Wa, Ha) => {
+    const l = layer();
+    if (!l) return;
+    const [slot, n] = d.frame.split(",");
+    const entry = state.slots.get(slot);
+    if (!(viewOk && entry && entry.ready && entry.n === n)) {
       // not decoded yet: what was shown stays (a frame not sent ahead shows once it is decoded)
-      if (!imageMode) {
+      if (!bridge.imageMode()) {
         for (const s of state.slots.values()) s.img.style.display = "none";
         state.placed = ""; // placed again when the image view comes back
       }
       return;
     }
-    const Wa = canvas.clientWidth;
-    const Ha = canvas.clientHeight;
-    const z = zoom * Ha / Hs;
     const key = [slot, n, cu, cv, z, Wa, Ha].join("|");
     if (key === state.placed) return;
     const shown = `${slot},${n}`;
     if (shown !== state.shown && !swapping) {
-      // another frame: swapped at the next animation frame, the one that draws its overlays (a
-      // batch of scene changes is applied in one frame and drawn in the next; a view moves in
-      // the frame it arrives, as the bridge's transform comes off)
-      if (!state.swapQueued) {
-        state.swapQueued = true;
-        requestAnimationFrame(() => {
-          state.swapQueued = false;
-          update(true);
-        });
-      }
+      swapSoon();
       return;
     }
     state.placed = key;
@@ -134,7 +208,7 @@
   };
   onMutation();
   new MutationObserver(onMutation).observe(document.body, {
-    childList: true, subtree: true, attributes: true, attributeFilter: ["data-frame", "data-view", "data-mode"],
+    childList: true, subtree: true, attributes: true, attributeFilter: ["data-frame", "data-view", "data-mode", "data-ids"],
   });
   const watch = () => {
     const canvas = glCanvas();

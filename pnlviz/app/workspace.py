@@ -1,9 +1,10 @@
 """The image view's scene nodes for one tab: the overlays as line segments over the frame, and the
 points you grab (observed keypoints, ghosts of the missing ones, points of annotated lines) as
-batched discs with their ids. Every node is created once and then updated in place, so an edit
+batched discs. Every node is created once and then updated in place, so an edit
 sends only what changed and a drag in progress is never cut short by a redraw. The frame's
 pixels are drawn by the page behind the transparent canvas (sent once per frame:
-:mod:`pnlviz.app.pageframes`), and the dark frame around them is the page's background
+:mod:`pnlviz.app.pageframes`), the points' ids by the page over it (:attr:`Workspace.id_labels`,
+sent with the view: :mod:`pnlviz.app.pagesync`), and the dark frame around them is the page's background
 (:data:`pnlviz.app.bridge.BACKDROP_RGB`); in the scene, invisible surfaces there take the pointer.
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
@@ -24,7 +25,7 @@ from pnlviz.app.modes import PointKind, Selection, WorkspaceEvents
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
 from pnlviz.app.pageframes import FrameSlots
 from pnlviz.app.points import DragRoute, PointNodes
-from pnlviz.app.view2d import PLANE_Z, ImagePlane, declutter, placed
+from pnlviz.app.view2d import PLANE_Z, ImagePlane, placed
 from pnlviz.viz import ring
 
 #: screen pixels: the radius of the selection ring
@@ -35,7 +36,9 @@ THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch":
              "detected_lines": 2.0, "residuals": 1.5, "finding_annotated": 5.0, "finding_expected": 2.0}
 BACKDROP_MARGIN = 6.0  # the pick surface around the image: this many image widths (heights) each side
 SELECTED_RGB = (255, 255, 255)
-LABEL_MIN_GAP_PX = 16.0  # ids closer than this on screen: only the first one shows
+#: CSS px: an id closer than this on screen to one before it is hidden (the page applies it at every
+#: zoom, ``pageframes.js``; :func:`pnlviz.app.view2d.declutter` is the same rule)
+LABEL_MIN_GAP_PX = 16.0
 
 
 class Workspace:
@@ -56,9 +59,11 @@ class Workspace:
                        for kind, layer, opacity in ((PointKind.KEYPOINTS, "keypoints", 1.0),
                                                     (PointKind.GHOSTS, "ghosts", 0.55),
                                                     (PointKind.LINE_POINTS, "keypoints", 1.0))}
-        self._labels: dict[object, Any] = {}  # keypoint id -> label node (viser's)
-        self._label_uv: dict[object, np.ndarray] = {}
-        self._label_rank: dict[object, int] = {}
+        #: the ids the page writes next to the points, ``(text, u, v)`` in image pixels, observed
+        #: keypoints first, then ghosts ("12?"), each in id order: the page hides one too close to
+        #: one before it. Viser's labels cost a scene node each (three messages per id on every
+        #: frame change, and a slow tail of the next frame's latency)
+        self.id_labels: list[tuple[str, float, float]] = []
         self.selected: Selection | None = None
         self.also: list[Selection] = []  # more selected keypoints (Ctrl+click)
         #: what the page is told changed: the frame shown, the points or their grab size
@@ -179,9 +184,9 @@ class Workspace:
         for kind, markers in shown.items():
             self.points[kind].show(markers, plane, self.world_per_px)
         observed, ghosted = shown[PointKind.KEYPOINTS], shown[PointKind.GHOSTS]
-        labelled = [(k, uv, 0) for k, uv in zip(observed.keys, observed.uv)] if ids else []
-        labelled += [(k, uv, 1) for k, uv in zip(ghosted.keys, ghosted.uv)] if ids else []
-        self._show_labels(labelled)
+        labelled = sorted(zip(observed.keys, observed.labels, observed.uv), key=lambda e: str(e[0])) if ids else []
+        labelled += sorted(((k, f"{k}?", uv) for k, uv in zip(ghosted.keys, ghosted.uv)), key=lambda e: str(e[0])) if ids else []
+        self.id_labels = [(text, float(uv[0]), float(uv[1])) for _, text, uv in labelled]
         self.pins = ({k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}, observed)
         self._show_pins()
         self._show_selection()
@@ -209,37 +214,6 @@ class Workspace:
         else:
             update_changed(handle, points=pts, colors=colors, visible=True)
 
-    def _show_labels(self, labelled: list) -> None:
-        wanted = {k: (np.asarray(uv, float), rank) for k, uv, rank in labelled}
-        for k in [k for k in self._labels if k not in wanted]:
-            self._labels.pop(k).remove()
-            self._label_uv.pop(k, None)
-            self._label_rank.pop(k, None)
-        for k, (uv, rank) in wanted.items():
-            pos = placed(self.plane).world(uv, "selection")
-            text = f"{k}" if rank == 0 else f"{k}?"
-            handle = self._labels.get(k)
-            if handle is None:
-                self._labels[k] = self.scene.add_label(f"{self.root}/ids/{k}", text, position=pos,
-                                                       font_screen_scale=0.9, anchor="bottom-left")
-            elif k not in self._label_uv or not np.allclose(self._label_uv[k], uv) or self._label_rank[k] != rank:
-                handle.position, handle.text = pos, text
-            self._label_uv[k], self._label_rank[k] = uv, rank
-        self.declutter()
-
-    def declutter(self) -> None:
-        """Ids too close to an earlier one on screen at this zoom are hidden (observed before ghosts)."""
-        if not self._labels:
-            return
-        keys = sorted(self._labels, key=lambda k: (self._label_rank[k], str(k)))
-        uv = np.array([self._label_uv[k] for k in keys])
-        px_per_image_px = placed(self.plane).scale / self.world_per_px
-        keep = declutter(uv * px_per_image_px, LABEL_MIN_GAP_PX)
-        for k, show in zip(keys, keep):
-            handle = self._labels[k]
-            if handle.visible != bool(show):
-                handle.visible = bool(show)
-
     # ------------------------------------------------------------------ selection and zoom
     def select(self, selected: Selection | None, also=()) -> None:
         """Ring the selected point (and ``also``: more selected keypoints)."""
@@ -266,13 +240,12 @@ class Workspace:
             update_changed(self._ring, points=pts, visible=True)
 
     def set_zoom(self, world_per_px: float) -> None:
-        """The camera zoomed: points keep their size on screen, ids are decluttered again."""
+        """The camera zoomed: points keep their size on screen."""
         if self.world_per_px > 0 and abs(math.log(world_per_px / self.world_per_px)) < 0.05:
             return
         self.world_per_px = world_per_px
         for nodes in self.points.values():
             nodes.rescale(world_per_px)
         if self.plane is not None:
-            self.declutter()
             self._show_pins()
             self._show_selection()
