@@ -39,7 +39,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from playwright.sync_api import sync_playwright
+from playwright.sync_api import Error as PlaywrightError, sync_playwright
 
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
          "--disable-component-update", "--disable-sync"]
@@ -66,7 +66,10 @@ class Screencast:
 
     def _frame(self, event) -> None:
         self.frames.append((event["metadata"]["timestamp"], event["data"]))
-        self.cdp.send("Page.screencastFrameAck", {"sessionId": event["sessionId"]})
+        try:
+            self.cdp.send("Page.screencastFrameAck", {"sessionId": event["sessionId"]})
+        except PlaywrightError:  # a frame that came as the browser closed: nothing to acknowledge
+            pass
 
     def wait(self, seconds: float) -> None:
         """Let time pass while the frames keep coming (events are handled inside playwright calls)."""

@@ -9,7 +9,6 @@ import cv2
 import numpy as np
 
 from pnlviz.app.modes import Mode
-from pnlviz.app.view2d import declutter
 from pnlviz.app.workspace import LABEL_MIN_GAP_PX
 import test_app_browser as base
 from test_app_browser import open_page, tab, wait_until
@@ -152,10 +151,21 @@ IDS = ("() => [...document.querySelectorAll('#pnlviz-ids span')].filter((s) => s
 IDS_LAYER = "() => { const l = document.getElementById('pnlviz-ids'); return l ? l.style.display : 'missing'; }"
 
 
+def declutter(screen_xy, min_gap: float) -> np.ndarray:
+    """The page's rule for crowded ids, written out: in the order given, an id is shown unless it is
+    closer than ``min_gap`` to one shown before it. Bool mask."""
+    keep, kept = [], []
+    for p in np.asarray(screen_xy, float).reshape(-1, 2):
+        keep.append(all(np.hypot(*(p - q)) >= min_gap for q in kept))
+        if keep[-1]:
+            kept.append(p)
+    return np.array(keep, bool)
+
+
 def expected_ids(session, box) -> tuple[list, int]:
     """The workspace's ids where the server's camera puts their points (the bottom-left corner 3 px
-    right of and above the point), those too close to one before them left out by
-    :func:`pnlviz.app.view2d.declutter`; and how many were left out."""
+    right of and above the point), those too close to one before them left out (:func:`declutter`);
+    and how many were left out."""
     control = session.view_control
     labels = session.workspace.id_labels
     xy = control.view2d.to_screen(np.array([[u, v] for _, u, v in labels]).reshape(-1, 2), control.canvas)

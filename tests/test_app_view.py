@@ -1,4 +1,4 @@
-"""The image view's pure parts: the plane and the 2D camera over it, label decluttering, snapping,
+"""The image view's pure parts: the plane and the 2D camera over it, snapping,
 the pointer bridge's messages, the overlay geometry, and the undo history kept with the edits."""
 
 import json
@@ -11,7 +11,7 @@ import pytest
 from pnlviz import EXAMPLES_DIR
 from pnlviz.app.bridge import Gesture, bridge_html, page_url, parse_pointer
 from pnlviz.app.pagesync import page_data
-from pnlviz.app.view2d import FOV_Y, MAX_ZOOM, MIN_ZOOM_OF_FIT, PLANE_Z, ImagePlane, View2D, declutter, snap
+from pnlviz.app.view2d import FOV_Y, MAX_ZOOM, MIN_ZOOM_OF_FIT, PLANE_Z, ImagePlane, View2D, snap
 
 CANVAS = (1276, 900)
 
@@ -83,13 +83,7 @@ def test_pan_clamp_and_relative_views_across_frame_sizes():
     np.testing.assert_allclose(moved.zoom, v.zoom / 2)  # the same part of the frame on screen
 
 
-# ---------------------------------------------------------------------- labels and snapping
-def test_declutter_keeps_the_first_of_labels_that_would_overlap():
-    xy = [[0, 0], [5, 0], [20, 0], [24, 3], [100, 100]]
-    assert declutter(xy, 16.0).tolist() == [True, False, True, False, True]
-    assert declutter(xy, 0.0).all() and declutter(np.zeros((0, 2)), 16.0).shape == (0,)
-
-
+# ---------------------------------------------------------------------- snapping
 def test_snap_prefers_points_then_lines_within_the_radius():
     points = np.array([[100.0, 100.0]])
     segments = np.array([[[0.0, 200.0], [400.0, 200.0]]])

@@ -19,8 +19,8 @@
 // - Shown in the image view only (#pnlviz-bridge data-mode).
 // - The keypoints' ids are the page's too, in a layer over the canvas (#pnlviz-view data-ids:
 //   "text,u,v;..." in image pixels, most important first). An id closer than MIN_GAP CSS px on
-//   screen to one before it is hidden, at every zoom (pnlviz.app.view2d.declutter is the same
-//   rule; a test holds them to each other). New ids come in with the frame's swap, at the
+//   screen to one before it is hidden, at every zoom (tests/test_app_browser_frames.py checks the
+//   rule). New ids come in with the frame's swap, at the
 //   animation frame after their batch; a view change moves them at once.
 // window.__pnlvizFrames exposes its state (slots decoded, swaps, what is shown) to tests.
 (() => {

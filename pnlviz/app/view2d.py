@@ -172,19 +172,6 @@ def placed(plane: ImagePlane | None) -> ImagePlane:
     return plane
 
 
-def declutter(screen_xy, min_gap: float) -> np.ndarray:
-    """Which labels to show so that none is closer than ``min_gap`` to one shown before it
-    (greedy, in the order given: put the important ones first). Bool mask."""
-    xy = np.asarray(screen_xy, float).reshape(-1, 2)
-    keep = np.zeros(len(xy), bool)
-    kept: list[np.ndarray] = []
-    for i, p in enumerate(xy):
-        if not kept or np.min(np.hypot(*(np.array(kept) - p).T)) >= min_gap:
-            keep[i] = True
-            kept.append(p)
-    return keep
-
-
 def snap(uv, points, segments, radius: float) -> tuple[np.ndarray, str | None]:
     """``uv`` moved onto the nearest of ``points`` (N, 2) within ``radius``, else onto the nearest
     point of ``segments`` (M, 2, 2) within ``radius``, else left where it is. Returns the pixel and

@@ -37,7 +37,7 @@ THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch":
 BACKDROP_MARGIN = 6.0  # the pick surface around the image: this many image widths (heights) each side
 SELECTED_RGB = (255, 255, 255)
 #: CSS px: an id closer than this on screen to one before it is hidden (the page applies it at every
-#: zoom, ``pageframes.js``; :func:`pnlviz.app.view2d.declutter` is the same rule)
+#: zoom: ``pageframes.js``, its MIN_GAP)
 LABEL_MIN_GAP_PX = 16.0
 
 
