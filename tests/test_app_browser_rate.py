@@ -131,7 +131,14 @@ def test_wheel_zoom_and_drag_pan_push_the_camera_once_per_gesture_to_where_the_p
     ring = page.evaluate("() => { const r = document.getElementById('pnlviz-drag-ring');"
                          " return r ? [parseFloat(r.style.left), parseFloat(r.style.top)] : null; }")
     assert ring is not None and np.hypot(ring[0] - (x + 24), ring[1] - (y + 16)) < 1.0
+    # the live preview has put the server's point under the ring: the ring goes with the release
+    nodes = session.workspace.points["keypoints"]
+    held = uv + np.array([24, 16]) / control.view2d.zoom
+    wait_until(lambda: kid in nodes.keys and np.hypot(*(nodes.uv[nodes.keys.index(kid)] - held)) < 1.0)
+    page_points = "() => (window.__pnlvizBridge.view || {points: []}).points"  # what the page was told
+    wait_until(lambda: np.min(np.hypot(*(np.reshape(page.evaluate(page_points), (-1, 2)) - held).T), initial=9.0) < 1.0)
     page.mouse.up()
+    assert page.evaluate("() => document.getElementById('pnlviz-drag-ring') === null")
     wait_until(lambda: str(kid) in (app.state.edits.get(session.stem).get("keypoints") or {}))
     np.testing.assert_allclose(np.array(app.state.edits.get(session.stem)["keypoints"][str(kid)]) - uv,
                                np.array([24, 16]) / control.view2d.zoom, atol=0.6)

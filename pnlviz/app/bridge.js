@@ -13,7 +13,8 @@
 // - Pan or point drag? The server lists the grabbable points and the view in #pnlviz-view; a
 //   press within the grab radius of one is left to viser (a point drag: a ring drawn here follows
 //   the pointer at display rate while the server moves the point and recalibrates; the ring goes
-//   when the server's points arrive after the release). Any other plain left press is a pan
+//   at the release if the server's point is under it already, else when the server's points
+//   arrive after the release). Any other plain left press is a pan
 //   candidate: its pointer moves are kept from viser, so viser never starts a drag; past 3 px it
 //   is a pan (viser's pending click is cancelled with a pointercancel), else the release goes on
 //   to viser as a click (select, deselect; shift+click places, and is never taken).
@@ -470,8 +471,11 @@
     if (pt && event.pointerId === pt.id) {
       state.point = null;
       if (state.ring) {
-        state.ring.released = true; // it goes when the server's points come (or after a while)
-        setTimeout(hideRing, 1500);
+        // it goes now if the server's point is under it already (the live preview caught up with
+        // the hand), else when the server's points come (or after a while)
+        state.ring.released = true;
+        if (pointUnderRing()) hideRing();
+        else setTimeout(hideRing, 1500);
       }
     }
   };
@@ -498,6 +502,22 @@
     }
     state.ring.el.style.left = `${x}px`;
     state.ring.el.style.top = `${y}px`;
+    state.ring.x = x;
+    state.ring.y = y;
+  };
+  // whether one of the server's points is drawn where the ring is (within 1.5 px: the pointer's
+  // whole-pixel coordinates and the points' tenth-pixel ones put it 0.7-0.8 px off when it is)
+  const pointUnderRing = () => {
+    const st = stage();
+    const d = state.view;
+    if (!st || !state.ring || !d || d.view.length !== 3 || d.canvas.length !== 2) return false;
+    const box = st.clip.getBoundingClientRect();
+    const [x, y] = [state.ring.x - box.left, state.ring.y - box.top];
+    for (let i = 0; i + 1 < d.points.length; i += 2) {
+      const q = screenOf(d.points[i], d.points[i + 1]);
+      if (Math.hypot(q[0] - x, q[1] - y) <= 1.5) return true;
+    }
+    return false;
   };
   const hideRing = () => {
     if (state.ring && state.ring.released) {
