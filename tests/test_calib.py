@@ -377,3 +377,32 @@ def test_border_points_aimed_inside_keep_frames_calibrated_and_residuals_as_obse
         assert reported == pytest.approx(aimed.line_residuals), stem
         checked += 1
     assert checked >= 40, checked
+
+
+def test_annotation_observations_are_computed_once_and_shared_read_only():
+    from pnlviz import EXAMPLES_DIR
+    from pnlviz.calib.inputs import annotation_observations
+    from pnlviz.data import open_dataset
+
+    ds = open_dataset(EXAMPLES_DIR / "sample")
+    model = load_field_model()
+    ann = ds.annotation(ds.stems[2])
+    fresh, _ = observations_from_annotation(ann, 960, 540, model=model)
+    first = annotation_observations(ann, 960, 540, model)
+    again = annotation_observations({k: np.array(v) for k, v in ann.items()}, 960, 540, model)  # equal content
+    for obs in (first, again):  # what the frame pipeline computed before
+        for name in ("kp_ids", "kp_xy", "kp_xyz", "kp_sets", "kp_main", "kp_derived"):
+            np.testing.assert_array_equal(getattr(obs, name), getattr(fresh, name))
+        assert obs.lines.keys() == fresh.lines.keys() and obs.circles.keys() == fresh.circles.keys()
+    assert again.kp_xy is first.kp_xy  # computed once
+    with pytest.raises(ValueError):  # shared: no caller can change it for the others
+        again.kp_xy[0, 0] = 0.0
+    again.lines.pop(next(iter(again.lines)))  # each caller's own dicts
+    assert first.lines.keys() == fresh.lines.keys()
+    assert annotation_observations(ann, 960, 540, model).lines.keys() == fresh.lines.keys()
+    # another annotation (one point of one line moved), another size: computed anew
+    moved = {k: np.array(v) for k, v in ann.items()}
+    line = next(k for k in moved if k in model.lines)
+    moved[line][0] += 0.01
+    assert annotation_observations(moved, 960, 540, model).kp_xy is not first.kp_xy
+    assert annotation_observations(ann, 1280, 720, model).width == 1280

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from pnlviz.calib.calibrate import CalibParams, CalibrationResult, calibrate
-from pnlviz.calib.inputs import Detections, observations_from_annotation, observations_from_predictions
+from pnlviz.calib.inputs import Detections, annotation_observations, observations_from_predictions
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.sources import KeypointEdit, apply_keypoint_edits, merge_observations
 from pnlviz.conventions import DEFAULT_ALPHA
@@ -102,10 +102,10 @@ def observations_for(inputs: FrameInputs, source: str, model: FieldModel) -> tup
     obs: Observations | None = None
     origin: str | None = None
     if ann is not None and det is not None:
-        obs, origin = merge_observations(observations_from_annotation(ann, W, H, model=model)[0],
+        obs, origin = merge_observations(annotation_observations(ann, W, H, model),
                                          observations_from_predictions(det, W, H, model=model), model), "both"
     elif ann is not None:
-        obs, origin = observations_from_annotation(ann, W, H, model=model)[0], "annotation"
+        obs, origin = annotation_observations(ann, W, H, model), "annotation"
     elif det is not None:
         obs, origin = observations_from_predictions(det, W, H, model=model), "detections"
     if inputs.keypoint_edits:
