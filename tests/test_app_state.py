@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pnlviz import EXAMPLES_DIR
-from pnlviz.app.modes import DragEvent, DragPhase, PointKind
+from pnlviz.app.modes import DragEvent, DragPhase, PointKind, Selection
 from pnlviz.app.overlay import Layers, render
 from pnlviz.app.state import AppState, Settings
 from pnlviz.calib.calibrate import CalibParams
@@ -241,6 +241,12 @@ def test_the_ids_written_over_the_frame_are_the_points_shown_observed_first(data
     want = sorted((str(k), tuple(uv)) for k, uv in zip(observed.keys, observed.uv))
     want += sorted((f"{k}?", tuple(uv)) for k, uv in zip(ghosts.keys, ghosts.uv))
     assert [(t, (u, v)) for t, u, v in ws.id_labels] == want
+    # an occluded keypoint's id is in parentheses
+    kid = observed.keys[0]
+    tab.editor.select(Selection(PointKind.KEYPOINTS, kid))
+    tab.editor.cycle_visibility()
+    tab.flush()
+    assert f"({kid})" in [t for t, _, _ in ws.id_labels] and str(kid) not in [t for t, _, _ in ws.id_labels]
     tab.painter.set_layer("ids", False)
     tab.flush()
     assert ws.id_labels == []
