@@ -161,10 +161,10 @@ def test_the_page_is_told_the_view_and_where_points_can_be_grabbed():
 def test_the_page_is_told_the_ids_in_order_with_nothing_it_would_misread():
     plane = ImagePlane(960, 540)
     html = page_data(1, 0, True, View2D(480.0, 270.0, 1.0), (1000, 800), plane, 8.0, np.zeros((0, 2)), "0,1",
-                     [("12", 10.04, 20.0), ("(5)", 1.0, 2.0), ("7?", np.nan, 3.0), ('1,;"<>&3?', 4.0, 5.0)])
+                     [("12", 10.04, 20.0), ("(5)", 1.0, 2.0), ("7?", np.nan, 3.0), ('1,;"<>&3?', 4.0, 5.0)], 16.0)
     # in the order given (the page keeps the first of two crowded ids); a point off the image plane
     # (NaN) has no id; separators and markup never reach the attribute
-    assert 'data-ids="12,10.0,20.0;(5),1.0,2.0;13?,4.0,5.0"' in html
+    assert 'data-ids="12,10.0,20.0;(5),1.0,2.0;13?,4.0,5.0"' in html and 'data-id-gap="16"' in html
     assert 'data-ids=""' in page_data(1, 0, True, None, (1000, 800), None, 0.0, np.zeros((0, 2)))
 
 

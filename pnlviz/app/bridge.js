@@ -173,6 +173,7 @@
       v: Number(d.v), answer: Number(d.answer), applied: d.applied === "1", view: nums(d.view),
       limits: nums(d.limits), canvas: nums(d.canvas), reach: Number(d.reach || 0),
       pointsText: d.points || "", points: nums(d.points), frame: d.frame || "", ids: d.ids || "",
+      idGap: Number(d.idGap || 0),
     };
   };
   state.readView = readView;

@@ -18,17 +18,16 @@
 //   a pan or zoom in the page moves the image with the overlays; it takes no pointer events.
 // - Shown in the image view only (#pnlviz-bridge data-mode).
 // - The keypoints' ids are the page's too, in a layer over the canvas (#pnlviz-view data-ids:
-//   "text,u,v;..." in image pixels, most important first). An id closer than MIN_GAP CSS px on
-//   screen to one before it is hidden, at every zoom (tests/test_app_browser_frames.py checks the
-//   rule). New ids come in with the frame's swap, at the
-//   animation frame after their batch; a view change moves them at once.
+//   "text,u,v;..." in image pixels, most important first). An id closer than data-id-gap CSS px
+//   on screen to one before it is hidden, at every zoom (tests/test_app_browser_frames.py checks
+//   the rule). New ids come in with the frame's swap, at the animation frame after their batch;
+//   a view change moves them at once.
 // window.__pnlvizFrames exposes its state (slots decoded, swaps, what is shown) to tests.
 (() => {
   if (window.__pnlvizFrames || !window.__pnlvizBridge || window.__pnlvizBridge.reloading) return;
-  const MIN_GAP = 16; // pnlviz.app.workspace.LABEL_MIN_GAP_PX
   const state = {
     slots: new Map(), shown: "", decoded: 0, swaps: 0, layer: null, placed: "", swapQueued: false,
-    idsLayer: null, ids: "", idsPlaced: "", idsShown: 0,
+    idsLayer: null, ids: "", idsPlaced: "",
   };
   window.__pnlvizFrames = state;
 
@@ -74,19 +73,18 @@
 
   // the ids of `text` ("text,u,v;...") placed for the view (cu, cv) at z CSS px per image px; the
   // anchor of each is its bottom-left corner, a little off the point
-  const placeIds = (text, cu, cv, z, Wa, Ha) => {
+  const placeIds = (text, gap, cu, cv, z, Wa, Ha) => {
     const l = idsLayer();
     if (!l) return;
-    const key = [text, cu, cv, z, Wa, Ha].join("|");
+    const key = [text, gap, cu, cv, z, Wa, Ha].join("|");
     if (key === state.idsPlaced) return;
     state.idsPlaced = key;
     const entries = text ? text.split(";").map((e) => e.split(",")) : [];
     const kept = [];
-    let shown = 0;
     entries.forEach(([label, u, v], i) => {
       const x = Wa / 2 + (Number(u) - cu) * z;
       const y = Ha / 2 + (Number(v) - cv) * z;
-      const show = kept.every(([a, b]) => Math.hypot(a - x, b - y) >= MIN_GAP);
+      const show = kept.every(([a, b]) => Math.hypot(a - x, b - y) >= gap);
       if (show) kept.push([x, y]);
       let el = l.children[i];
       if (!el) {
@@ -99,10 +97,8 @@
       el.style.opacity = label.endsWith("?") ? "0.7" : "1"; // a ghost's id, as its disc, is fainter
       el.style.transform = `translate(${(x + 3).toFixed(1)}px, ${(y - 3).toFixed(1)}px) translateY(-100%)`;
       el.style.display = show ? "block" : "none";
-      shown += show;
     });
     for (let i = entries.length; i < l.children.length; i += 1) l.children[i].style.display = "none";
-    state.idsShown = shown;
   };
 
   // new pixels in a slot: decoded off screen; the slot's previous image stays until then
@@ -162,7 +158,7 @@
     if (viewOk) {
       if (swapping) state.ids = d.ids;
       else if (d.ids !== state.ids) swapSoon();
-      placeIds(state.ids, cu, cv, z, Wa, Ha);
+      placeIds(state.ids, d.idGap, cu, cv, z, Wa, Ha);
     }
     placeFrame(d, swapping, viewOk, cu, cv, z, Wa, Ha);
   };
@@ -208,7 +204,7 @@
   };
   onMutation();
   new MutationObserver(onMutation).observe(document.body, {
-    childList: true, subtree: true, attributes: true, attributeFilter: ["data-frame", "data-view", "data-mode", "data-ids"],
+    childList: true, subtree: true, attributes: true, attributeFilter: ["data-frame", "data-view", "data-mode", "data-ids", "data-id-gap"],
   });
   const watch = () => {
     const canvas = glCanvas();

@@ -36,8 +36,8 @@ THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch":
              "detected_lines": 2.0, "residuals": 1.5, "finding_annotated": 5.0, "finding_expected": 2.0}
 BACKDROP_MARGIN = 6.0  # the pick surface around the image: this many image widths (heights) each side
 SELECTED_RGB = (255, 255, 255)
-#: CSS px: an id closer than this on screen to one before it is hidden (the page applies it at every
-#: zoom: ``pageframes.js``, its MIN_GAP)
+#: CSS px: an id closer than this on screen to one before it is hidden (sent with the ids: the page
+#: applies it at every zoom, ``pageframes.js``)
 LABEL_MIN_GAP_PX = 16.0
 
 

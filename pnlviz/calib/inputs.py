@@ -130,9 +130,9 @@ def annotation_observations(annotation: Mapping[str, np.ndarray], width: int, he
     labels take 1-12 ms of a 20-30 ms recalibration). The arrays are read-only; the dicts are
     each caller's own."""
     digest = hashlib.blake2b(digest_size=16)
-    for key in sorted(annotation):
-        a = np.ascontiguousarray(np.asarray(annotation[key], float))
-        digest.update(f"{key}|{a.shape}|".encode())
+    for name in sorted(annotation):
+        a = np.ascontiguousarray(np.asarray(annotation[name], float))
+        digest.update(f"{name}|{a.shape}|".encode())
         digest.update(a.tobytes())
     key = (digest.digest(), int(width), int(height), id(model))
     with _annotation_lock:
