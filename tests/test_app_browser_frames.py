@@ -59,12 +59,17 @@ def best_shift(page, session, rect) -> tuple[tuple[int, int], float]:
     return best, scores[best]
 
 
-def test_the_page_draws_the_frame_where_the_camera_puts_it_and_next_sends_no_pixels(data, browser, serve):
+def opened(browser, serve, data):
+    """The app on ``data`` in a page, settled: (app, page, the tab's session, the canvas's box)."""
     app = serve(data)
     page = open_page(browser, app, "focal")
     session = tab(app)
     quiet(page, session)
-    box = canvas_box(page)
+    return app, page, session, canvas_box(page)
+
+
+def test_the_page_draws_the_frame_where_the_camera_puts_it_and_next_sends_no_pixels(data, browser, serve):
+    app, page, session, box = opened(browser, serve, data)
     wait_until(lambda: page.evaluate(FRAMES)["shown"] != "")
     rect = shown_image_rect(page)
     np.testing.assert_allclose([rect["x"], rect["y"], rect["width"], rect["height"]], expected_rect(session, box),
@@ -98,12 +103,8 @@ def test_the_page_draws_the_frame_where_the_camera_puts_it_and_next_sends_no_pix
 
 
 def test_a_right_drag_and_the_camera_keys_pan_and_zoom_the_frame_with_its_overlays(data, browser, serve):
-    app = serve(data)
-    page = open_page(browser, app, "focal")
-    session = tab(app)
+    app, page, session, box = opened(browser, serve, data)
     control = session.view_control
-    quiet(page, session)
-    box = canvas_box(page)
 
     # a right drag away from the points: the page's pan, one camera push, the frame under the hand
     start = empty_spot(session, (200, 150))
@@ -184,12 +185,8 @@ def assert_ids_match(page, session, box) -> int:
 
 
 def test_the_page_writes_each_id_by_its_point_and_hides_crowded_ones_at_every_zoom(data, browser, serve):
-    app = serve(data)
-    page = open_page(browser, app, "focal")
-    session = tab(app)
+    app, page, session, box = opened(browser, serve, data)
     control = session.view_control
-    quiet(page, session)
-    box = canvas_box(page)
     wait_until(lambda: len(session.workspace.id_labels) > 0)
     counts = {}
     for step, key in enumerate(["", "s", "s", "s", "w", "w", "w", "w", "w", "w", "n"]):

@@ -33,43 +33,41 @@
 
   const bridge = window.__pnlvizBridge;
   const glCanvas = () => bridge.glCanvas(); // the WebGL canvas, as the bridge finds it
-  // the layer: first child of the canvas's wrapper, which becomes a stacking context so that the
-  // layer (z-index -1) is drawn over the page's background and under the canvas
-  const layer = () => {
+  // a layer of ours in the canvas's wrapper (the element the bridge moves with its pans and zooms),
+  // made again if the wrapper changes: `key` names it in `state`, `zIndex` -1 puts it under the
+  // canvas (first child; the wrapper becomes a stacking context, so the layer is still drawn over
+  // the page's background), 1 over it; `made(el)` fills a new one
+  const ensureLayer = (key, id, zIndex, style, made) => {
     const canvas = glCanvas();
     if (!canvas || !canvas.parentElement) return null;
     const target = canvas.parentElement;
-    if (!state.layer || state.layer.parentElement !== target) {
+    if (!state[key] || state[key].parentElement !== target) {
       const el = document.createElement("div");
-      el.id = "pnlviz-frames";
-      Object.assign(el.style, { position: "absolute", left: "0", top: "0", width: "0", height: "0", zIndex: "-1",
-        pointerEvents: "none", overflow: "visible" });
-      if (getComputedStyle(target).position === "static") target.style.position = "relative";
-      target.style.zIndex = "0";
-      target.insertBefore(el, target.firstChild);
-      state.layer = el;
-      state.placed = "";
-      for (const s of state.slots.values()) el.appendChild(s.img);
+      el.id = id;
+      Object.assign(el.style, { position: "absolute", left: "0", top: "0", width: "0", height: "0",
+        zIndex: String(zIndex), pointerEvents: "none", overflow: "visible", ...style });
+      if (zIndex < 0) {
+        if (getComputedStyle(target).position === "static") target.style.position = "relative";
+        target.style.zIndex = "0";
+        target.insertBefore(el, target.firstChild);
+      } else {
+        target.appendChild(el);
+      }
+      state[key] = el;
+      made(el);
     }
-    return state.layer;
+    return state[key];
   };
-
-  // the ids' layer: over the canvas, in the same element, so the bridge's transform moves it too
-  const idsLayer = () => {
-    const canvas = glCanvas();
-    if (!canvas || !canvas.parentElement) return null;
-    const target = canvas.parentElement;
-    if (!state.idsLayer || state.idsLayer.parentElement !== target) {
-      const el = document.createElement("div");
-      el.id = "pnlviz-ids";
-      Object.assign(el.style, { position: "absolute", left: "0", top: "0", width: "0", height: "0", zIndex: "1",
-        pointerEvents: "none", overflow: "visible", font: "600 11px/13px sans-serif", color: "#1a1a1a" });
-      target.appendChild(el);
-      state.idsLayer = el;
+  // the frame's layer, under the canvas
+  const layer = () => ensureLayer("layer", "pnlviz-frames", -1, {}, (el) => {
+    state.placed = "";
+    for (const s of state.slots.values()) el.appendChild(s.img);
+  });
+  // the ids' layer, over the canvas
+  const idsLayer = () => ensureLayer("idsLayer", "pnlviz-ids", 1,
+    { font: "600 11px/13px sans-serif", color: "#1a1a1a" }, () => {
       state.idsPlaced = "";
-    }
-    return state.idsLayer;
-  };
+    });
 
   // the ids of `text` ("text,u,v;...") placed for the view (cu, cv) at z CSS px per image px; the
   // anchor of each is its bottom-left corner, a little off the point

@@ -1,11 +1,12 @@
 """The image view's scene nodes for one tab: the overlays as line segments over the frame, and the
 points you grab (observed keypoints, ghosts of the missing ones, points of annotated lines) as
-batched discs. Every node is created once and then updated in place, so an edit
-sends only what changed and a drag in progress is never cut short by a redraw. The frame's
-pixels are drawn by the page behind the transparent canvas (sent once per frame:
+batched discs. Every node is created once and then updated in place, so an edit sends only what
+changed and a drag in progress is never cut short by a redraw. The frame's pixels are drawn by the
+page behind the transparent canvas (sent once per frame:
 :mod:`pnlviz.app.pageframes`), the points' ids by the page over it (:attr:`Workspace.id_labels`,
-sent with the view: :mod:`pnlviz.app.pagesync`), and the dark frame around them is the page's background
-(:data:`pnlviz.app.bridge.BACKDROP_RGB`); in the scene, invisible surfaces there take the pointer.
+sent with the view: :mod:`pnlviz.app.pagesync`), and the dark frame around them is the page's
+background (:data:`pnlviz.app.bridge.BACKDROP_RGB`); in the scene, invisible surfaces there take
+the pointer.
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
 select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
@@ -184,9 +185,11 @@ class Workspace:
         for kind, markers in shown.items():
             self.points[kind].show(markers, plane, self.world_per_px)
         observed, ghosted = shown[PointKind.KEYPOINTS], shown[PointKind.GHOSTS]
-        labelled = sorted(zip(observed.keys, observed.labels, observed.uv), key=lambda e: str(e[0])) if ids else []
-        labelled += sorted(((k, f"{k}?", uv) for k, uv in zip(ghosted.keys, ghosted.uv)), key=lambda e: str(e[0])) if ids else []
-        self.id_labels = [(text, float(uv[0]), float(uv[1])) for _, text, uv in labelled]
+        self.id_labels = []
+        if ids:  # observed keypoints first (an occluded one's label is "(12)"), then the ghosts
+            labelled = sorted(zip(observed.keys, observed.labels, observed.uv), key=lambda e: str(e[0]))
+            labelled += sorted(((k, f"{k}?", uv) for k, uv in zip(ghosted.keys, ghosted.uv)), key=lambda e: str(e[0]))
+            self.id_labels = [(text, float(uv[0]), float(uv[1])) for _, text, uv in labelled]
         self.pins = ({k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}, observed)
         self._show_pins()
         self._show_selection()
