@@ -310,10 +310,13 @@
     const T = state.T;
     return [T.s * (d.canvas[0] / 2 + (u - cu) * z) + T.tx, T.s * (d.canvas[1] / 2 + (v - cv) * z) + T.ty];
   };
-  const pointAt = (p) => {
+  const viewKnown = () => {
     const d = state.view;
-    if (!d || d.view.length !== 3 || d.canvas.length !== 2) return undefined; // not known: viser decides
-    const reach = Math.max(4, d.reach) * state.T.s;
+    return !!d && d.view.length === 3 && d.canvas.length === 2;
+  };
+  // the server's point nearest canvas point p within `reach` px (where it is on the canvas), or null
+  const nearestPoint = (p, reach) => {
+    const d = state.view;
     let best = null;
     let bestD = reach;
     for (let i = 0; i + 1 < d.points.length; i += 2) {
@@ -325,6 +328,10 @@
       }
     }
     return best;
+  };
+  const pointAt = (p) => {
+    if (!viewKnown()) return undefined; // not known: viser decides
+    return nearestPoint(p, Math.max(4, state.view.reach) * state.T.s);
   };
   const plainLeft = (e) => e.button === 0 && !e.shiftKey && !e.ctrlKey && !e.altKey && !e.metaKey;
   const ctrlLeft = (e) => e.button === 0 && !e.shiftKey && !e.altKey && (e.ctrlKey || e.metaKey);
@@ -510,15 +517,9 @@
   // whole-pixel coordinates and the points' tenth-pixel ones put it 0.7-0.8 px off when it is)
   const pointUnderRing = () => {
     const st = stage();
-    const d = state.view;
-    if (!st || !state.ring || !d || d.view.length !== 3 || d.canvas.length !== 2) return false;
+    if (!st || !state.ring || !viewKnown()) return false;
     const box = st.clip.getBoundingClientRect();
-    const [x, y] = [state.ring.x - box.left, state.ring.y - box.top];
-    for (let i = 0; i + 1 < d.points.length; i += 2) {
-      const q = screenOf(d.points[i], d.points[i + 1]);
-      if (Math.hypot(q[0] - x, q[1] - y) <= 1.5) return true;
-    }
-    return false;
+    return nearestPoint([state.ring.x - box.left, state.ring.y - box.top], 1.5) !== null;
   };
   const hideRing = () => {
     if (state.ring && state.ring.released) {

@@ -158,17 +158,17 @@
       else if (d.ids !== state.ids) swapSoon();
       placeIds(state.ids, d.idGap, cu, cv, z, Wa, Ha);
     }
-    placeFrame(d, swapping, viewOk, cu, cv, z, Wa, Ha);
+    placeFrame(d, swapping, imageMode, viewOk, cu, cv, z, Wa, Ha);
   };
 
-  const placeFrame = (d, swapping, viewOk, cu, cv, z, Wa, Ha) => {
+  const placeFrame = (d, swapping, imageMode, viewOk, cu, cv, z, Wa, Ha) => {
     const l = layer();
     if (!l) return;
     const [slot, n] = d.frame.split(",");
     const entry = state.slots.get(slot);
     if (!(viewOk && entry && entry.ready && entry.n === n)) {
       // not decoded yet: what was shown stays (a frame not sent ahead shows once it is decoded)
-      if (!bridge.imageMode()) {
+      if (!imageMode) {
         for (const s of state.slots.values()) s.img.style.display = "none";
         state.placed = ""; // placed again when the image view comes back
       }

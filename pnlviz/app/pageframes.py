@@ -14,8 +14,9 @@ slot once; the slot to show, and its version, come with the view in ``#pnlviz-vi
 places it from the same numbers as the camera and swaps it in the animation frame that draws
 those overlays (viser applies a batch in one frame and draws it in the next). A frame sent ahead
 (hidden) is shown with no pixels sent. Measured: a frame of the image view 79 -> 46 ms
-(``benchmarks/bench_frame_cost.py``; docs/app.md, "What a frame costs"). The scene keeps an invisible surface where the image is, which takes
-the clicks (:class:`pnlviz.app.workspace.Workspace`).
+(``benchmarks/bench_frame_cost.py``; docs/app.md, "What a frame costs"). The scene keeps an
+invisible surface where the image is, which takes the clicks
+(:class:`pnlviz.app.workspace.Workspace`).
 
 A tab without a browser (tests, the command line) keeps the bookkeeping and sends nothing.
 """
@@ -73,6 +74,11 @@ class FrameSlots:
     @property
     def shown_key(self) -> Hashable | None:
         return None if self.shown is None else self._slots[self.shown]["key"]
+
+    @property
+    def shown_plane(self) -> ImagePlane | None:
+        """The plane of the frame shown, None before the first."""
+        return None if self.shown is None else self._slots[self.shown]["plane"]
 
     def page_state(self) -> str:
         """What ``#pnlviz-view`` tells the page to show: ``"slot,version"`` ("" before a frame)."""

@@ -2,11 +2,10 @@
 points you grab (observed keypoints, ghosts of the missing ones, points of annotated lines) as
 batched discs. Every node is created once and then updated in place, so an edit sends only what
 changed and a drag in progress is never cut short by a redraw. The frame's pixels are drawn by the
-page behind the transparent canvas (sent once per frame:
-:mod:`pnlviz.app.pageframes`), the points' ids by the page over it (:attr:`Workspace.id_labels`,
-sent with the view: :mod:`pnlviz.app.pagesync`), and the dark frame around them is the page's
-background (:data:`pnlviz.app.bridge.BACKDROP_RGB`); in the scene, invisible surfaces there take
-the pointer.
+page behind the transparent canvas (sent once per frame: :mod:`pnlviz.app.pageframes`), the
+points' ids by the page over it (:attr:`Workspace.id_labels`, sent with the view:
+:mod:`pnlviz.app.pagesync`), and the dark frame around them is the page's background
+(:data:`pnlviz.app.bridge.BACKDROP_RGB`); in the scene, invisible surfaces there take the pointer.
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
 select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
@@ -47,7 +46,6 @@ class Workspace:
 
     def __init__(self, scene, root: str, events: WorkspaceEvents):
         self.scene, self.root, self.events = scene, f"{root}/image_view", events
-        self.plane: ImagePlane | None = None
         self.world_per_px = 0.01  # scene units per screen pixel at the current zoom
         #: the frames' pixels in the page (:mod:`pnlviz.app.pageframes`; a tab with a browser gives
         #: it the panel to send them through)
@@ -76,16 +74,21 @@ class Workspace:
         """The frame shown (its stem), None before the first."""
         return self.frames.shown_key
 
+    @property
+    def plane(self) -> ImagePlane | None:
+        """Where the frame shown sits in the scene, None before the first."""
+        return self.frames.shown_plane
+
     def show_image(self, key: Hashable, image_bgr: np.ndarray | Callable[[], np.ndarray]) -> bool:
         """Show the frame ``key`` (its pixels, BGR as the frame reader gives them, or a function
         that reads them when they are not in the page yet). A frame preloaded with
         :meth:`preload` is shown at once, with no image sent. True if anything changed."""
         if key == self.image_key:
             return False
+        before = self.plane
         plane = self.frames.show(key, image_bgr)
-        if plane != self.plane:
+        if plane != before:
             self._pick_surfaces(plane)
-        self.plane = plane
         if self.on_change is not None:
             self.on_change()
         return True
