@@ -95,9 +95,13 @@ def settle(session, seconds=0.6):
     session.flush()
 
 
+#: the viewer's canvases (not the one the page draws the overlays on, which has the viewer's size)
+VIEWER_CANVAS = "canvas:not(#pnlviz-draw canvas)"
+
+
 def canvas_box(page):
     """The viewer's canvas on the page (the largest: viser draws text into small ones too)."""
-    return max((c.bounding_box() for c in page.locator("canvas").all()), key=lambda b: b["width"] * b["height"])
+    return max((c.bounding_box() for c in page.locator(VIEWER_CANVAS).all()), key=lambda b: b["width"] * b["height"])
 
 
 def to_screen(session, uv):

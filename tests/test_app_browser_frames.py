@@ -217,3 +217,66 @@ def test_the_page_writes_each_id_by_its_point_and_hides_crowded_ones_at_every_zo
     session.queue.enqueue(lambda: session.painter.set_layer("ids", True))
     wait_until(lambda: len(page.evaluate(IDS)) > 0)
     assert_ids_match(page, session, box)
+
+
+def screen_rgb(page, box) -> np.ndarray:
+    """A screenshot of the canvas's area, RGB (CSS px = screenshot px at this device pixel ratio)."""
+    png = page.screenshot(clip={"x": box["x"], "y": box["y"], "width": box["width"], "height": box["height"]})
+    return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1].astype(int)
+
+
+def assert_marks_where_the_camera_puts_them(page, session, box) -> None:
+    """Each keypoint's disc (those with no other point within 12 px, their centres on the canvas)
+    is its colour at the point's screen pixel, and a stretch of the calibrated pitch's line is its
+    amber there."""
+    from pnlviz.app.overlay import REFINED_RGB
+
+    control, ws = session.view_control, session.workspace
+    shot = screen_rgb(page, box)
+    nodes = ws.points["keypoints"]
+    everything = np.concatenate([n.uv for n in ws.points.values() if n.keys])
+    checked = 0
+    for uv, rgb in zip(nodes.uv, nodes.shaded):
+        x, y = control.view2d.to_screen(uv, control.canvas)
+        near = np.sort(np.hypot(*(everything - uv).T))[1] * control.view2d.zoom  # screen px to the next point
+        if near < 12 or not (5 <= x < shot.shape[1] - 5 and 5 <= y < shot.shape[0] - 5):
+            continue
+        checked += 1
+        assert np.abs(shot[int(y), int(x)] - rgb).max() <= 24, (uv, shot[int(y), int(x)], rgb)
+    assert checked >= 3
+    seg = session.painter.overlay.segments["refined_pitch"]
+    mids = control.view2d.to_screen(seg.points.mean(axis=1), control.canvas)
+    lengths = np.hypot(*(seg.points[:, 1] - seg.points[:, 0]).T) * control.view2d.zoom
+    clear = [(x, y) for (x, y), n in zip(mids, lengths) if n > 20 and 5 <= x < shot.shape[1] - 5
+             and 5 <= y < shot.shape[0] - 5 and np.min(np.hypot(*(control.view2d.to_screen(everything, control.canvas)
+                                                                   - [x, y]).T)) > 20]
+    assert len(clear) >= 3
+    amber = [np.abs(shot[int(round(y)) - 1:int(round(y)) + 2, int(round(x)) - 1:int(round(x)) + 2]
+                    - REFINED_RGB).sum(axis=2).min() for x, y in clear]
+    assert np.median(amber) <= 40, amber
+
+
+def test_the_page_draws_the_overlays_and_points_where_the_camera_puts_them_at_every_zoom(data, browser, serve):
+    """The overlays are the page's (pagedraw.py, pageframes.js): the points' discs in their colours
+    and the calibrated pitch's lines are where the server's camera puts them, at fit and after a
+    zoom; they are not drawn in the 3D view and come back after it."""
+    app, page, session, box = opened(browser, serve, data)
+    control = session.view_control
+    wait_until(lambda: len(session.workspace.points["keypoints"].keys) > 0 and session.painter.overlay is not None)
+    quiet(page, session)
+    assert_marks_where_the_camera_puts_them(page, session, box)
+    page.mouse.move(box["x"] + 5, box["y"] + 5)
+    pushes, zoom = control.pushes, control.view2d.zoom
+    page.keyboard.press("w")
+    page.keyboard.press("w")
+    wait_until(lambda: control.pushes > pushes)
+    quiet(page, session)
+    assert control.view2d.zoom > 1.15 * zoom
+    assert_marks_where_the_camera_puts_them(page, session, box)
+    layer = "() => document.getElementById('pnlviz-draw').style.display"
+    session.queue.enqueue(lambda: session.set_mode(Mode.THREE_D))
+    wait_until(lambda: page.evaluate(layer) == "none")
+    session.queue.enqueue(lambda: session.set_mode(Mode.IMAGE))
+    wait_until(lambda: page.evaluate(layer) == "block")
+    quiet(page, session)
+    assert_marks_where_the_camera_puts_them(page, session, box)

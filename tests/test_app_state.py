@@ -252,6 +252,58 @@ def test_the_ids_written_over_the_frame_are_the_points_shown_observed_first(data
     assert ws.id_labels == []
 
 
+def test_the_page_draws_the_layers_shown_back_to_front_and_the_selection_over_them(data, serve):
+    from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB
+    from pnlviz.app.points import DISC_PX, RIM_PX
+    from pnlviz.app.workspace import LINE_ORDER, RING_PX, THICKNESS
+
+    app = serve(data)
+    tab = app.session()
+    tab.goto(app.state.find("00002"))
+    tab.flush()
+    ws = tab.workspace
+    overlay = tab.painter.overlay
+    observed, ghosts = ws.points[PointKind.KEYPOINTS], ws.points[PointKind.GHOSTS]
+
+    def kinds(marks):
+        return [(m.kind, m.rgb) for m in marks]
+
+    marks = ws.marks
+    lines = [m for m in marks if m.kind == "s"]
+    # the overlay's every segment, each layer in its colours and width, the layers in their order
+    want = [(name, m) for name in LINE_ORDER if name in overlay.segments for m in [overlay.segments[name]] if len(m)]
+    assert sum(len(m.xy) for m in lines) == 2 * sum(len(seg) for _, seg in want)
+    widths = [m.width for m in lines]
+    assert widths[0] == THICKNESS[want[0][0]] and widths[-1] == THICKNESS[want[-1][0]]
+    assert marks[:len(lines)] == lines and all(m.alpha == 1.0 for m in lines)  # the lines first
+    discs = marks[len(lines):]
+    # the ghosts on their rims, then the keypoints on theirs, each point where the grab mesh is
+    assert discs[0].size == RIM_PX and discs[0].rgb == (0, 0, 0) and len(discs[0].xy) == len(ghosts.keys)
+    np.testing.assert_allclose(discs[0].xy, ghosts.uv)
+    rim = next(i for i, m in enumerate(discs[1:], 1) if m.size == RIM_PX)
+    np.testing.assert_allclose(discs[rim].xy, observed.uv)
+    assert all(m.size == DISC_PX for m in discs[rim + 1:])
+    assert sum(len(m.xy) for m in discs[rim + 1:]) == len(observed.keys)
+    # a selected point and a pinned one: the box, then the ring, over everything
+    kid = observed.keys[0]
+    tab.editor.select(Selection(PointKind.KEYPOINTS, kid))
+    app.state.move_keypoint("00002", kid, float(observed.uv[0, 0]) + 1.0, float(observed.uv[0, 1]), tab.settings)
+    tab.show()
+    tab.flush()
+    marks = ws.marks
+    assert kinds(marks[-2:]) in ([("q", PIN_RGB), ("c", (255, 255, 255))], [("q", FLAGGED_RGB), ("c", (255, 255, 255))])
+    assert marks[-1].size == RING_PX
+    np.testing.assert_allclose(marks[-1].xy, [observed.uv[observed.keys.index(kid)]])
+    # the lines at the overlay's opacity; a layer switched off is not drawn
+    tab.painter.set_opacity(0.4)
+    tab.painter.set_layer("ghosts", False)
+    tab.painter.set_layer("keypoints", False)
+    tab.flush()
+    marks = ws.marks
+    assert {m.alpha for m in marks if m.kind == "s"} == {0.4}
+    assert not [m for m in marks if m.kind in "dq"] and ws.points[PointKind.GHOSTS].keys == []
+
+
 def test_annotation_and_detections_merge_with_the_side_convention_resolved(shared_dir, tmp_path):
     """PnLCalib's detections name the near goal 'left'; WC14 annotations name the true side.
     Merged, they must not fight: 'both' scores at least as well as either alone."""

@@ -20,7 +20,7 @@ CANVAS = (1276, 900)
 def test_pixels_and_scene_points_round_trip_and_the_frame_is_centred():
     plane = ImagePlane(960, 540)
     uv = np.array([[0.0, 0.0], [959.0, 539.0], [123.25, 456.5]])
-    xyz = plane.world(uv, "keypoints")
+    xyz = plane.world(uv, "grab")
     assert np.all(xyz[:, 2] < PLANE_Z)  # floated towards the camera
     np.testing.assert_allclose(plane.pixel(xyz), uv, atol=1e-9)
     w, h = plane.extent
@@ -29,7 +29,7 @@ def test_pixels_and_scene_points_round_trip_and_the_frame_is_centred():
     # a ray from a camera meets the plane at the pixel under the pointer, whatever layer it grabbed
     eye = np.array([1.0, -2.0, PLANE_Z - 5.0])
     np.testing.assert_allclose(plane.pixel_on_ray(eye, plane.world([300.0, 200.0])), [300.0, 200.0], atol=1e-9)
-    over = plane.world([300.0, 200.0], "keypoints")  # seen from the side: a fraction of a pixel of parallax
+    over = plane.world([300.0, 200.0], "grab")  # seen from the side: a fraction of a pixel of parallax
     assert 0 < np.hypot(*(plane.pixel_on_ray(eye, over) - [300.0, 200.0])) < 0.2
     assert plane.pixel_on_ray(eye, eye - [0.0, 0.0, 1.0]) is None  # pointing away from the plane
 
@@ -166,6 +166,31 @@ def test_the_page_is_told_the_ids_in_order_with_nothing_it_would_misread():
     # (NaN) has no id; separators and markup never reach the attribute
     assert 'data-ids="12,10.0,20.0;(5),1.0,2.0;13?,4.0,5.0"' in html and 'data-id-gap="16"' in html
     assert 'data-ids=""' in page_data(1, 0, True, None, (1000, 800), None, 0.0, np.zeros((0, 2)))
+
+
+def test_the_marks_the_page_draws_are_written_by_colour_in_order_and_nothing_broken_reaches_it():
+    from pnlviz.app.pagedraw import Mark, disc_marks, draw_text, segment_marks
+
+    seg = np.array([[[0.0, 1.0], [2.0, 3.0]], [[4.0, 5.0], [6.04, 7.0]], [[8.0, np.nan], [9.0, 9.0]],
+                    [[10.0, 10.0], [11.0, 11.0]]])
+    cols = np.array([[255, 0, 0], [0, 0, 255], [255, 0, 0], [255, 0, 0]], np.uint8)
+    marks = segment_marks(seg, cols, 2.0, alpha=0.5)
+    # one mark per colour, in the order the colours first appear; a segment with a NaN end goes whole
+    text = draw_text(marks)
+    assert text == "s;0;2;ff0000;0.5;0.0,1.0,2.0,3.0,10.0,10.0,11.0,11.0|s;0;2;0000ff;0.5;4.0,5.0,6.0,7.0"
+    # discs on their rim, drawn first; a NaN point is left out; a mark left with nothing is not written
+    discs = disc_marks(np.array([[1.0, 2.0], [np.nan, 0.0], [3.0, 4.0]]),
+                       np.array([[9, 9, 9], [8, 8, 8], [9, 9, 9]], np.uint8), 4.5, 6.0)
+    assert draw_text(discs) == "d;6;0;000000;1;1.0,2.0,3.0,4.0|d;4.5;0;090909;1;1.0,2.0,3.0,4.0"
+    assert draw_text([Mark("c", np.array([[np.nan, 1.0]]), (1, 2, 3), 11.0, 2.0)]) == ""
+    assert draw_text([Mark("q", np.array([[1.0, 2.0]]), (300, -4, 16), 8.5, 2.0, alpha=3.0)]) == \
+        "q;8.5;2;ff0010;1;1.0,2.0"  # colour and alpha clipped into range
+    assert disc_marks(np.zeros((0, 2)), np.zeros((0, 3), np.uint8), 4.5, 6.0) == []
+    with pytest.raises(ValueError, match="unknown mark kind 'x'"):
+        draw_text([Mark("x", np.zeros((1, 2)), (0, 0, 0))])
+    plane = ImagePlane(960, 540)
+    html = page_data(1, 0, True, View2D(480.0, 270.0, 1.0), (1000, 800), plane, 8.0, np.zeros((0, 2)), draw=text)
+    assert f'data-draw="{text}"' in html
 
 
 def test_the_bridge_element_carries_the_script_and_a_clean_field_label():

@@ -78,10 +78,12 @@
   };
   window.__pnlvizBridge = state;
 
-  // the viewer's canvas: the largest one on the page (viser draws text into small ones too)
+  // the viewer's canvas: the largest one on the page (viser draws text into small ones too), not
+  // the one the page draws the overlays on (pageframes.js: it follows the viewer's size)
   const viewCanvas = () => {
     let best = null;
     for (const c of document.querySelectorAll("canvas")) {
+      if (c.closest("#pnlviz-draw")) continue;
       if (!best || c.clientWidth * c.clientHeight > best.clientWidth * best.clientHeight) best = c;
     }
     return best;
@@ -173,7 +175,7 @@
       v: Number(d.v), answer: Number(d.answer), applied: d.applied === "1", view: nums(d.view),
       limits: nums(d.limits), canvas: nums(d.canvas), reach: Number(d.reach || 0),
       pointsText: d.points || "", points: nums(d.points), frame: d.frame || "", ids: d.ids || "",
-      idGap: Number(d.idGap || 0),
+      idGap: Number(d.idGap || 0), draw: d.draw || "",
     };
   };
   state.readView = readView;

@@ -1,5 +1,5 @@
-"""Drawing one tab: its frame's image on the image plane (and the frames either side of it sent
-ahead), the overlays and points over it (the label-error finder's findings among them), the
+"""Drawing one tab: its frame's image (and the frames either side of it sent ahead), the overlays
+and points over it (the label-error finder's findings among them), the
 panel's texts, and in the 3D view the camera over the pitch. Only what changed is sent
 (:func:`pnlviz.app.workspace.update_changed`), inside one message batch per draw.
 """
@@ -227,27 +227,10 @@ class Painter:
         overlay = overlay_geometry(view, self.layers, tab.state.model, hidden=self.hidden_ids(view.stem),
                                    findings=() if preview else self.findings(view),
                                    occluded=set(tab.state.edits.get(view.stem).get("occluded") or ()))
-        colors = self.blended(overlay, view) if self.opacity < 1.0 else None
-        tab.workspace.show_overlay(overlay, colors, keypoints=self.layers.keypoints, ghosts=self.layers.ghosts,
+        tab.workspace.show_overlay(overlay, opacity=self.opacity, keypoints=self.layers.keypoints, ghosts=self.layers.ghosts,
                                    line_points=tab.editor.drag_mode is DragMode.LINE_POINTS, ids=self.layers.ids)
         if not preview:
             self.overlay = overlay
-
-    def blended(self, overlay: Overlay, view: FrameView) -> dict[str, np.ndarray]:
-        """Segment colours mixed with the image under each end: the overlays at ``opacity``."""
-        image = self.tab.state.image(view.stem)
-        W, H = view.size
-        if image is None:
-            image = blank_canvas(W, H)
-        out = {}
-        for name, seg in overlay.segments.items():
-            if not len(seg):
-                continue
-            uv = np.round(seg.points).astype(int)
-            u, v = np.clip(uv[..., 0], 0, image.shape[1] - 1), np.clip(uv[..., 1], 0, image.shape[0] - 1)
-            under = image[v, u, ::-1].astype(float)  # (N, 2, 3) RGB
-            out[name] = (self.opacity * seg.colors[:, None].astype(float) + (1 - self.opacity) * under).astype(np.uint8)
-        return out
 
     # ------------------------------------------------------------------ the panel
     def show_panel(self, view: FrameView) -> None:

@@ -4,9 +4,9 @@ keypoints coloured by set, their residuals, "ghosts" (catalogue keypoints the ca
 the frame that nobody observed: click one to choose its id, drag it to place it), and the label-error
 finder's findings (the class where the annotation put it and where the camera expects it).
 
-:func:`overlay_geometry` is pure; :mod:`pnlviz.app.workspace` turns it into scene primitives
-that are updated in place (the frame image itself is sent once per frame). :func:`render` draws
-the same on the pixels, for pictures and for the 3D view's frustum.
+:func:`overlay_geometry` is pure; :mod:`pnlviz.app.workspace` turns it into the marks the page
+draws over the frame (:mod:`pnlviz.app.pagedraw`; the frame image itself is sent once per frame).
+:func:`render` draws the same on the pixels, for pictures and for the 3D view's frustum.
 """
 
 from __future__ import annotations

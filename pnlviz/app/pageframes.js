@@ -10,24 +10,24 @@
 //   the canvas size the server computed with. The WebGL camera looks straight at the image with a
 //   fixed vertical field of view, so the canvas's real height scales the zoom. An image spans
 //   pixels -0.5 .. W - 0.5 (integer coordinates are pixel centres).
-// - A new frame is swapped in at the animation frame after its message batch arrives: viser
-//   applies a batch in one frame and draws its lines and ids in the next, so the image changes
-//   with its lines. A view change (a pan's answer) is placed at once: the camera moves in the
-//   frame the batch arrives, as the bridge's transform comes off.
+// - The overlays are the page's too (#pnlviz-view data-draw: pnlviz/app/pagedraw.py says the
+//   format): drawn on a 2D canvas over viser's, in CSS px at the view. viser's scene holds only
+//   invisible surfaces that take the pointer, so a new frame, its overlays and its ids are all
+//   shown as their message batch arrives, together, as is a view change (a pan's answer, as the
+//   bridge's transform comes off).
 // - The layer sits in the element the pointer bridge moves with its CSS transform (bridge.js), so
 //   a pan or zoom in the page moves the image with the overlays; it takes no pointer events.
 // - Shown in the image view only (#pnlviz-bridge data-mode).
 // - The keypoints' ids are the page's too, in a layer over the canvas (#pnlviz-view data-ids:
 //   "text,u,v;..." in image pixels, most important first). An id closer than data-id-gap CSS px
 //   on screen to one before it is hidden, at every zoom (tests/test_app_browser_frames.py checks
-//   the rule). New ids come in with the frame's swap, at the animation frame after their batch;
-//   a view change moves them at once.
+//   the rule).
 // window.__pnlvizFrames exposes its state (slots decoded, swaps, what is shown) to tests.
 (() => {
   if (window.__pnlvizFrames || !window.__pnlvizBridge || window.__pnlvizBridge.reloading) return;
   const state = {
-    slots: new Map(), shown: "", decoded: 0, swaps: 0, layer: null, placed: "", swapQueued: false,
-    idsLayer: null, ids: "", idsPlaced: "",
+    slots: new Map(), shown: "", decoded: 0, swaps: 0, layer: null, placed: "",
+    idsLayer: null, idsPlaced: "", drawLayer: null, drawPlaced: "", draws: 0,
   };
   window.__pnlvizFrames = state;
 
@@ -63,8 +63,15 @@
     state.placed = "";
     for (const s of state.slots.values()) el.appendChild(s.img);
   });
-  // the ids' layer, over the canvas
-  const idsLayer = () => ensureLayer("idsLayer", "pnlviz-ids", 1,
+  // the overlays' layer, over the canvas: one 2D canvas
+  const drawLayer = () => ensureLayer("drawLayer", "pnlviz-draw", 1, {}, (el) => {
+    const c = document.createElement("canvas");
+    Object.assign(c.style, { position: "absolute", left: "0", top: "0" });
+    el.appendChild(c);
+    state.drawPlaced = "";
+  });
+  // the ids' layer, over the overlays
+  const idsLayer = () => ensureLayer("idsLayer", "pnlviz-ids", 2,
     { font: "600 11px/13px sans-serif", color: "#1a1a1a" }, () => {
       state.idsPlaced = "";
     });
@@ -99,6 +106,57 @@
     for (let i = entries.length; i < l.children.length; i += 1) l.children[i].style.display = "none";
   };
 
+  // the marks of `text` (pnlviz/app/pagedraw.py) drawn for the view (cu, cv) at z CSS px per image
+  // px on a canvas of Wa x Ha CSS px: points in image pixels, sizes and widths in CSS px
+  const placeDraw = (text, cu, cv, z, Wa, Ha) => {
+    const l = drawLayer();
+    if (!l) return;
+    const key = [cu, cv, z, Wa, Ha, text].join("|");
+    if (key === state.drawPlaced) return;
+    state.drawPlaced = key;
+    const c = l.firstChild;
+    const dpr = window.devicePixelRatio || 1;
+    const w = Math.round(Wa * dpr);
+    const h = Math.round(Ha * dpr);
+    if (c.width !== w || c.height !== h) {
+      c.width = w;
+      c.height = h;
+      Object.assign(c.style, { width: `${Wa}px`, height: `${Ha}px` });
+    }
+    const g = c.getContext("2d");
+    g.setTransform(1, 0, 0, 1, 0, 0);
+    g.clearRect(0, 0, w, h);
+    g.setTransform(dpr, 0, 0, dpr, 0, 0);
+    g.lineCap = "round";
+    for (const part of text ? text.split("|") : []) {
+      const [kind, size, width, hex, alpha, coords] = part.split(";");
+      const n = coords.split(",").map(Number);
+      const s = Number(size);
+      g.globalAlpha = Number(alpha);
+      g.lineWidth = Number(width);
+      g.strokeStyle = g.fillStyle = `#${hex}`;
+      g.beginPath();
+      const step = kind === "s" ? 4 : 2;
+      for (let i = 0; i + step <= n.length; i += step) {
+        const x = Wa / 2 + (n[i] - cu) * z;
+        const y = Ha / 2 + (n[i + 1] - cv) * z;
+        if (kind === "s") {
+          g.moveTo(x, y);
+          g.lineTo(Wa / 2 + (n[i + 2] - cu) * z, Ha / 2 + (n[i + 3] - cv) * z);
+        } else if (kind === "q") {
+          g.rect(x - s, y - s, 2 * s, 2 * s);
+        } else {
+          g.moveTo(x + s, y);
+          g.arc(x, y, s, 0, 2 * Math.PI);
+        }
+      }
+      if (kind === "d") g.fill();
+      else g.stroke();
+    }
+    g.globalAlpha = 1;
+    state.draws += 1;
+  };
+
   // new pixels in a slot: decoded off screen; the slot's previous image stays until then
   const readSlots = () => {
     for (const el of document.querySelectorAll(".pnlviz-frame")) {
@@ -128,19 +186,7 @@
     }
   };
 
-  // another frame, or other ids: swapped in at the next animation frame, the one that draws their
-  // overlays (a batch of scene changes is applied in one frame and drawn in the next; a view moves
-  // in the frame it arrives, as the bridge's transform comes off)
-  const swapSoon = () => {
-    if (state.swapQueued) return;
-    state.swapQueued = true;
-    requestAnimationFrame(() => {
-      state.swapQueued = false;
-      update(true);
-    });
-  };
-
-  const update = (swapping = false) => {
+  const update = () => {
     const d = bridge.readView(); // #pnlviz-view, as the bridge reads it
     const canvas = glCanvas();
     if (!d || !canvas) return;
@@ -151,17 +197,15 @@
     const Wa = canvas.clientWidth;
     const Ha = canvas.clientHeight;
     const z = viewOk ? zoom * Ha / Hs : 0;
-    const ids = idsLayer();
-    if (ids) ids.style.display = viewOk ? "block" : "none";
+    for (const l of [drawLayer(), idsLayer()]) if (l) l.style.display = viewOk ? "block" : "none";
     if (viewOk) {
-      if (swapping) state.ids = d.ids;
-      else if (d.ids !== state.ids) swapSoon();
-      placeIds(state.ids, d.idGap, cu, cv, z, Wa, Ha);
+      placeDraw(d.draw, cu, cv, z, Wa, Ha);
+      placeIds(d.ids, d.idGap, cu, cv, z, Wa, Ha);
     }
-    placeFrame(d, swapping, imageMode, viewOk, cu, cv, z, Wa, Ha);
+    placeFrame(d, imageMode, viewOk, cu, cv, z, Wa, Ha);
   };
 
-  const placeFrame = (d, swapping, imageMode, viewOk, cu, cv, z, Wa, Ha) => {
+  const placeFrame = (d, imageMode, viewOk, cu, cv, z, Wa, Ha) => {
     const l = layer();
     if (!l) return;
     const [slot, n] = d.frame.split(",");
@@ -177,10 +221,6 @@
     const key = [slot, n, cu, cv, z, Wa, Ha].join("|");
     if (key === state.placed) return;
     const shown = `${slot},${n}`;
-    if (shown !== state.shown && !swapping) {
-      swapSoon();
-      return;
-    }
     state.placed = key;
     // a transform, not left/top/width/height: the browser snaps a box's edges to whole pixels
     // (half a pixel off the overlays), not a transformed image's
@@ -202,7 +242,7 @@
   };
   onMutation();
   new MutationObserver(onMutation).observe(document.body, {
-    childList: true, subtree: true, attributes: true, attributeFilter: ["data-frame", "data-view", "data-mode", "data-ids", "data-id-gap"],
+    childList: true, subtree: true, attributes: true, attributeFilter: ["data-frame", "data-view", "data-mode", "data-ids", "data-id-gap", "data-draw"],
   });
   const watch = () => {
     const canvas = glCanvas();

@@ -17,7 +17,10 @@ A hidden element of the tab's panel, ``#pnlviz-view``, carries in its data attri
   the view and the overlays it belongs to;
 * ``data-ids``: the keypoint ids the page writes over the canvas, ``text,u,v;...`` (image
   pixels), most important first: the page hides an id closer than ``data-id-gap`` CSS px
-  (:data:`pnlviz.app.workspace.LABEL_MIN_GAP_PX`) on screen to one before it, at every zoom.
+  (:data:`pnlviz.app.workspace.LABEL_MIN_GAP_PX`) on screen to one before it, at every zoom;
+* ``data-draw``: the overlays, points, pin boxes and selection rings the page draws over the
+  frame (:attr:`pnlviz.app.workspace.Workspace.marks`, written by
+  :func:`pnlviz.app.pagedraw.draw_text`).
 
 A push announces itself inside the camera's atomic message batch
 (:meth:`pnlviz.app.viewcontrol.ViewControl.push`), so the page gets the new version with the
@@ -30,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from pnlviz.app.pagedraw import draw_text
 from pnlviz.app.view2d import MAX_ZOOM, MIN_ZOOM_OF_FIT, View2D
 from pnlviz.app.points import GRAB_PX
 from pnlviz.app.workspace import LABEL_MIN_GAP_PX
@@ -37,17 +41,18 @@ from pnlviz.app.workspace import LABEL_MIN_GAP_PX
 
 def page_data(version: int, answer: int, applied: bool, view: View2D | None, canvas: tuple[int, int],
               plane, reach: float, points: np.ndarray, frame: str = "",
-              ids: Sequence[tuple[str, float, float]] = (), id_gap: float = 0.0) -> str:
+              ids: Sequence[tuple[str, float, float]] = (), id_gap: float = 0.0, draw: str = "") -> str:
     """The ``#pnlviz-view`` element for these values (``plane``: the frame's
     :class:`pnlviz.app.view2d.ImagePlane`, None before the first frame; ``frame``: the slot shown,
     :meth:`pnlviz.app.pageframes.FrameSlots.page_state`; ``ids``: ``(text, u, v)`` per id label,
     most important first, :attr:`pnlviz.app.workspace.Workspace.id_labels`; ``id_gap``: the least
-    distance between two ids shown, CSS px)."""
+    distance between two ids shown, CSS px; ``draw``: the marks the page draws over the frame,
+    :func:`pnlviz.app.pagedraw.draw_text`)."""
     attrs = {"v": str(int(version)), "answer": str(int(answer)), "applied": "1" if applied else "0",
              "canvas": f"{int(canvas[0])},{int(canvas[1])}", "frame": frame,
              "ids": ";".join(f"{_id_text(t)},{u:.1f},{v:.1f}" for t, u, v in ids
                              if np.isfinite(u) and np.isfinite(v)),
-             "id-gap": f"{float(id_gap):g}"}
+             "id-gap": f"{float(id_gap):g}", "draw": draw}
     if view is not None and plane is not None:
         fit = View2D.fit(plane, canvas).zoom
         attrs["view"] = f"{view.cu:.4f},{view.cv:.4f},{view.zoom:.6g}"
@@ -100,7 +105,7 @@ class PageSync:
         nodes = [n for n in ws.points.values() if n.keys and len(n.uv)]
         points = np.concatenate([n.uv for n in nodes]) if nodes else np.zeros((0, 2))
         return page_data(control.version, self.answer, self.applied, view, control.canvas, plane, reach, points,
-                         ws.frames.page_state(), ws.id_labels, LABEL_MIN_GAP_PX)
+                         ws.frames.page_state(), ws.id_labels, LABEL_MIN_GAP_PX, draw_text(ws.marks))
 
 
 __all__ = ["PageSync", "page_data"]

@@ -1,7 +1,8 @@
 """The points you grab in the image view, of one kind (observed keypoints, ghosts of the missing
-ones, points of annotated lines): flat discs with a black rim over an invisible batched mesh that
-takes the pointer (:class:`PointNodes`), and the drag of one of them, whether the browser's pick
-found the mesh or only the image under it."""
+ones, points of annotated lines): where they are and their colours (the page draws them as flat
+discs with a black rim: :attr:`pnlviz.app.workspace.Workspace.marks`), an invisible batched mesh
+in the scene that takes the pointer (:class:`PointNodes`), and the drag of one of them, whether
+the browser's pick found the mesh or only the image under it."""
 
 from __future__ import annotations
 
@@ -35,9 +36,9 @@ def _disc(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
 
 
 class PointNodes:
-    """The points of one kind, drawn as flat discs with a black rim (two point clouds: unlit, so
-    the colours are the legend's) over an invisible batched mesh that takes the pointer, so every
-    point of a frame is grabbed directly; ``keys[i]`` says what instance ``i`` is.
+    """The points of one kind (the page draws them from ``uv`` and :attr:`shaded`), over an
+    invisible batched mesh that takes the pointer, so every point of a frame is grabbed directly;
+    ``keys[i]`` says what instance ``i`` is; ``moved()`` is called when a dragged point moves.
 
     The browser finds what the pointer hits on a batched mesh where its instances were when it
     was made: once they are moved or resized in place, a press on a point reports no instance
@@ -67,7 +68,8 @@ class PointNodes:
         self.colors = np.zeros((0, 3), np.uint8)
         self.plane: ImagePlane | None = None
         self.world_per_px = 0.01
-        self.disc = self.rim = self.grab = None
+        self.grab = None
+        self.moved: Callable[[], None] | None = None
         self.dragging = False  # one of these points is being dragged: the grab mesh stays
         self._grab_made: tuple[np.ndarray, np.ndarray] | None = None  # its instances as made
         self._grabs_made = 0
@@ -81,7 +83,6 @@ class PointNodes:
         self.colors = np.asarray(markers.colors, np.uint8).reshape(-1, 3)
         if not self.keys and self.grab is None:
             return
-        self._draw()
         capacity = max(8, 1 << max(0, len(self.keys) - 1).bit_length())
         self._set_grab(*self._grab_layout(capacity))
 
@@ -126,30 +127,12 @@ class PointNodes:
                 m.remove()
         self._stale = keep + [(m, now) for m in meshes]
 
-    def _draw(self) -> None:
-        """The visible discs and rims, where ``uv`` says (none: hidden)."""
-        if not self.keys:
-            for node in (self.disc, self.rim):
-                if node is not None:
-                    update_changed(node, visible=False)
-            return
-        pos = placed(self.plane).world(self.uv, self.layer).astype(np.float32)
-        rim_pos = pos + np.array([0.0, 0.0, 0.0002], np.float32)
-        if self.disc is None:
-            common = {"point_shape": "circle", "point_shading": "flat", "precision": "float32"}
-            self.rim = self.scene.add_point_cloud(f"{self.path}/rim", rim_pos, np.zeros_like(self.colors),
-                                                  point_size=RIM_PX * self.world_per_px, **common)
-            self.disc = self.scene.add_point_cloud(f"{self.path}/disc", pos, self._shade(self.colors),
-                                                   point_size=DISC_PX * self.world_per_px, **common)
-            return
-        update_changed(self.rim, points=rim_pos, colors=np.zeros_like(self.colors), visible=True)
-        update_changed(self.disc, points=pos, colors=self._shade(self.colors), visible=True)
-
-    def _shade(self, colors: np.ndarray) -> np.ndarray:
-        """Colours at this kind's opacity (ghosts: mixed with grey)."""
+    @property
+    def shaded(self) -> np.ndarray:
+        """The points' colours at this kind's opacity (ghosts: mixed with grey)."""
         if self.opacity >= 1.0:
-            return colors
-        return (self.opacity * colors + (1 - self.opacity) * 90).astype(np.uint8)
+            return self.colors
+        return (self.opacity * self.colors + (1 - self.opacity) * 90).astype(np.uint8)
 
     def _grab_layout(self, capacity: int) -> tuple[np.ndarray, np.ndarray]:
         """Positions and scales of the grab mesh's instances: the points, then the spares."""
@@ -164,8 +147,6 @@ class PointNodes:
 
     def rescale(self, world_per_px: float) -> None:
         self.world_per_px = world_per_px
-        if self.disc is not None:
-            self.disc.point_size, self.rim.point_size = DISC_PX * world_per_px, RIM_PX * world_per_px
         if self.grab is not None and self.keys:
             self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
 
@@ -174,9 +155,10 @@ class PointNodes:
         if not 0 <= index < len(self.keys):
             return
         self.uv[index] = uv
-        self._draw()
         if self.grab is not None:
             self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
+        if self.moved is not None:
+            self.moved()
 
     def _instance(self, index: int | None, at_uv) -> int | None:
         """The point an event is about: the point nearest where the pointer hit, within reach;

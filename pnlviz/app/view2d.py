@@ -28,9 +28,9 @@ FOV_Y = math.radians(30.0)
 #: zoom limits, canvas pixels per image pixel: out to a quarter of "fit", in to 32x
 MAX_ZOOM = 32.0
 MIN_ZOOM_OF_FIT = 0.25
-#: how far in front of the image each overlay layer floats (scene units; the camera is >= 0.4 away)
-LAYER_DEPTH = {"grab": 0.0005, "casing": 0.0008, "pitch": 0.001, "lines": 0.0015, "residuals": 0.002, "ghosts": 0.0025,
-               "keypoints": 0.003, "selection": 0.0035}
+#: how far in front of the image a layer of the scene floats (scene units; the camera is >= 0.4
+#: away): the points' grab meshes (everything you see over the frame is the page's)
+LAYER_DEPTH = {"grab": 0.0005}
 
 
 @dataclass(frozen=True)

@@ -1,11 +1,12 @@
-"""The image view's scene nodes for one tab: the overlays as line segments over the frame, and the
-points you grab (observed keypoints, ghosts of the missing ones, points of annotated lines) as
-batched discs. Every node is created once and then updated in place, so an edit sends only what
-changed and a drag in progress is never cut short by a redraw. The frame's pixels are drawn by the
-page behind the transparent canvas (sent once per frame: :mod:`pnlviz.app.pageframes`), the
-points' ids by the page over it (:attr:`Workspace.id_labels`, sent with the view:
-:mod:`pnlviz.app.pagesync`), and the dark frame around them is the page's background
-(:data:`pnlviz.app.bridge.BACKDROP_RGB`); in the scene, invisible surfaces there take the pointer.
+"""The image view of one tab. The page draws what you see (:mod:`pnlviz.app.pagesync` sends it
+with the view): the frame's pixels behind viser's transparent canvas (sent once per frame:
+:mod:`pnlviz.app.pageframes`), and over it the overlays, the points and the selection
+(:attr:`Workspace.marks`, :mod:`pnlviz.app.pagedraw`) and the points' ids
+(:attr:`Workspace.id_labels`); the dark frame around them is the page's background
+(:data:`pnlviz.app.bridge.BACKDROP_RGB`). The scene holds only what the pointer hits, invisible:
+a surface over the image and around it, and the points' grab meshes
+(:class:`pnlviz.app.points.PointNodes`), changed in place where they can be, so a drag in
+progress is never cut short by a redraw.
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
 select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
@@ -22,15 +23,18 @@ import numpy as np
 
 from pnlviz.app.handles import update_changed
 from pnlviz.app.modes import PointKind, Selection, WorkspaceEvents
-from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay, Segments
+from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay
+from pnlviz.app.pagedraw import Mark, disc_marks, segment_marks
 from pnlviz.app.pageframes import FrameSlots
-from pnlviz.app.points import DragRoute, PointNodes
+from pnlviz.app.points import DISC_PX, RIM_PX, DragRoute, PointNodes
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, placed
-from pnlviz.viz import ring
 
 #: screen pixels: the radius of the selection ring
 RING_PX = 11.0
 PIN_BOX_PX = 8.5  #: screen pixels: half the side of the box around a pinned keypoint
+#: the overlay's line layers, back to front (others after them, by name)
+LINE_ORDER = ("finding_annotated", "refined_pitch_casing", "reference_pitch", "initial_pitch", "annotation",
+              "detected_lines", "refined_pitch", "finding_expected", "residuals")
 #: screen thickness of each layer's lines
 THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
              "detected_lines": 2.0, "residuals": 1.5, "finding_annotated": 5.0, "finding_expected": 2.0}
@@ -51,13 +55,14 @@ class Workspace:
         #: it the panel to send them through)
         self.frames = FrameSlots()
         self._pick: dict[str, Any] = {}  # the invisible surfaces the pointer hits: "frame", "backdrop"
-        self._ring = self._pin_boxes = None
         self.pins: tuple[dict, Markers] = ({}, Markers())  # pinned id -> flagged, and where the keypoints are
-        self._lines: dict[str, object] = {}
+        self._line_marks: list[Mark] = []  # the overlay's lines, as the page draws them
         self.points = {kind: PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity, events)
                        for kind, layer, opacity in ((PointKind.KEYPOINTS, "keypoints", 1.0),
                                                     (PointKind.GHOSTS, "ghosts", 0.55),
                                                     (PointKind.LINE_POINTS, "keypoints", 1.0))}
+        for nodes in self.points.values():
+            nodes.moved = self.changed  # a dragged point moves on the page at once
         #: the ids the page writes next to the points, ``(text, u, v)`` in image pixels, observed
         #: keypoints first, then ghosts ("12?"), each in id order: the page hides one too close to
         #: one before it. Viser's labels cost a scene node each (three messages per id on every
@@ -89,8 +94,7 @@ class Workspace:
         plane = self.frames.show(key, image_bgr)
         if plane != before:
             self._pick_surfaces(plane)
-        if self.on_change is not None:
-            self.on_change()
+        self.changed()
         return True
 
     def holds(self, key: Hashable) -> bool:
@@ -162,26 +166,15 @@ class Workspace:
         return self.plane.pixel_on_ray(event.ray_origin, np.asarray(event.ray_origin) + np.asarray(event.ray_direction))
 
     # ------------------------------------------------------------------ overlays
-    def show_overlay(self, overlay: Overlay, line_colors: dict[str, np.ndarray] | None = None, *,
-                     keypoints: bool = True, ghosts: bool = True, line_points: bool = False, ids: bool = True) -> None:
-        """Every layer of ``overlay`` updated in place (``line_colors``: colours per segment end,
-        (N, 2, 3), e.g. blended towards the image for a lower opacity)."""
+    def show_overlay(self, overlay: Overlay, *, opacity: float = 1.0, keypoints: bool = True, ghosts: bool = True,
+                     line_points: bool = False, ids: bool = True) -> None:
+        """Every layer of ``overlay``, as the marks the page draws (``opacity``: the lines', over
+        the image), and the points to grab."""
         plane = placed(self.plane)  # the frame is shown first
-        for name in set(self._lines) | set(overlay.segments):
-            seg = overlay.segments.get(name, Segments())
-            handle = self._lines.get(name)
-            if not len(seg):
-                if handle is not None:
-                    update_changed(handle, visible=False)
-                continue
-            pts = plane.world(seg.points, {"residuals": "residuals", "refined_pitch_casing": "casing"}.get(name, "pitch"))
-            cols = line_colors[name] if line_colors and name in line_colors else np.repeat(seg.colors[:, None], 2, 1)
-            if handle is None:
-                self._lines[name] = self.scene.add_line_segments(f"{self.root}/lines/{name}", pts, cols,
-                                                                 thickness=THICKNESS.get(name, 1.5),
-                                                                 thickness_units="screen")
-            else:
-                update_changed(handle, points=pts, colors=cols, visible=True)
+        layers = sorted(overlay.segments, key=lambda n: (LINE_ORDER.index(n) if n in LINE_ORDER else len(LINE_ORDER), n))
+        self._line_marks = [m for name in layers
+                            for m in segment_marks(overlay.segments[name].points, overlay.segments[name].colors,
+                                                   THICKNESS.get(name, 1.5), opacity)]
         shown = {PointKind.KEYPOINTS: overlay.keypoints if keypoints else Markers(),
                  PointKind.GHOSTS: overlay.ghosts if ghosts else Markers(),
                  PointKind.LINE_POINTS: overlay.line_points if line_points else Markers()}
@@ -194,56 +187,47 @@ class Workspace:
             labelled += sorted(((k, f"{k}?", uv) for k, uv in zip(ghosted.keys, ghosted.uv)), key=lambda e: str(e[0]))
             self.id_labels = [(text, float(uv[0]), float(uv[1])) for _, text, uv in labelled]
         self.pins = ({k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}, observed)
-        self._show_pins()
-        self._show_selection()
+        self.changed()
+
+    @property
+    def marks(self) -> list[Mark]:
+        """What the page draws over the frame, back to front: the lines (:data:`LINE_ORDER`), the
+        ghosts, the keypoints and the points of annotated lines (each on a black rim), the boxes
+        of the pinned keypoints and the selection rings."""
+        out = list(self._line_marks)
+        for kind in (PointKind.GHOSTS, PointKind.KEYPOINTS, PointKind.LINE_POINTS):
+            nodes = self.points[kind]
+            if nodes.keys:
+                out += disc_marks(nodes.uv, nodes.shaded, DISC_PX, RIM_PX)
+        pins, observed = self.pins
+        for rgb, flagged in ((PIN_RGB, False), (FLAGGED_RGB, True)):
+            where = [observed.uv[observed.keys.index(k)] for k, f in pins.items() if f is flagged]
+            if where:
+                out.append(Mark("q", np.array(where), rgb, size=PIN_BOX_PX, width=2.0))
+        rings = self._selected_uv()
+        if len(rings):
+            out.append(Mark("c", rings, SELECTED_RGB, size=RING_PX, width=2.0))
+        return out
+
+    def changed(self) -> None:
+        """Tell the page (the points moved, the overlays or the selection changed)."""
         if self.on_change is not None:
             self.on_change()
-
-    def _show_pins(self) -> None:
-        """A box around each pinned keypoint, black, orange where the camera cannot agree with it."""
-        (pins, observed), handle = self.pins, self._pin_boxes
-        if not pins or self.plane is None:
-            if handle is not None:
-                update_changed(handle, visible=False)
-            return
-        h = PIN_BOX_PX * self.world_per_px / self.plane.scale
-        corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h], [-h, -h]])
-        segs, cols = [], []
-        for k, flagged in pins.items():
-            box = observed.uv[observed.keys.index(k)] + corners
-            segs.append(np.stack([box[:-1], box[1:]], 1))
-            cols.append(np.tile(np.array(FLAGGED_RGB if flagged else PIN_RGB, np.uint8), (4, 2, 1)))
-        pts, colors = self.plane.world(np.concatenate(segs), "selection"), np.concatenate(cols)
-        if handle is None:
-            self._pin_boxes = self.scene.add_line_segments(f"{self.root}/pins", pts, colors, thickness=2.0,
-                                                           thickness_units="screen")
-        else:
-            update_changed(handle, points=pts, colors=colors, visible=True)
 
     # ------------------------------------------------------------------ selection and zoom
     def select(self, selected: Selection | None, also=()) -> None:
         """Ring the selected point (and ``also``: more selected keypoints)."""
         self.selected, self.also = selected, list(also)
-        self._show_selection()
+        self.changed()
 
-    def _show_selection(self) -> None:
+    def _selected_uv(self) -> np.ndarray:
+        """Where the selected points are (image pixels)."""
         where = []
         for sel in [self.selected, *self.also]:
-            nodes = self.points.get(sel.kind) if sel is not None and self.plane is not None else None
+            nodes = self.points.get(sel.kind) if sel is not None else None
             if nodes is not None and sel is not None and sel.key in nodes.keys:
                 where.append(nodes.uv[nodes.keys.index(sel.key)])
-        if not where:
-            if self._ring is not None:
-                update_changed(self._ring, visible=False)
-            return
-        radius = RING_PX * self.world_per_px / placed(self.plane).scale
-        segments = [np.stack([c[:-1], c[1:]], 1) for c in (ring(uv, radius, 32) for uv in where)]
-        pts = placed(self.plane).world(np.concatenate(segments), "selection")
-        if self._ring is None:
-            self._ring = self.scene.add_line_segments(f"{self.root}/selection", pts, SELECTED_RGB, thickness=2.0,
-                                                      thickness_units="screen")
-        else:
-            update_changed(self._ring, points=pts, visible=True)
+        return np.array(where, float).reshape(-1, 2)
 
     def set_zoom(self, world_per_px: float) -> None:
         """The camera zoomed: points keep their size on screen."""
@@ -252,6 +236,3 @@ class Workspace:
         self.world_per_px = world_per_px
         for nodes in self.points.values():
             nodes.rescale(world_per_px)
-        if self.plane is not None:
-            self._show_pins()
-            self._show_selection()
