@@ -62,10 +62,10 @@ def wait_for_text(page, text, timeout=20.0):
 VIEWPORT = {"width": 1100, "height": 700}
 
 
-def open_page(browser, app, text, n: int = 1):
+def open_page(browser, app, text, n: int = 1, viewport: dict | None = None):
     """A page on the app, once ``text`` shows in the panel and the page's bridge has reported
     the canvas (so that image pixels can be found on screen); ``n``: it is the n-th tab."""
-    page = browser.new_page(viewport=VIEWPORT)
+    page = browser.new_page(viewport=viewport or VIEWPORT)
     page.goto(app.page_url)  # the URL the server prints: no reload for the device pixel ratio
     wait_for_text(page, text)
     session = tab(app, n)

@@ -59,10 +59,11 @@ def best_shift(page, session, rect) -> tuple[tuple[int, int], float]:
     return best, scores[best]
 
 
-def opened(browser, serve, data):
-    """The app on ``data`` in a page, settled: (app, page, the tab's session, the canvas's box)."""
+def opened(browser, serve, data, viewport: dict | None = None):
+    """The app on ``data`` in a page (of ``viewport``, the browser tests' size by default), settled:
+    (app, page, the tab's session, the canvas's box)."""
     app = serve(data)
-    page = open_page(browser, app, "focal")
+    page = open_page(browser, app, "focal", viewport=viewport)
     session = tab(app)
     quiet(page, session)
     return app, page, session, canvas_box(page)
@@ -225,6 +226,20 @@ def screen_rgb(page, box) -> np.ndarray:
     return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1].astype(int)
 
 
+def settled_rgb(page, box, timeout: float = 8.0) -> np.ndarray:
+    """:func:`screen_rgb` once two shots 0.5 s apart agree (software WebGL compiles a shader the
+    first time it is needed: the frame that uses it can come seconds later)."""
+    import time
+
+    shot, deadline = screen_rgb(page, box), time.time() + timeout
+    while True:
+        page.wait_for_timeout(500)
+        again = screen_rgb(page, box)
+        if np.abs(again - shot).max() <= 8 or time.time() > deadline:
+            return again
+        shot = again
+
+
 def assert_marks_where_the_camera_puts_them(page, session, box) -> None:
     """Each keypoint's disc (those with no other point within 12 px, their centres on the canvas)
     is its colour at the point's screen pixel, and a stretch of the calibrated pitch's line is its
@@ -280,3 +295,32 @@ def test_the_page_draws_the_overlays_and_points_where_the_camera_puts_them_at_ev
     wait_until(lambda: page.evaluate(layer) == "block")
     quiet(page, session)
     assert_marks_where_the_camera_puts_them(page, session, box)
+
+
+def test_the_pointer_over_the_image_lights_nothing_at_any_zoom(data, browser, serve):
+    """viser outlines a hovered clickable mesh in yellow; the invisible surface over the frame and
+    the points' grab meshes take clicks, so, zoomed in, a pointer resting on the image washed the
+    whole view yellow and ringed the points. The page keeps the hover from the scene: the pixels
+    under a resting pointer are those with the pointer off the canvas, at fit and zoomed in, on
+    the image and on a point."""
+    from pnlviz.app.view2d import View2D
+
+    app, page, session, box = opened(browser, serve, data, {"width": 1600, "height": 900})  # the wash showed here
+    control = session.view_control
+    wait_until(lambda: len(session.workspace.points["keypoints"].keys) > 0)
+    for zoom in (None, 4.0):
+        if zoom is not None:
+            uv = session.workspace.points["keypoints"].uv[0]
+            pushes = control.pushes
+            session.queue.enqueue(lambda: control.push(View2D(float(uv[0]), float(uv[1]), zoom)))
+            wait_until(lambda: control.pushes > pushes)
+        quiet(page, session)
+        spot = empty_spot(session, (60, 60))
+        point = control.view2d.to_screen(session.workspace.points["keypoints"].uv[0], control.canvas)
+        page.mouse.move(box["x"] + box["width"] + 100, box["y"] + 5)  # over the panel
+        away = settled_rgb(page, box)
+        for where in (spot, point + [2.0, 1.0]):
+            page.mouse.move(box["x"] + where[0], box["y"] + where[1], steps=4)
+            over = settled_rgb(page, box)
+            changed = np.abs(over - away).max(axis=2) > 40
+            assert changed.mean() < 0.001, (zoom, where, changed.mean())

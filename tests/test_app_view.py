@@ -440,9 +440,6 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
             self.nodes.append(Node(name, pos, kw["batched_scales"]))
             return self.nodes[-1]
 
-        def add_point_cloud(self, name, points, colors, **kw):
-            return SimpleNamespace(points=points, colors=colors, visible=True, point_size=1.0)
-
     dragged, panned = [], []
     events = SimpleNamespace(drag=dragged.append, screen_to_pixel=lambda xy: np.asarray(xy, float),
                              pan=lambda *a: panned.append(a))

@@ -75,6 +75,7 @@
     wheelTimer: null, idleMs: 120, press: null, point: null, swallowClick: false,
     view: null, gestures: 0, latency: [], pendingInputs: [], rafPending: false,
     boxPress: null, boxes: 0, box: null, // a ctrl+drag in the air; boxes drawn; the last one [k, x0, y0, x1, y1]
+    relaying: false, // a move copied to the window's listeners is on its way (relayMove)
   };
   window.__pnlvizBridge = state;
 
@@ -151,6 +152,7 @@
     return [event.clientX - box.left, event.clientY - box.top, box.width, box.height];
   };
   const track = (event) => {
+    if (state.relaying) return; // our copy of a move, sent to the window: the move itself was seen
     const canvas = canvasOf(event.target);
     state.over = canvas !== null;
     const p = canvas ? local(event) : null;
@@ -382,6 +384,7 @@
   window.addEventListener(
     "pointermove",
     (event) => {
+      if (state.relaying) return; // our own copy of a move, on its way to the window's listeners
       const press = state.press;
       if (press && event.pointerId === press.id && !(event.buttons & press.mask)) finishPress(); // released unseen
       else if (press && event.pointerId === press.id) {
@@ -433,9 +436,23 @@
           frameDrawn(event.timeStamp);
         }
       }
+      if (imageMode() && canvasOf(event.target)) relayMove(event);
     },
     { capture: true },
   );
+  // In the image view a move over the canvas goes to the window's listeners only (viser's point
+  // drags and their start), not to the scene's: three.js's hover would light the invisible
+  // surfaces that take the clicks (viser outlines a hovered clickable mesh in yellow: zoomed in,
+  // the surface over the frame washed the whole view) and viser's camera would see the moves.
+  const relayMove = (event) => {
+    event.stopImmediatePropagation();
+    state.relaying = true;
+    try {
+      window.dispatchEvent(new PointerEvent(event.type, event));
+    } finally {
+      state.relaying = false;
+    }
+  };
   // a pan's press is over: its gesture goes to the server; true if it was a pan
   const finishPress = () => {
     const press = state.press;
