@@ -169,7 +169,7 @@ def test_the_shot_finds_each_circle_points_closest_segment_as_a_full_search_does
         pts = poly[rng.integers(0, 115, 40)] + rng.normal(0.0, [1.0, 5.0, 30.0][trial % 3], (40, 2))
         item = np.zeros(40, int)
         j, t, off = _closest_segments(poly[None], item, pts)
-        _, _, d2 = _distances(poly[None], item, pts, np.zeros(40, int), 115)
+        d2 = _distances(poly[None], item, pts, np.zeros(40, int), 115)[3]
         np.testing.assert_allclose(np.hypot(*off.T), np.sqrt(d2.min(axis=1)), atol=1e-9)
         np.testing.assert_allclose(poly[j] + t[:, None] * (poly[j + 1] - poly[j]) + off, pts, atol=1e-9)
 

@@ -124,14 +124,16 @@ _STRIDE = 8
 
 def _distances(poly: np.ndarray, item: np.ndarray, pts: np.ndarray, start: np.ndarray, n: int):
     """Each point against the ``n`` segments from vertex ``start`` of its item's polyline:
-    (t (m, n), offsets (m, n, 2), squared distances (m, n))."""
-    v = poly[item[:, None], start[:, None] + np.arange(n + 1)]  # (m, n + 1, 2)
-    a, ab = v[:, :-1], v[:, 1:] - v[:, :-1]
-    ap = pts[:, None, :] - a
-    L2 = np.maximum(np.einsum("msk,msk->ms", ab, ab), 1e-18)
-    t = np.clip(np.einsum("msk,msk->ms", ap, ab) / L2, 0.0, 1.0)
-    d = ap - t[..., None] * ab
-    return t, d, np.einsum("msk,msk->ms", d, d)
+    (t (m, n), offsets x and y (m, n) each, squared distances (m, n)). Written per coordinate:
+    the solve of a long shot calls it for thousands of points at every step."""
+    idx = (item[:, None], start[:, None] + np.arange(n + 1))
+    vx, vy = poly[..., 0][idx], poly[..., 1][idx]  # (m, n + 1)
+    ax, ay = vx[:, :-1], vy[:, :-1]
+    bx, by = vx[:, 1:] - ax, vy[:, 1:] - ay
+    px, py = pts[:, :1] - ax, pts[:, 1:] - ay
+    t = np.clip((px * bx + py * by) / np.maximum(bx * bx + by * by, 1e-18), 0.0, 1.0)
+    dx, dy = px - t * bx, py - t * by
+    return t, dx, dy, dx * dx + dy * dy
 
 
 def _closest_segments(poly: np.ndarray, item: np.ndarray, pts: np.ndarray):
@@ -142,16 +144,16 @@ def _closest_segments(poly: np.ndarray, item: np.ndarray, pts: np.ndarray):
     a thin far ellipse and the seam of a closed circle; the same segments as a full search on
     random views of the centre circle, points 1-30 px off it: tests/test_calib_unmarked.py)."""
     S, m = poly.shape[1], len(pts)
+    rows = np.arange(m)
     if S <= 6 * _STRIDE:
-        t, d, d2 = _distances(poly, item, pts, np.zeros(m, int), S - 1)
+        t, dx, dy, d2 = _distances(poly, item, pts, np.zeros(m, int), S - 1)
         k = np.argmin(d2, axis=1)
-        return k, t[np.arange(m), k], d[np.arange(m), k]
+        return k, t[rows, k], np.column_stack([dx[rows, k], dy[rows, k]])
     every = np.r_[np.arange(0, S - 1, _STRIDE), S - 1]
-    _, _, dc = _distances(poly[:, every], item, pts, np.zeros(m, int), len(every) - 1)
+    dc = _distances(poly[:, every], item, pts, np.zeros(m, int), len(every) - 1)[3]
     width = 3 * _STRIDE
     starts = np.clip(every[np.argsort(dc, axis=1)[:, :2]] - _STRIDE, 0, S - 1 - width)  # (m, 2)
-    t, d, d2 = (np.concatenate(x, axis=1) for x in zip(*(_distances(poly, item, pts, starts[:, i], width)
-                                                          for i in range(2))))
+    t, dx, dy, d2 = (np.concatenate(x, axis=1) for x in zip(*(_distances(poly, item, pts, starts[:, i], width)
+                                                              for i in range(2))))
     k = np.argmin(d2, axis=1)
-    rows = np.arange(m)
-    return starts[rows, k // width] + k % width, t[rows, k], d[rows, k]
+    return starts[rows, k // width] + k % width, t[rows, k], np.column_stack([dx[rows, k], dy[rows, k]])
