@@ -384,7 +384,7 @@ def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_
     from pnlviz.app.modes import PointKind
     from pnlviz.app.points import GRAB_PX, PointNodes
 
-    nodes = PointNodes(None, "/t", PointKind.KEYPOINTS, "keypoints")
+    nodes = PointNodes(None, "/t", PointKind.KEYPOINTS)
     nodes.plane = ImagePlane(960, 540)
     nodes.world_per_px = nodes.plane.scale  # 1 screen pixel per image pixel
     nodes.keys, nodes.uv = [11, 40, 57], np.array([[100.0, 100.0], [300.0, 200.0], [305.0, 260.0]])
@@ -444,7 +444,7 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     events = SimpleNamespace(drag=dragged.append, screen_to_pixel=lambda xy: np.asarray(xy, float),
                              pan=lambda *a: panned.append(a))
     scene = Scene()
-    nodes = PointNodes(scene, "/t", PointKind.KEYPOINTS, "keypoints", events=events)
+    nodes = PointNodes(scene, "/t", PointKind.KEYPOINTS, events=events)
     plane = ImagePlane(960, 540)
     uv = np.array([[100.0 + 50 * i, 200.0] for i in range(8)])
     nodes.show(Markers(list(range(1, 9)), uv, np.zeros((8, 3), np.uint8)), plane, plane.scale)

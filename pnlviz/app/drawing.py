@@ -227,8 +227,9 @@ class Painter:
         overlay = overlay_geometry(view, self.layers, tab.state.model, hidden=self.hidden_ids(view.stem),
                                    findings=() if preview else self.findings(view),
                                    occluded=set(tab.state.edits.get(view.stem).get("occluded") or ()))
-        tab.workspace.show_overlay(overlay, opacity=self.opacity, keypoints=self.layers.keypoints, ghosts=self.layers.ghosts,
-                                   line_points=tab.editor.drag_mode is DragMode.LINE_POINTS, ids=self.layers.ids)
+        tab.workspace.show_overlay(overlay, opacity=self.opacity, keypoints=self.layers.keypoints,
+                                   ghosts=self.layers.ghosts, ids=self.layers.ids,
+                                   line_points=tab.editor.drag_mode is DragMode.LINE_POINTS)
         if not preview:
             self.overlay = overlay
 

@@ -27,7 +27,7 @@
   if (window.__pnlvizFrames || !window.__pnlvizBridge || window.__pnlvizBridge.reloading) return;
   const state = {
     slots: new Map(), shown: "", decoded: 0, swaps: 0, layer: null, placed: "",
-    idsLayer: null, idsPlaced: "", drawLayer: null, drawPlaced: "", draws: 0,
+    idsLayer: null, idsPlaced: "", drawLayer: null, drawPlaced: "",
   };
   window.__pnlvizFrames = state;
 
@@ -154,7 +154,6 @@
       else g.stroke();
     }
     g.globalAlpha = 1;
-    state.draws += 1;
   };
 
   // new pixels in a slot: decoded off screen; the slot's previous image stays until then
@@ -242,7 +241,8 @@
   };
   onMutation();
   new MutationObserver(onMutation).observe(document.body, {
-    childList: true, subtree: true, attributes: true, attributeFilter: ["data-frame", "data-view", "data-mode", "data-ids", "data-id-gap", "data-draw"],
+    childList: true, subtree: true, attributes: true,
+    attributeFilter: ["data-frame", "data-view", "data-mode", "data-ids", "data-id-gap", "data-draw"],
   });
   const watch = () => {
     const canvas = glCanvas();

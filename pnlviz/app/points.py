@@ -59,9 +59,9 @@ class PointNodes:
     dropped, even on a mesh made anew, reports no instance in Chromium (cause not found); that
     drag lands by the pointer's screen position, as before, but without the live preview."""
 
-    def __init__(self, scene, path: str, kind: PointKind, layer: str, opacity: float = 1.0,
+    def __init__(self, scene, path: str, kind: PointKind, opacity: float = 1.0,
                  events: WorkspaceEvents | None = None):
-        self.scene, self.path, self.kind, self.layer, self.opacity = scene, path, kind, layer, opacity
+        self.scene, self.path, self.kind, self.opacity = scene, path, kind, opacity
         self.events = events
         self.keys: list = []
         self.uv = np.zeros((0, 2))

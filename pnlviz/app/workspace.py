@@ -57,10 +57,9 @@ class Workspace:
         self._pick: dict[str, Any] = {}  # the invisible surfaces the pointer hits: "frame", "backdrop"
         self.pins: tuple[dict, Markers] = ({}, Markers())  # pinned id -> flagged, and where the keypoints are
         self._line_marks: list[Mark] = []  # the overlay's lines, as the page draws them
-        self.points = {kind: PointNodes(scene, f"{self.root}/{kind}", kind, layer, opacity, events)
-                       for kind, layer, opacity in ((PointKind.KEYPOINTS, "keypoints", 1.0),
-                                                    (PointKind.GHOSTS, "ghosts", 0.55),
-                                                    (PointKind.LINE_POINTS, "keypoints", 1.0))}
+        self.points = {kind: PointNodes(scene, f"{self.root}/{kind}", kind, opacity, events)
+                       for kind, opacity in ((PointKind.KEYPOINTS, 1.0), (PointKind.GHOSTS, 0.55),
+                                             (PointKind.LINE_POINTS, 1.0))}
         for nodes in self.points.values():
             nodes.moved = self.changed  # a dragged point moves on the page at once
         #: the ids the page writes next to the points, ``(text, u, v)`` in image pixels, observed
@@ -171,7 +170,8 @@ class Workspace:
         """Every layer of ``overlay``, as the marks the page draws (``opacity``: the lines', over
         the image), and the points to grab."""
         plane = placed(self.plane)  # the frame is shown first
-        layers = sorted(overlay.segments, key=lambda n: (LINE_ORDER.index(n) if n in LINE_ORDER else len(LINE_ORDER), n))
+        order = {name: i for i, name in enumerate(LINE_ORDER)}
+        layers = sorted(overlay.segments, key=lambda n: (order.get(n, len(order)), n))
         self._line_marks = [m for name in layers
                             for m in segment_marks(overlay.segments[name].points, overlay.segments[name].colors,
                                                    THICKNESS.get(name, 1.5), opacity)]
