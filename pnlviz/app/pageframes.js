@@ -13,8 +13,9 @@
 // - The overlays are the page's too (#pnlviz-view data-draw: pnlviz/app/pagedraw.py says the
 //   format): drawn on a 2D canvas over viser's, in CSS px at the view. viser's scene holds only
 //   invisible surfaces that take the pointer, so a new frame, its overlays and its ids are all
-//   shown as their message batch arrives, together, as is a view change (a pan's answer, as the
-//   bridge's transform comes off).
+//   shown as their message batch arrives, together (a frame whose pixels are still decoding is
+//   shown with its overlays once they are), as is a view change (a pan's answer, as the bridge's
+//   transform comes off).
 // - The layer sits in the element the pointer bridge moves with its CSS transform (bridge.js), so
 //   a pan or zoom in the page moves the image with the overlays; it takes no pointer events.
 // - Shown in the image view only (#pnlviz-bridge data-mode).
@@ -197,7 +198,10 @@
     const Ha = canvas.clientHeight;
     const z = viewOk ? zoom * Ha / Hs : 0;
     for (const l of [drawLayer(), idsLayer()]) if (l) l.style.display = viewOk ? "block" : "none";
-    if (viewOk) {
+    const [slot, n] = d.frame.split(",");
+    const entry = state.slots.get(slot);
+    if (viewOk && entry && entry.ready && entry.n === n) {
+      // with their frame: a frame not decoded yet keeps the last one shown, and its overlays
       placeDraw(d.draw, cu, cv, z, Wa, Ha);
       placeIds(d.ids, d.idGap, cu, cv, z, Wa, Ha);
     }
