@@ -59,6 +59,16 @@ def best_shift(page, session, rect) -> tuple[tuple[int, int], float]:
     return best, scores[best]
 
 
+def to_3d_and_back(page, session, layer_display: str) -> None:
+    """The tab to the 3D view, where the page's layer (``layer_display``: a script giving its
+    CSS display) is hidden, and back to the image view, where it shows again; settled."""
+    session.queue.enqueue(lambda: session.set_mode(Mode.THREE_D))
+    wait_until(lambda: page.evaluate(layer_display) == "none")
+    session.queue.enqueue(lambda: session.set_mode(Mode.IMAGE))
+    wait_until(lambda: page.evaluate(layer_display) == "block")
+    quiet(page, session)
+
+
 def opened(browser, serve, data, viewport: dict | None = None):
     """The app on ``data`` in a page (of ``viewport``, the browser tests' size by default), settled:
     (app, page, the tab's session, the canvas's box)."""
@@ -206,11 +216,7 @@ def test_the_page_writes_each_id_by_its_point_and_hides_crowded_ones_at_every_zo
     assert any(t.endswith("?") for t in texts) and any(t.isdigit() for t in texts)
 
     # the 3D view shows no ids; switched off, none; back on, the same again
-    session.queue.enqueue(lambda: session.set_mode(Mode.THREE_D))
-    wait_until(lambda: page.evaluate(IDS_LAYER) == "none")
-    session.queue.enqueue(lambda: session.set_mode(Mode.IMAGE))
-    wait_until(lambda: page.evaluate(IDS_LAYER) == "block")
-    quiet(page, session)
+    to_3d_and_back(page, session, IDS_LAYER)
     assert_ids_match(page, session, box)
     session.queue.enqueue(lambda: session.painter.set_layer("ids", False))
     wait_until(lambda: page.evaluate(IDS) == [])
@@ -288,12 +294,7 @@ def test_the_page_draws_the_overlays_and_points_where_the_camera_puts_them_at_ev
     quiet(page, session)
     assert control.view2d.zoom > 1.15 * zoom
     assert_marks_where_the_camera_puts_them(page, session, box)
-    layer = "() => document.getElementById('pnlviz-draw').style.display"
-    session.queue.enqueue(lambda: session.set_mode(Mode.THREE_D))
-    wait_until(lambda: page.evaluate(layer) == "none")
-    session.queue.enqueue(lambda: session.set_mode(Mode.IMAGE))
-    wait_until(lambda: page.evaluate(layer) == "block")
-    quiet(page, session)
+    to_3d_and_back(page, session, "() => document.getElementById('pnlviz-draw').style.display")
     assert_marks_where_the_camera_puts_them(page, session, box)
 
 

@@ -230,11 +230,17 @@ def test_drag_end_recalibrates_on_the_server(data, serve):
     assert tab.editor.last_recalibration_ms > 0 and tab.editor.grabs == tab.editor.releases == 1
 
 
-def test_the_ids_written_over_the_frame_are_the_points_shown_observed_first(data, serve):
+def tab_on(serve, data, stem: str):
+    """The app on ``data`` and a tab of it (no browser) showing frame ``stem``, drawn."""
     app = serve(data)
     tab = app.session()
-    tab.goto(app.state.find("00002"))
+    tab.goto(app.state.find(stem))
     tab.flush()
+    return app, tab
+
+
+def test_the_ids_written_over_the_frame_are_the_points_shown_observed_first(data, serve):
+    _, tab = tab_on(serve, data, "00002")
     ws = tab.workspace
     observed, ghosts = ws.points[PointKind.KEYPOINTS], ws.points[PointKind.GHOSTS]
     assert len(observed.keys) and len(ghosts.keys)
@@ -257,10 +263,7 @@ def test_the_page_draws_the_layers_shown_back_to_front_and_the_selection_over_th
     from pnlviz.app.points import DISC_PX, RIM_PX
     from pnlviz.app.workspace import LINE_ORDER, RING_PX, THICKNESS
 
-    app = serve(data)
-    tab = app.session()
-    tab.goto(app.state.find("00002"))
-    tab.flush()
+    app, tab = tab_on(serve, data, "00002")
     ws = tab.workspace
     overlay = tab.painter.overlay
     observed, ghosts = ws.points[PointKind.KEYPOINTS], ws.points[PointKind.GHOSTS]
