@@ -230,8 +230,8 @@ def main() -> None:
                               "const i = gl.getExtension('WEBGL_debug_renderer_info');"
                               "return i ? gl.getParameter(i.UNMASKED_RENDERER_WEBGL) : 'unknown'; }"))
         cast = Screencast(page)
-        box = max((c.bounding_box() for c in page.locator("canvas:not(#pnlviz-draw canvas)").all()),
-                  key=lambda b: b["width"] * b["height"])  # the viewer's, not the page's overlay canvas
+        box = max((c.bounding_box() for c in page.locator("canvas[data-engine]").all()),
+                  key=lambda b: b["width"] * b["height"])  # the viewer's (three.js marks it)
 
         def drags(n: int) -> list[float | None]:
             out = []

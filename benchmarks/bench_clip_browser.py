@@ -106,7 +106,7 @@ def main() -> None:
                 session.queue.enqueue(lambda s=session, i=index: s.goto(i))
                 session.flush()
             cast = Screencast(pages[1])
-            box = max((c.bounding_box() for c in pages[0].locator("canvas:not(#pnlviz-draw canvas)").all()),
+            box = max((c.bounding_box() for c in pages[0].locator("canvas[data-engine]").all()),
                       key=lambda r: r["width"] * r["height"])
             out, solves, quick = [], [], []
             for i in range(args.drags):

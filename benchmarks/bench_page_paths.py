@@ -54,8 +54,8 @@ def main() -> None:
         page.locator("#bench-block").scroll_into_view_if_needed()
         time.sleep(1)
         box = page.locator("#bench-block").bounding_box()
-        canvas = max((c.bounding_box() for c in page.locator("canvas:not(#pnlviz-draw canvas)").all()),
-                     key=lambda b: b["width"] * b["height"])  # the viewer's, not the page's overlay canvas
+        canvas = max((c.bounding_box() for c in page.locator("canvas[data-engine]").all()),
+                     key=lambda b: b["width"] * b["height"])  # the viewer's (three.js marks it)
         regions = {"panel": (box["x"], box["y"], box["width"], box["height"]),
                    "scene": (canvas["x"], canvas["y"], canvas["width"], canvas["height"])}
         layer = session.workspace._lines.get("refined_pitch")

@@ -407,8 +407,8 @@ def browser_section(tmp: Path, drags_per_tab: int = 8) -> list[str]:
              "--disable-component-update", "--disable-sync"]
 
     def canvas_box(page) -> dict:
-        return max((c.bounding_box() for c in page.locator("canvas:not(#pnlviz-draw canvas)").all()),
-                   key=lambda b: b["width"] * b["height"])  # the viewer's, not the page's overlay canvas
+        return max((c.bounding_box() for c in page.locator("canvas[data-engine]").all()),
+                   key=lambda b: b["width"] * b["height"])  # the viewer's (three.js marks it)
 
     try:
         with sync_playwright() as pw:

@@ -93,8 +93,8 @@ def select_leftmost(page, tab) -> None:
     tab.flush()
     time.sleep(1.0)
     i = int(nodes.uv[:, 0].argmin())
-    box = max((c.bounding_box() for c in page.locator("canvas:not(#pnlviz-draw canvas)").all()),
-              key=lambda b: b["width"] * b["height"])  # the viewer's, not the page's overlay canvas
+    box = max((c.bounding_box() for c in page.locator("canvas[data-engine]").all()),
+              key=lambda b: b["width"] * b["height"])  # the viewer's (three.js marks it)
     x, y = tab.view_control.view2d.to_screen(nodes.uv[i], tab.view_control.canvas)
     page.mouse.click(box["x"] + x, box["y"] + y)
 

@@ -95,12 +95,13 @@ def settle(session, seconds=0.6):
     session.flush()
 
 
-#: the viewer's canvases (not the one the page draws the overlays on, which has the viewer's size)
-VIEWER_CANVAS = "canvas:not(#pnlviz-draw canvas)"
+#: the viewer's canvas, which three.js marks (viser draws text into small ones; the page draws the
+#: overlays on one of the viewer's size)
+VIEWER_CANVAS = "canvas[data-engine]"
 
 
 def canvas_box(page):
-    """The viewer's canvas on the page (the largest: viser draws text into small ones too)."""
+    """The viewer's canvas on the page (the largest such, should there be more)."""
     return max((c.bounding_box() for c in page.locator(VIEWER_CANVAS).all()), key=lambda b: b["width"] * b["height"])
 
 
@@ -810,7 +811,7 @@ def test_a_point_dragged_60_px_to_its_true_place_stays_there_and_the_pitch_follo
     np.testing.assert_allclose(nodes.uv[nodes.keys.index(kid)], put)  # it stays where it was put...
     after = view.result.camera.project(model.keypoint_xyz([kid]))[0]
     assert np.hypot(*(after - put)) < 5.0  # ...and the pitch follows it
-    assert kid in session.workspace.pins[0] and not session.workspace.pins[0][kid]  # drawn pinned, not flagged
+    assert kid in session.workspace.pins and not session.workspace.pins[kid]  # drawn pinned, not flagged
     page.close()
 
 
@@ -849,5 +850,5 @@ def test_four_hand_placed_points_calibrate_an_image_only_frame(tmp_path, browser
     true_uv = truth.project(model.keypoint_xyz(ground))
     err = np.hypot(*(result.camera.project(model.keypoint_xyz(ground)) - true_uv).T)
     assert np.nanmedian(err) < 6.0  # four clicks: the pitch about the penalty area within a few px
-    assert set(session.workspace.pins[0]) == set(chosen)
+    assert set(session.workspace.pins) == set(chosen)
     page.close()

@@ -79,19 +79,10 @@
   };
   window.__pnlvizBridge = state;
 
-  // the viewer's canvas: the largest one on the page (viser draws text into small ones too), not
-  // the one the page draws the overlays on (pageframes.js: it follows the viewer's size)
-  const viewCanvas = () => {
-    let best = null;
-    for (const c of document.querySelectorAll("canvas")) {
-      if (c.closest("#pnlviz-draw")) continue;
-      if (!best || c.clientWidth * c.clientHeight > best.clientWidth * best.clientHeight) best = c;
-    }
-    return best;
-  };
-  // the WebGL canvas (three.js marks it; a 2D overlay of the same size sits over it): `target`,
-  // its react-three-fiber wrapper, is moved by the transform; `clip`, the wrapper's parent (overflow
-  // hidden, the canvas's size), holds it still and clips it
+  // the viewer's canvas: the WebGL one, which three.js marks (viser draws text into small canvases,
+  // a 2D overlay of the same size may sit over it, and the page draws its overlays on another:
+  // pageframes.js). `target`, its react-three-fiber wrapper, is moved by the transform; `clip`, the
+  // wrapper's parent (overflow hidden, the canvas's size), holds it still and clips it
   const glCanvas = () => {
     let best = null;
     for (const c of document.querySelectorAll("canvas[data-engine]")) {
@@ -123,7 +114,7 @@
     const input = field();
     if (!input) return;
     state.seq += 1;
-    const canvas = viewCanvas();
+    const canvas = glCanvas();
     const g = state.sent;
     const message = JSON.stringify({
       kind: "pointer", n: state.seq, log_zoom: state.logZoom, x: state.x, y: state.y,
@@ -140,7 +131,7 @@
   // one that draws text
   const canvasOf = (target) => {
     if (!target || target.tagName !== "CANVAS") return null;
-    const view = viewCanvas();
+    const view = glCanvas();
     const area = (c) => c.clientWidth * c.clientHeight;
     return view && area(target) >= 0.5 * area(view) ? target : null;
   };
@@ -729,7 +720,7 @@
       state.busy = false;
       return;
     }
-    const canvas = viewCanvas();
+    const canvas = glCanvas();
     if (!canvas) return;
     if (!cue) {
       cue = document.createElement("div");
@@ -759,7 +750,7 @@
   // the canvas size in CSS pixels (the screen pixels a zoom is measured in; viser reports the
   // drawing buffer's, which shrinks when it lowers the resolution on a slow machine)
   const watchCanvas = () => {
-    const canvas = viewCanvas();
+    const canvas = glCanvas();
     if (!canvas || !canvas.clientWidth || !field()) return setTimeout(watchCanvas, 200);
     new ResizeObserver(() => send()).observe(canvas);
   };

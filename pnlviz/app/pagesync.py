@@ -33,7 +33,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pnlviz.app.pagedraw import draw_text
 from pnlviz.app.view2d import MAX_ZOOM, MIN_ZOOM_OF_FIT, View2D
 from pnlviz.app.points import GRAB_PX
 from pnlviz.app.workspace import LABEL_MIN_GAP_PX
@@ -105,7 +104,7 @@ class PageSync:
         nodes = [n for n in ws.points.values() if n.keys and len(n.uv)]
         points = np.concatenate([n.uv for n in nodes]) if nodes else np.zeros((0, 2))
         return page_data(control.version, self.answer, self.applied, view, control.canvas, plane, reach, points,
-                         ws.frames.page_state(), ws.id_labels, LABEL_MIN_GAP_PX, draw_text(ws.marks))
+                         ws.frames.page_state(), ws.id_labels, LABEL_MIN_GAP_PX, ws.marks_text)
 
 
 __all__ = ["PageSync", "page_data"]

@@ -24,7 +24,7 @@ import numpy as np
 from pnlviz.app.handles import update_changed
 from pnlviz.app.modes import PointKind, Selection, WorkspaceEvents
 from pnlviz.app.overlay import FLAGGED_RGB, PIN_RGB, Markers, Overlay
-from pnlviz.app.pagedraw import Mark, disc_marks, segment_marks
+from pnlviz.app.pagedraw import Mark, disc_marks, draw_text, segment_marks
 from pnlviz.app.pageframes import FrameSlots
 from pnlviz.app.points import DISC_PX, RIM_PX, DragRoute, PointNodes
 from pnlviz.app.view2d import PLANE_Z, ImagePlane, placed
@@ -35,6 +35,7 @@ PIN_BOX_PX = 8.5  #: screen pixels: half the side of the box around a pinned key
 #: the overlay's line layers, back to front (others after them, by name)
 LINE_ORDER = ("finding_annotated", "refined_pitch_casing", "reference_pitch", "initial_pitch", "annotation",
               "detected_lines", "refined_pitch", "finding_expected", "residuals")
+_LINE_RANK = {name: i for i, name in enumerate(LINE_ORDER)}
 #: screen thickness of each layer's lines
 THICKNESS = {"refined_pitch": 2.0, "refined_pitch_casing": 4.5, "initial_pitch": 1.5, "reference_pitch": 1.5, "annotation": 2.0,
              "detected_lines": 2.0, "residuals": 1.5, "finding_annotated": 5.0, "finding_expected": 2.0}
@@ -55,8 +56,9 @@ class Workspace:
         #: it the panel to send them through)
         self.frames = FrameSlots()
         self._pick: dict[str, Any] = {}  # the invisible surfaces the pointer hits: "frame", "backdrop"
-        self.pins: tuple[dict, Markers] = ({}, Markers())  # pinned id -> flagged, and where the keypoints are
+        self.pins: dict[int, bool] = {}  # the pinned keypoints shown -> flagged (drawn where their points are)
         self._line_marks: list[Mark] = []  # the overlay's lines, as the page draws them
+        self._marks_text: str | None = None  # :attr:`marks_text`, until the next change
         self.points = {kind: PointNodes(scene, f"{self.root}/{kind}", kind, opacity, events)
                        for kind, opacity in ((PointKind.KEYPOINTS, 1.0), (PointKind.GHOSTS, 0.55),
                                              (PointKind.LINE_POINTS, 1.0))}
@@ -170,8 +172,7 @@ class Workspace:
         """Every layer of ``overlay``, as the marks the page draws (``opacity``: the lines', over
         the image), and the points to grab."""
         plane = placed(self.plane)  # the frame is shown first
-        order = {name: i for i, name in enumerate(LINE_ORDER)}
-        layers = sorted(overlay.segments, key=lambda n: (order.get(n, len(order)), n))
+        layers = sorted(overlay.segments, key=lambda n: (_LINE_RANK.get(n, len(_LINE_RANK)), n))
         self._line_marks = [m for name in layers
                             for m in segment_marks(overlay.segments[name].points, overlay.segments[name].colors,
                                                    THICKNESS.get(name, 1.5), opacity)]
@@ -186,7 +187,7 @@ class Workspace:
             labelled = sorted(zip(observed.keys, observed.labels, observed.uv), key=lambda e: str(e[0]))
             labelled += sorted(((k, f"{k}?", uv) for k, uv in zip(ghosted.keys, ghosted.uv)), key=lambda e: str(e[0]))
             self.id_labels = [(text, float(uv[0]), float(uv[1])) for _, text, uv in labelled]
-        self.pins = ({k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}, observed)
+        self.pins = {k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}
         self.changed()
 
     @property
@@ -199,9 +200,9 @@ class Workspace:
             nodes = self.points[kind]
             if nodes.keys:
                 out += disc_marks(nodes.uv, nodes.shaded, DISC_PX, RIM_PX)
-        pins, observed = self.pins
+        observed = self.points[PointKind.KEYPOINTS]
         for rgb, flagged in ((PIN_RGB, False), (FLAGGED_RGB, True)):
-            where = [observed.uv[observed.keys.index(k)] for k, f in pins.items() if f is flagged]
+            where = [observed.uv[observed.keys.index(k)] for k, f in self.pins.items() if f is flagged]
             if where:
                 out.append(Mark("q", np.array(where), rgb, size=PIN_BOX_PX, width=2.0))
         rings = self._selected_uv()
@@ -209,8 +210,17 @@ class Workspace:
             out.append(Mark("c", rings, SELECTED_RGB, size=RING_PX, width=2.0))
         return out
 
+    @property
+    def marks_text(self) -> str:
+        """:attr:`marks` as the page reads them (:func:`pnlviz.app.pagedraw.draw_text`), written
+        once per change: the page is told the view far more often than the marks change."""
+        if self._marks_text is None:
+            self._marks_text = draw_text(self.marks)
+        return self._marks_text
+
     def changed(self) -> None:
         """Tell the page (the points moved, the overlays or the selection changed)."""
+        self._marks_text = None
         if self.on_change is not None:
             self.on_change()
 
