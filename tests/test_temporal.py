@@ -311,6 +311,51 @@ def test_the_shot_jacobian_is_the_frames_own_chained_to_the_shot_and_matches_pla
     assert np.allclose(J, plain, atol=1e-5 * np.abs(plain).max()), np.abs(J - plain).max()
 
 
+def test_a_problem_restricted_to_selections_is_the_problem_built_on_them():
+    """A solve restricts its shot anew after each gating (``ShotProblem.restricted``, rows taken
+    from the problem with everything): residuals, Jacobian and each frame's distances are those of
+    a problem built on the same selections, with the weights that follow from what each frame
+    keeps (a frame left with no keypoint weighs its lines alone; one left with no line or circle,
+    its keypoints alone)."""
+    from pnlviz.calib.shot import Selection
+    from pnlviz.calib.shot_fit import distances
+
+    model = load_field_model()
+    _, obs = _shot(8, np.array([5.0, 58.0, -16.0]), seed=13)
+    cams = _per_frame(obs)
+    for t in (2, 3, 5):
+        obs[t].circles = {"Circle central": cams[t].project(model.circles["Circle central"].point_at(np.linspace(0, 6, 9))),
+                          "Circle left": cams[t].project(model.circles["Circle left"].point_at(np.linspace(-0.9, 0.9, 5)))}
+    obs[6] = None
+    data = frame_data(obs, model)
+    everything = [None if o is None else Selection.everything(o) for o in obs]
+    sel = list(everything)
+    sel[0] = Selection(np.arange(obs[0].n_keypoints) % 3 != 0, everything[0].lines[1:], ())
+    sel[1] = Selection(np.zeros(obs[1].n_keypoints, bool), everything[1].lines, ())  # lines alone
+    sel[2] = Selection(everything[2].keypoints, (), ())  # keypoints alone
+    sel[3] = Selection(everything[3].keypoints[::-1] & (np.arange(obs[3].n_keypoints) > 1), everything[3].lines[:2],
+                       ("Circle left",))  # the class seen first on the shot is left out here
+    sel[5] = None
+    whole = ShotProblem(data, (W, H), TemporalParams())
+    C, k1, per = initial(cams, 8)
+    x = np.concatenate([C, [k1], per.ravel()])
+    for chosen in (sel, everything):
+        built, restricted = ShotProblem(data, (W, H), TemporalParams(), chosen), whole.restricted(chosen)
+        assert restricted.n_data == built.n_data < whole.n_data or chosen is everything
+        (r1, J1), (r2, J2) = built.evaluate(x, True), restricted.evaluate(x, True)
+        assert np.array_equal(r1, r2) and np.array_equal(J1.toarray(), J2.toarray())
+    assert not np.array_equal(ShotProblem(data, (W, H), TemporalParams(), sel).evaluate(x)[0], whole.evaluate(x)[0])
+    # each frame's distances, all frames at once, are those of its camera alone
+    for t, (mine, d) in enumerate(zip(whole.distances(x), data)):
+        if d is None:
+            assert mine is None
+            continue
+        alone = distances(d, whole.cameras(x)[t])
+        assert np.allclose(mine.keypoints, alone.keypoints)
+        assert mine.classes.keys() == alone.classes.keys()
+        assert np.allclose([mine.classes[k] for k in alone.classes], list(alone.classes.values()), atol=1e-6)
+
+
 def test_angle_steps_turn_the_camera_as_its_angles_do():
     """Each column of angle_steps is the left rotation step a change of pan, tilt or roll makes."""
     from pnlviz.geometry.camera import rotation_from_pan_tilt_roll

@@ -26,6 +26,7 @@ matrix is sparse: a frame's rows touch its own four columns and the four shared 
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -188,6 +189,15 @@ class ShotProblem:
         self.n_params = 4 + 4 * self.T
         self._prior = self._prior_jacobian()
 
+    def restricted(self, selections: Sequence[Selection | None]) -> ShotProblem:
+        """This problem with each frame restricted to ``selections[t]`` (None: everything), for a
+        problem made with everything selected: the same as a new problem on those selections, its
+        rows taken from this one's (a solve restricts the shot anew after each gating)."""
+        out = copy.copy(self)
+        out.rows = self.rows.restricted(selections)
+        out.n_data = out.rows.n_res
+        return out
+
     # ------------------------------------------------------------------ parameters
     def unpack(self, x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
         """``(C (3,), k1, per-frame (T, 4): pan, tilt, roll, log f)``."""
@@ -258,14 +268,17 @@ class ShotProblem:
             perp, over = segment_block(A, B, q, f[tl], MIN_DEPTH)
             ln = np.hypot(perp.r, over.r)
         seen = np.unique(np.concatenate([rows.kp_t, rows.ln_t] + [g.frames for g in rows.circles]).astype(int))
-        found = {int(t): FrameDistances(np.nan_to_num(kp[rows.kp_t == t], nan=math.inf), {}) for t in seen}
-        for (t, name), idx in rows.ln_items.items():
-            found[t].classes[name] = float(np.max(ln[idx])) if len(idx) else 0.0
+        kp = np.nan_to_num(kp, nan=math.inf)
+        # the rows are stacked frame by frame, and a class's rows follow each other: split, not searched
+        frames, at = np.unique(rows.kp_t, return_index=True)
+        per_frame = dict(zip(frames.tolist(), np.split(kp, at[1:]))) if len(frames) else {}
+        found = {int(t): FrameDistances(per_frame.get(int(t), np.zeros(0)), {}) for t in seen}
+        for (t, name), worst in zip(rows.ln_items, _runs_max(ln, [len(idx) for idx in rows.ln_items.values()])):
+            found[t].classes[name] = worst
         for g in rows.circles:
             d = np.abs(circle_residuals(g, R, C, f, k1, self.cx, self.cy, False).r)
-            for i, t in enumerate(g.frames.tolist()):
-                mine = d[g.item == i]
-                found[t].classes[g.name] = float(np.max(mine)) if len(mine) else 0.0
+            for t, worst in zip(g.frames.tolist(), _runs_max(d, np.bincount(g.item, minlength=len(g.frames)))):
+                found[t].classes[g.name] = worst
         return [found.get(t) for t in range(self.T)]
 
     def _chain(self, J: np.ndarray, per: np.ndarray) -> scipy.sparse.csr_matrix:
@@ -273,16 +286,18 @@ class ShotProblem:
         log f, k1: :mod:`pnlviz.geometry.projection`'s 8) chained to the shot's parameters."""
         t = self.rows.frame
         steps = angle_steps(per[:, 0], per[:, 1], per[:, 2])
+        # each row's 8 entries in column order (the centre and k1, then its frame's 4): the CSR
+        # arrays are written directly
         block = np.empty((len(J), 8))
-        block[:, :3] = np.einsum("nk,nkj->nj", J[:, :3], steps[t])  # pan, tilt, roll
-        block[:, 3] = J[:, 6]  # log f
-        block[:, 4:7] = J[:, 3:6]  # the centre
-        block[:, 7] = J[:, 7] if self.params.fit_k1 else 0.0
-        cols = np.empty((len(J), 8), int)
-        cols[:, :4] = 4 + 4 * t[:, None] + np.arange(4)
-        cols[:, 4:] = np.arange(4)
-        rows = np.repeat(np.arange(len(J)), 8)
-        return scipy.sparse.csr_matrix((block.ravel(), (rows, cols.ravel())), shape=(len(J), self.n_params))
+        block[:, :3] = J[:, 3:6]  # the centre
+        block[:, 3] = J[:, 7] if self.params.fit_k1 else 0.0
+        block[:, 4:7] = np.einsum("nk,nkj->nj", J[:, :3], steps[t])  # pan, tilt, roll
+        block[:, 7] = J[:, 6]  # log f
+        cols = np.empty((len(J), 8), np.int32)
+        cols[:, :4] = np.arange(4)
+        cols[:, 4:] = 4 + 4 * t[:, None] + np.arange(4)
+        indptr = np.arange(0, 8 * len(J) + 1, 8, dtype=np.int32)
+        return scipy.sparse.csr_matrix((block.ravel(), cols.ravel(), indptr), shape=(len(J), self.n_params))
 
     def _prior_jacobian(self) -> scipy.sparse.csr_matrix:
         """The prior rows' Jacobian (constant: the prior is linear in ``x``): the acceleration of
@@ -320,6 +335,10 @@ class _Rows:
     frame: np.ndarray
     #: the line rows (into ``ln_*``) of each (frame, class)
     ln_items: dict[tuple[int, str], np.ndarray]
+    #: the circles' items before grouping, ``(frame, world, pixels, weight, class)`` in frame order
+    circle_items: list[tuple[int, np.ndarray, np.ndarray, float, str]]
+    #: the PnL weight of lines against points the weights come from
+    alpha: float
 
     @property
     def n_res(self) -> int:
@@ -370,7 +389,46 @@ class _Rows:
         return cls(kp_t, cat(kp_parts, 0, (0, 3)), cat(kp_parts, 1, (0, 2)), cat(kp_parts, 2, (0,), bool),
                    np.repeat(np.array(kp_weights, float), kp_counts), ln_t, cat(ln_rows, 0, (0, 3)),
                    cat(ln_rows, 1, (0, 3)), cat(ln_rows, 2, (0, 2)), np.repeat(np.array(ln_weights, float), ln_counts),
-                   groups, frame.astype(int), items)
+                   groups, frame.astype(int), items, circles, alpha)
+
+    def restricted(self, selections: Sequence[Selection | None]) -> _Rows:
+        """These rows (every observation of each frame, :meth:`stack` with nothing deselected) with
+        each frame restricted to ``selections[t]``: what :meth:`stack` gives for them, rows in the
+        same order, without going through the frames again."""
+        T = len(selections)
+        counts = np.bincount(self.kp_t, minlength=T)
+        masks = [np.ones(n, bool) if s is None else s.keypoints for s, n in zip(selections, counts)]
+        kp = np.concatenate([masks[t] for t in np.flatnonzero(counts)]) if len(self.kp_t) else np.zeros(0, bool)
+        lines_of = [None if s is None else set(s.lines) for s in selections]  # None: every class
+        circles_of = [None if s is None else set(s.circles) for s in selections]
+        lines = [(t, name) for (t, name) in self.ln_items if (kept := lines_of[t]) is None or name in kept]
+        circles = [it for it in self.circle_items if (kept := circles_of[it[0]]) is None or it[4] in kept]
+        K = np.bincount(self.kp_t[kp], minlength=T)  # each frame's keypoints left
+        drawn = np.zeros(T, bool)  # ... and whether it keeps a line or a circle
+        drawn[[t for t, _ in lines] + [it[0] for it in circles]] = True
+        w_pt, w_ln = math.sqrt(1 - self.alpha), math.sqrt(self.alpha)
+        ln_idx = [self.ln_items[key] for key in lines]
+        ln = np.concatenate(ln_idx).astype(int) if ln_idx else np.zeros(0, int)
+        ends = np.cumsum([0] + [len(i) for i in ln_idx])
+        items = {key: np.arange(a, b) for key, a, b in zip(lines, ends[:-1], ends[1:])}
+        kp_t, ln_t = self.kp_t[kp], self.ln_t[ln]
+        groups = group_circles([(t, world, pts, w_ln if K[t] else 1.0, name) for t, world, pts, _, name in circles])
+        frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [g.row_frames for g in groups])
+        return _Rows(kp_t, self.kp_X[kp], self.kp_xy[kp], self.kp_pin[kp], np.where(drawn[kp_t], w_pt, 1.0),
+                     ln_t, self.ln_A[ln], self.ln_B[ln], self.ln_q[ln], np.where(K[ln_t] > 0, w_ln, 1.0),
+                     groups, frame.astype(int), items, circles, self.alpha)
+
+
+def _runs_max(values: np.ndarray, counts) -> list[float]:
+    """The largest of each run of ``values`` (runs of ``counts`` values back to back; 0 for an
+    empty run)."""
+    counts = np.asarray(counts, int)
+    out = np.zeros(len(counts))
+    full = counts > 0
+    if full.any():
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        out[full] = np.maximum.reduceat(values, starts[full])
+    return out.tolist()
 
 
 def _put(r: np.ndarray, J: np.ndarray | None, at: int, weight, block: Block) -> int:

@@ -166,7 +166,7 @@ def _gated_solve(fd: Sequence[FrameData | None], size: tuple[float, float], para
     nfev, info = 0, {"success": False, "cost": math.inf, "iterations": 0}
     dist: list[FrameDistances | None] = []
     for _ in range(3):
-        x, info = _solve(ShotProblem(fd, size, params, sel, calib.alpha), x, params, tol, free)
+        x, info = _solve(whole.restricted(sel), x, params, tol, free)
         nfev += int(info["iterations"])
         dist = whole.distances(x)
         new = _gated(fd, dist, point_gate, line_gate, calib)
