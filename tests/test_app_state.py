@@ -152,6 +152,30 @@ def test_keypoint_edits_recalibrate_undo_redo_and_persist(data):
     restarted.close()
 
 
+def test_the_tabs_are_told_of_an_edit_before_its_review_snapshot_is_taken(data):
+    """An edit reaches the tabs (they redraw) without waiting for the review snapshot, which is
+    in the record by the time the edit returns, taken with that edit."""
+    from pnlviz.data.snapshot import edits_digest
+
+    st = AppState(data)
+    stem = "00002"
+    obs = st.view(stem).observations
+    kid, (x, y) = int(obs.kp_ids[0]), obs.kp_xy[0]
+    st.move_keypoint(stem, kid, x + 5, y)  # the frame is "corrected" from here: its edits take snapshots
+
+    def label() -> tuple[float, float]:
+        got = st.edits.get(stem)["snapshot"]["labels"][str(kid)]
+        return got["x"], got["y"]
+
+    told = []
+    st.subscribe(lambda s: told.append(label()))
+    st.move_keypoint(stem, kid, x + 25, y - 10)
+    assert told == [pytest.approx((x + 5, y))]  # told first: the old snapshot is still there
+    assert label() == pytest.approx((x + 25, y - 10))
+    assert st.edits.get(stem)["snapshot"]["edits"] == edits_digest(st.edits.get(stem))  # taken with this edit
+    st.close()
+
+
 def test_line_point_edit_goes_into_the_annotation(data):
     st = AppState(data)
     ann = st.reader.annotation("00001")

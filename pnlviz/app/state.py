@@ -323,13 +323,14 @@ class AppState:
         """The one door for a change to a frame's edit record, whoever makes it (a drag, a review,
         an accepted shot, a fix of the label-error finder): ``change(record)`` as one user action,
         one undo step, validated and written at once (:meth:`pnlviz.data.edits.EditsStore.act`;
-        ``corrected``: the frame becomes "corrected"; ``merge``: see there); then the review
-        snapshot, ``snapshot`` when given (a shot's; a function of the record as changed, for one
-        made from it), else what the frame shows under ``settings`` when it is reviewed
-        (:meth:`snapshot`); then every tab is told (``notify`` False: a snapshot refreshed while they
-        are being told already). A clip frame's shot model follows before the snapshot: the tabs on
-        the shot's other frames draw its quick answer while the snapshot is taken
-        (:meth:`pnlviz.app.shots.ClipShots.changed`). True when the record changed."""
+        ``corrected``: the frame becomes "corrected"; ``merge``: see there), with ``snapshot`` when
+        given (a shot's; a function of the record as changed, for one made from it); then every tab
+        is told (:meth:`notify`; ``notify`` False: a snapshot refreshed while they are being told
+        already); then, without a ``snapshot`` given, the review snapshot of what the frame shows
+        under ``settings`` when it is reviewed (:meth:`snapshot`), taken before this returns. No tab
+        shows the snapshot, so the tabs draw first: the hand sees its edit without waiting for it,
+        and a clip's shot is fully solved before it (the snapshot of a frame reviewed with its shot
+        needs no solve of its own). True when the record changed."""
         self.index_of(stem)
         with self.edits.lock(stem):  # the change and the snapshot that goes with it are one
             changed = change is not None and self.edits.act(stem, change, corrected=corrected, merge=merge)
@@ -337,11 +338,11 @@ class AppState:
             if snap is not None and snap != self.edits.get(stem).get("snapshot"):
                 self.edits.update(stem, snapshot=snap)
                 changed = True
-        if notify and changed and self._shots is not None:
-            self._shots.changed(stem)  # a clip's tabs on other frames draw the shot's quick answer meanwhile
+        if notify:
+            self.notify(stem, changed)
         if snapshot is None and changed:
             self.snapshot(stem, settings)
-        return self.notify(stem, changed) if notify else changed
+        return changed
 
     def snapshot(self, stem: str, settings: Settings | None = None) -> dict | None:
         """Record in a reviewed (accepted or corrected) frame's edit record what it shows under
