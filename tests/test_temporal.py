@@ -345,6 +345,8 @@ def test_a_problem_restricted_to_selections_is_the_problem_built_on_them():
         (r1, J1), (r2, J2) = built.evaluate(x, True), restricted.evaluate(x, True)
         assert np.array_equal(r1, r2) and np.array_equal(J1.toarray(), J2.toarray())
     assert not np.array_equal(ShotProblem(data, (W, H), TemporalParams(), sel).evaluate(x)[0], whole.evaluate(x)[0])
+    with pytest.raises(ValueError, match="keypoint mask does not match"):  # only the problem with everything
+        whole.restricted(sel).restricted(sel)
     # each frame's distances, all frames at once, are those of its camera alone
     for t, (mine, d) in enumerate(zip(whole.distances(x), data)):
         if d is None:

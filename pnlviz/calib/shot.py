@@ -398,6 +398,8 @@ class _Rows:
         T = len(selections)
         counts = np.bincount(self.kp_t, minlength=T)
         masks = [np.ones(n, bool) if s is None else s.keypoints for s, n in zip(selections, counts)]
+        if any(len(m) != n for m, n in zip(masks, counts)):
+            raise ValueError("a frame's keypoint mask does not match its rows: restrict the rows of every observation")
         kp = np.concatenate([masks[t] for t in np.flatnonzero(counts)]) if len(self.kp_t) else np.zeros(0, bool)
         lines_of = [None if s is None else set(s.lines) for s in selections]  # None: every class
         circles_of = [None if s is None else set(s.circles) for s in selections]
