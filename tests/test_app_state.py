@@ -154,7 +154,8 @@ def test_keypoint_edits_recalibrate_undo_redo_and_persist(data):
 
 def test_the_tabs_are_told_of_an_edit_before_its_review_snapshot_is_taken(data):
     """An edit reaches the tabs (they redraw) without waiting for the review snapshot, which is
-    in the record by the time the edit returns, taken with that edit."""
+    in the record by the time the edit returns, taken with that edit, even when a listener
+    fails."""
     from pnlviz.data.snapshot import edits_digest
 
     st = AppState(data)
@@ -173,6 +174,14 @@ def test_the_tabs_are_told_of_an_edit_before_its_review_snapshot_is_taken(data):
     assert told == [pytest.approx((x + 5, y))]  # told first: the old snapshot is still there
     assert label() == pytest.approx((x + 25, y - 10))
     assert st.edits.get(stem)["snapshot"]["edits"] == edits_digest(st.edits.get(stem))  # taken with this edit
+
+    def fails(_stem: str) -> None:
+        raise RuntimeError("a listener failed")
+
+    st.subscribe(fails)  # the error reaches the caller, and the snapshot of the edit is still taken
+    with pytest.raises(RuntimeError, match="a listener failed"):
+        st.move_keypoint(stem, kid, x + 30, y)
+    assert label() == pytest.approx((x + 30, y)) and st.edits.get(stem)["keypoints"][str(kid)] == [x + 30, y]
     st.close()
 
 

@@ -327,10 +327,10 @@ class AppState:
         given (a shot's; a function of the record as changed, for one made from it); then every tab
         is told (:meth:`notify`; ``notify`` False: a snapshot refreshed while they are being told
         already); then, without a ``snapshot`` given, the review snapshot of what the frame shows
-        under ``settings`` when it is reviewed (:meth:`snapshot`), taken before this returns. No tab
-        shows the snapshot, so the tabs draw first: the hand sees its edit without waiting for it,
-        and a clip's shot is fully solved before it (the snapshot of a frame reviewed with its shot
-        needs no solve of its own). True when the record changed."""
+        under ``settings`` when it is reviewed (:meth:`snapshot`), taken before this returns, even
+        when a listener fails. No tab shows the snapshot, so the tabs draw first: the hand sees its
+        edit without waiting for it, and a clip's shot is fully solved before it (the snapshot of a
+        frame reviewed with its shot needs no solve of its own). True when the record changed."""
         self.index_of(stem)
         with self.edits.lock(stem):  # the change and the snapshot that goes with it are one
             changed = change is not None and self.edits.act(stem, change, corrected=corrected, merge=merge)
@@ -338,10 +338,12 @@ class AppState:
             if snap is not None and snap != self.edits.get(stem).get("snapshot"):
                 self.edits.update(stem, snapshot=snap)
                 changed = True
-        if notify:
-            self.notify(stem, changed)
-        if snapshot is None and changed:
-            self.snapshot(stem, settings)
+        try:
+            if notify:
+                self.notify(stem, changed)
+        finally:  # a listener's error (a shot's failed solve) still leaves the snapshot of the change
+            if snapshot is None and changed:
+                self.snapshot(stem, settings)
         return changed
 
     def snapshot(self, stem: str, settings: Settings | None = None) -> dict | None:
