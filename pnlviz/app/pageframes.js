@@ -200,20 +200,20 @@
     for (const l of [drawLayer(), idsLayer()]) if (l) l.style.display = viewOk ? "block" : "none";
     const [slot, n] = d.frame.split(",");
     const entry = state.slots.get(slot);
-    if (viewOk && entry && entry.ready && entry.n === n) {
+    const ready = viewOk && entry && entry.ready && entry.n === n ? entry : null;
+    if (ready) {
       // with their frame: a frame not decoded yet keeps the last one shown, and its overlays
       placeDraw(d.draw, cu, cv, z, Wa, Ha);
       placeIds(d.ids, d.idGap, cu, cv, z, Wa, Ha);
     }
-    placeFrame(d, imageMode, viewOk, cu, cv, z, Wa, Ha);
+    placeFrame(ready, slot, n, imageMode, cu, cv, z, Wa, Ha);
   };
 
-  const placeFrame = (d, imageMode, viewOk, cu, cv, z, Wa, Ha) => {
+  // `entry`: the frame's slot, decoded and in view (null: not yet)
+  const placeFrame = (entry, slot, n, imageMode, cu, cv, z, Wa, Ha) => {
     const l = layer();
     if (!l) return;
-    const [slot, n] = d.frame.split(",");
-    const entry = state.slots.get(slot);
-    if (!(viewOk && entry && entry.ready && entry.n === n)) {
+    if (!entry) {
       // not decoded yet: what was shown stays (a frame not sent ahead shows once it is decoded)
       if (!imageMode) {
         for (const s of state.slots.values()) s.img.style.display = "none";

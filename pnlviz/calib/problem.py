@@ -180,9 +180,7 @@ class Problem:
         self.kp_X = self.world[:lay.K]
         self.line_a, self.line_b = self.world[lay.K:lay.K + lay.L], self.world[lay.K + lay.L:lay.K + 2 * lay.L]
         self._pixel_rows, self._circle_shift = lay.pixel_rows, 2 * lay.L
-        has_curves = lay.n_res > 2 * lay.K
-        self.w_pt = np.sqrt(1 - alpha) if has_curves else 1.0
-        self.w_ln = np.sqrt(alpha) if lay.K else 1.0
+        self.w_pt, self.w_ln = (float(w) for w in pnl_weights(alpha, lay.K > 0, lay.n_res > 2 * lay.K))
         pins = data.obs.pins[lay.kp_mask]
         self.pins = pins if pins.any() and (pin_weight != 1.0 or pin_scale > 0) else None
         self.pin_weight, self.pin_scale = pin_weight, pin_scale
@@ -267,6 +265,13 @@ class Problem:
             out[name] = np.abs(r[start:start + len(pts)]) / self.w_ln
             start += len(pts)
         return out
+
+
+def pnl_weights(alpha: float, keypoints, curves) -> tuple[np.ndarray, np.ndarray]:
+    """The weights of a frame's keypoint rows and of its line and circle rows: ``sqrt(1 - alpha)``
+    and ``sqrt(alpha)`` (the paper's cost, in squares), 1 for a kind alone on its frame (no
+    ``curves``: no line or circle; no ``keypoints``). Elementwise over arrays of frames."""
+    return np.where(curves, np.sqrt(1 - alpha), 1.0), np.where(keypoints, np.sqrt(alpha), 1.0)
 
 
 def pin_block(block: Block, pins: np.ndarray, weight: float, scale: float) -> Block:

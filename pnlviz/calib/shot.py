@@ -43,7 +43,7 @@ from pnlviz.geometry.so3 import cross
 
 from .observations import Observations
 from .pipeline import pnl_set
-from .problem import FrameData, pin_block
+from .problem import FrameData, pin_block, pnl_weights
 from .residuals import Block, SegmentJacobian, point_block, segment_block
 from .shot_circles import CircleGroup, circle_residuals, group_circles
 
@@ -362,8 +362,7 @@ class _Rows:
             arcs = [(name, w, p) for name, w, p in data.arcs(0.5) if name in sel.circles]
             m = sel.keypoints
             K = int(m.sum())
-            w_pt = math.sqrt(1 - alpha) if (lines or arcs) else 1.0
-            w_ln = math.sqrt(alpha) if K else 1.0
+            w_pt, w_ln = (float(w) for w in pnl_weights(alpha, K > 0, bool(lines or arcs)))
             if K:
                 kp_parts.append((obs.kp_xyz[m], obs.kp_xy[m], obs.pins[m]))
                 kp_frames.append(t)
@@ -408,16 +407,16 @@ class _Rows:
         K = np.bincount(self.kp_t[kp], minlength=T)  # each frame's keypoints left
         drawn = np.zeros(T, bool)  # ... and whether it keeps a line or a circle
         drawn[[t for t, _ in lines] + [it[0] for it in circles]] = True
-        w_pt, w_ln = math.sqrt(1 - self.alpha), math.sqrt(self.alpha)
+        w_pt, w_ln = pnl_weights(self.alpha, K > 0, drawn)  # per frame
         ln_idx = [self.ln_items[key] for key in lines]
         ln = np.concatenate(ln_idx).astype(int) if ln_idx else np.zeros(0, int)
         ends = np.cumsum([0] + [len(i) for i in ln_idx])
         items = {key: np.arange(a, b) for key, a, b in zip(lines, ends[:-1], ends[1:])}
         kp_t, ln_t = self.kp_t[kp], self.ln_t[ln]
-        groups = group_circles([(t, world, pts, w_ln if K[t] else 1.0, name) for t, world, pts, _, name in circles])
+        groups = group_circles([(t, world, pts, float(w_ln[t]), name) for t, world, pts, _, name in circles])
         frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [g.row_frames for g in groups])
-        return _Rows(kp_t, self.kp_X[kp], self.kp_xy[kp], self.kp_pin[kp], np.where(drawn[kp_t], w_pt, 1.0),
-                     ln_t, self.ln_A[ln], self.ln_B[ln], self.ln_q[ln], np.where(K[ln_t] > 0, w_ln, 1.0),
+        return _Rows(kp_t, self.kp_X[kp], self.kp_xy[kp], self.kp_pin[kp], w_pt[kp_t],
+                     ln_t, self.ln_A[ln], self.ln_B[ln], self.ln_q[ln], w_ln[ln_t],
                      groups, frame.astype(int), items, circles, self.alpha)
 
 
