@@ -155,23 +155,31 @@ def test_on_the_wc14_detections_the_rule_gains(shared_dir, model, monkeypatch):
 
 
 def test_the_shot_finds_each_circle_points_closest_segment_as_a_full_search_does(model):
-    """The shot's coarse-to-fine search (two coarse chords, then the segments around each) against
-    every segment, on random views of the centre circle with points 1-30 px off it."""
+    """The shot's pruned search (blocks of segments inside discs) finds the segment a search of
+    every segment finds, the first of equally close ones, on random views of the centre circle
+    (115 segments) and a penalty arc (33: blocks that do not fill up), several views per call, points
+    1-30 px off and points on the vertices (where two segments are equally close)."""
     from pnlviz.calib.shot_circles import _closest_segments, _distances
     from pnlviz.geometry.camera import Camera
 
-    arc, rng = model.circles["Circle central"], np.random.default_rng(5)
-    for trial in range(60):
-        cam = Camera.from_look_at((rng.uniform(-20, 20), rng.uniform(35, 70), -rng.uniform(8, 25)),
-                                  (rng.uniform(-10, 10), rng.uniform(-5, 5), 0.0), hfov_deg=rng.uniform(10, 50),
-                                  width=W, height=H)
-        poly = cam.project(arc.point_at(np.linspace(0.0, 2 * np.pi, 116)))
-        pts = poly[rng.integers(0, 115, 40)] + rng.normal(0.0, [1.0, 5.0, 30.0][trial % 3], (40, 2))
-        item = np.zeros(40, int)
-        j, t, off = _closest_segments(poly[None], item, pts)
-        d2 = _distances(poly[None], item, pts, np.zeros(40, int), 115)[3]
-        np.testing.assert_allclose(np.hypot(*off.T), np.sqrt(d2.min(axis=1)), atol=1e-9)
-        np.testing.assert_allclose(poly[j] + t[:, None] * (poly[j + 1] - poly[j]) + off, pts, atol=1e-9)
+    rng = np.random.default_rng(5)
+    for name, S in (("Circle central", 116), ("Circle left", 34)):
+        arc = model.circles[name]
+        world = arc.point_at(np.linspace(np.radians(arc.start_deg), np.radians(arc.end_deg), S))
+        for trial in range(20):
+            views = [Camera.from_look_at((rng.uniform(-20, 20), rng.uniform(35, 70), -rng.uniform(8, 25)),
+                                         (rng.uniform(-10, 10), rng.uniform(-5, 5), 0.0),
+                                         hfov_deg=rng.uniform(10, 50), width=W, height=H) for _ in range(3)]
+            poly = np.stack([cam.project(world) for cam in views])  # (3, S, 2)
+            item = rng.integers(0, 3, 60)
+            pts = poly[item, rng.integers(0, S, 60)]
+            pts[:40] += rng.normal(0.0, [1.0, 5.0, 30.0][trial % 3], (40, 2))  # the last 20 on vertices
+            j, t, off = _closest_segments(poly, item, pts)
+            d2 = _distances(poly, item, pts, np.zeros(60, int), S - 1)[3]
+            np.testing.assert_array_equal(j, np.argmin(d2, axis=1))
+            np.testing.assert_array_equal(np.square(off).sum(axis=1), d2.min(axis=1))
+            a, b = poly[item, j], poly[item, j + 1]
+            np.testing.assert_allclose(a + t[:, None] * (b - a) + off, pts, atol=1e-9)
 
 
 def test_the_card_names_the_points_held_to_their_marking(model):

@@ -118,8 +118,8 @@ def circle_residuals(g: CircleGroup, R: np.ndarray, C: np.ndarray, f: np.ndarray
     return Block(r, J)
 
 
-#: the coarse stride of the closest-segment search (samples)
-_STRIDE = 8
+#: segments per block of the closest-segment search
+_BLOCK = 4
 
 
 def _distances(poly: np.ndarray, item: np.ndarray, pts: np.ndarray, start: np.ndarray, n: int):
@@ -138,22 +138,53 @@ def _distances(poly: np.ndarray, item: np.ndarray, pts: np.ndarray, start: np.nd
 
 def _closest_segments(poly: np.ndarray, item: np.ndarray, pts: np.ndarray):
     """The closest segment ``j`` of each point on its item's polyline (``poly`` (n, S, 2)), where
-    on it (``t``) and the point minus that closest point. Coarse to fine (a shot has thousands of
-    circle points, and M x S pairs were most of its solve): the two closest chords of every
-    ``_STRIDE``-th vertex, then the ``3 _STRIDE`` segments around each (two, for the two sides of
-    a thin far ellipse and the seam of a closed circle; the same segments as a full search on
-    random views of the centre circle, points 1-30 px off it: tests/test_calib_unmarked.py)."""
+    on it (``t``) and the point minus that closest point: what a search of every segment finds
+    (the first of equally close ones), without measuring every segment (a shot has thousands of
+    circle points, and M x S pairs were most of its solve).
+
+    The segments are taken ``_BLOCK`` at a time, each block inside a disc around its vertices. A
+    point is measured against the segments of the block whose disc is nearest, and then only
+    against the blocks whose disc comes closer than that: a block farther away cannot hold a
+    closer segment."""
     S, m = poly.shape[1], len(pts)
+    n_seg = S - 1
+    nb = -(-n_seg // _BLOCK)
+    # padded with the last vertex to whole blocks (the padding's segments are never chosen)
+    padded = np.concatenate([poly, np.repeat(poly[:, -1:], nb * _BLOCK + 1 - S, axis=1)], axis=1)
+    # each block's disc: the centre of its vertices' bounding box, out to its farthest vertex
+    # (elementwise over the blocks' k-th vertices: reductions over a few items cost more)
+    verts = [padded[:, k::_BLOCK][:, :nb] for k in range(_BLOCK + 1)]  # (n, nb, 2) each
+    lo, hi = verts[0], verts[0]
+    for v in verts[1:]:
+        lo, hi = np.minimum(lo, v), np.maximum(hi, v)
+    centre = (lo + hi) / 2
+    r2 = np.zeros(centre.shape[:2])
+    for v in verts:
+        r2 = np.maximum(r2, np.square(v - centre).sum(axis=2))
+    radius = np.sqrt(r2) * (1 + 1e-9) + 1e-9  # a hair wider: rounding never prunes a segment
+    c = centre[item]  # (m, nb, 2)
+    away = np.square(pts[:, None, 0] - c[..., 0]) + np.square(pts[:, None, 1] - c[..., 1])  # squared
+    first = np.argmin(away, axis=1)
     rows = np.arange(m)
-    if S <= 6 * _STRIDE:
-        t, dx, dy, d2 = _distances(poly, item, pts, np.zeros(m, int), S - 1)
-        k = np.argmin(d2, axis=1)
-        return k, t[rows, k], np.column_stack([dx[rows, k], dy[rows, k]])
-    every = np.r_[np.arange(0, S - 1, _STRIDE), S - 1]
-    dc = _distances(poly[:, every], item, pts, np.zeros(m, int), len(every) - 1)[3]
-    width = 3 * _STRIDE
-    starts = np.clip(every[np.argsort(dc, axis=1)[:, :2]] - _STRIDE, 0, S - 1 - width)  # (m, 2)
-    t, dx, dy, d2 = (np.concatenate(x, axis=1) for x in zip(*(_distances(poly, item, pts, starts[:, i], width)
-                                                              for i in range(2))))
-    k = np.argmin(d2, axis=1)
-    return starts[rows, k // width] + k % width, t[rows, k], np.column_stack([dx[rows, k], dy[rows, k]])
+
+    def measure(at, blocks):
+        t, dx, dy, d2 = _distances(padded, item[at], pts[at], blocks * _BLOCK, _BLOCK)
+        seg = blocks[:, None] * _BLOCK + np.arange(_BLOCK)
+        d2 = np.where(seg < n_seg, d2, np.inf)
+        k = np.argmin(d2, axis=1)  # the first of equally close ones
+        i = np.arange(len(at))
+        return seg[i, k], t[i, k], dx[i, k], dy[i, k], d2[i, k]
+
+    j, t, dx, dy, d2 = found = measure(rows, first)
+    reach = np.sqrt(d2)[:, None] + radius[item]  # a block whose disc is farther holds no closer segment
+    away[rows, first] = np.inf
+    at, blocks = np.nonzero(away < reach * reach)
+    if len(at):
+        more = measure(at, blocks)
+        order = np.lexsort((more[0], more[4], at))  # per point: the closest, then the first
+        keep = order[np.r_[True, at[order][1:] != at[order][:-1]]]
+        p = at[keep]
+        better = (more[4][keep] < d2[p]) | ((more[4][keep] == d2[p]) & (more[0][keep] < j[p]))
+        for mine, theirs in zip(found, more):
+            mine[p[better]] = theirs[keep][better]
+    return j, t, np.column_stack([dx, dy])
