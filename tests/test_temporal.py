@@ -1,6 +1,7 @@
 """Temporal calibration (issue #14): one broadcast camera per shot, recovered from noisy detections;
 cuts; frames with too few keypoints placed by their shot; the jitter metric."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -313,8 +314,8 @@ def test_the_shot_jacobian_is_the_frames_own_chained_to_the_shot_and_matches_pla
 
 def test_a_problem_restricted_to_selections_is_the_problem_built_on_them():
     """A solve restricts its shot anew after each gating (``ShotProblem.restricted``, rows taken
-    from the problem with everything): residuals, Jacobian and each frame's distances are those of
-    a problem built on the same selections, with the weights that follow from what each frame
+    from the problem with everything): residuals and Jacobian are those of a problem built on the
+    frames without the observations left out, with the weights that follow from what each frame
     keeps (a frame left with no keypoint weighs its lines alone; one left with no line or circle,
     its keypoints alone)."""
     from pnlviz.calib.shot import Selection
@@ -339,8 +340,15 @@ def test_a_problem_restricted_to_selections_is_the_problem_built_on_them():
     whole = ShotProblem(data, (W, H), TemporalParams())
     C, k1, per = initial(cams, 8)
     x = np.concatenate([C, [k1], per.ravel()])
+    def without(o, s):  # the frame's observations without those left out
+        if o is None or s is None:
+            return o
+        return dataclasses.replace(o.subset(s.keypoints), lines={k: o.lines[k] for k in s.lines},
+                                   circles={k: o.circles[k] for k in s.circles})
+
     for chosen in (sel, everything):
-        built, restricted = ShotProblem(data, (W, H), TemporalParams(), chosen), whole.restricted(chosen)
+        built = ShotProblem(frame_data([without(o, s) for o, s in zip(obs, chosen)], model), (W, H), TemporalParams())
+        restricted = whole.restricted(chosen)
         assert restricted.n_data == built.n_data < whole.n_data or chosen is everything
         (r1, J1), (r2, J2) = built.evaluate(x, True), restricted.evaluate(x, True)
         assert np.array_equal(r1, r2) and np.array_equal(J1.toarray(), J2.toarray())

@@ -183,7 +183,9 @@ class ShotProblem:
         self.size, self.cx, self.cy = (W, H), W / 2.0, H / 2.0
         self.noise = params.noise_px * W / 960.0
         self.pin_scale = pin_scale
-        self.rows = _Rows.stack(frames, selections or [None] * self.T, alpha)
+        self.rows = _Rows.stack(frames, alpha)
+        if selections is not None:
+            self.rows = self.rows.restricted(selections)
         self.n_data = self.rows.n_res
         self.prior_scale = np.array([math.radians(params.accel_deg)] * 3 + [params.accel_log_f])
         self.n_params = 4 + 4 * self.T
@@ -273,7 +275,7 @@ class ShotProblem:
         frames, at = np.unique(rows.kp_t, return_index=True)
         per_frame = dict(zip(frames.tolist(), np.split(kp, at[1:]))) if len(frames) else {}
         found = {int(t): FrameDistances(per_frame.get(int(t), np.zeros(0)), {}) for t in seen}
-        for (t, name), worst in zip(rows.ln_items, _runs_max(ln, [len(idx) for idx in rows.ln_items.values()])):
+        for (t, name), worst in zip(rows.ln_items, _runs_max(ln, rows.ln_counts)):
             found[t].classes[name] = worst
         for g in rows.circles:
             d = np.abs(circle_residuals(g, R, C, f, k1, self.cx, self.cy, False).r)
@@ -333,8 +335,9 @@ class _Rows:
     circles: list[CircleGroup]
     #: each residual row's frame
     frame: np.ndarray
-    #: the line rows (into ``ln_*``) of each (frame, class)
-    ln_items: dict[tuple[int, str], np.ndarray]
+    #: the (frame, class) of each run of line rows, in row order, and the rows of each run
+    ln_items: list[tuple[int, str]]
+    ln_counts: np.ndarray
     #: the circles' items before grouping, ``(frame, world, pixels, weight, class)`` in frame order
     circle_items: list[tuple[int, np.ndarray, np.ndarray, float, str]]
     #: the PnL weight of lines against points the weights come from
@@ -345,55 +348,47 @@ class _Rows:
         return len(self.frame)
 
     @classmethod
-    def stack(cls, frames: Sequence[FrameData | None], selections: Sequence[Selection | None], alpha: float) -> _Rows:
-        kp_parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        kp_frames, kp_counts, kp_weights = [], [], []
-        ln_rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        ln_frames, ln_counts, ln_weights = [], [], []
-        circles: list[tuple[int, np.ndarray, np.ndarray, float, str]] = []
-        items: dict[tuple[int, str], np.ndarray] = {}
-        n_ln = 0
-        for t, (data, sel) in enumerate(zip(frames, selections)):
+    def stack(cls, frames: Sequence[FrameData | None], alpha: float) -> _Rows:
+        """Every observation of each frame (a frame's rows as its :class:`FrameData` holds them)."""
+        T = len(frames)
+        kp: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        ln: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        n_kp, n_ln = np.zeros(T, int), np.zeros(T, int)
+        drawn = np.zeros(T, bool)  # a frame with a line or a circle
+        items: list[tuple[int, str]] = []
+        counts: list[int] = []
+        circles: list[tuple[int, np.ndarray, np.ndarray, str]] = []
+        for t, data in enumerate(frames):
             if data is None:
                 continue
-            sel = sel or Selection.everything(data.obs)
             obs = data.obs
-            lines = [(name, rows) for name, rows in zip(data.line_names, data.line_rows) if name in sel.lines]
-            arcs = [(name, w, p) for name, w, p in data.arcs(0.5) if name in sel.circles]
-            m = sel.keypoints
-            K = int(m.sum())
-            w_pt, w_ln = (float(w) for w in pnl_weights(alpha, K > 0, bool(lines or arcs)))
-            if K:
-                kp_parts.append((obs.kp_xyz[m], obs.kp_xy[m], obs.pins[m]))
-                kp_frames.append(t)
-                kp_counts.append(K)
-                kp_weights.append(w_pt)
-            for name, rows in lines:
-                n = rows.stop - rows.start
-                ln_rows.append((data.line_a[rows], data.line_b[rows], data.line_pts[rows]))
-                ln_frames.append(t)
-                ln_counts.append(n)
-                ln_weights.append(w_ln)
-                items[(t, name)] = np.arange(n_ln, n_ln + n)
-                n_ln += n
-            circles += [(t, w, p, w_ln, name) for name, w, p in arcs]
+            if obs.n_keypoints:
+                kp.append((obs.kp_xyz, obs.kp_xy, obs.pins))
+                n_kp[t] = obs.n_keypoints
+            if data.line_names:
+                ln.append((data.line_a, data.line_b, data.line_pts))
+                n_ln[t] = len(data.line_pts)
+                items += [(t, name) for name in data.line_names]
+                counts += [rows.stop - rows.start for rows in data.line_rows]
+            circles += [(t, world, pts, name) for name, world, pts in data.arcs(0.5)]
+            drawn[t] = bool(data.line_names or obs.circles)
+        w_pt, w_ln = pnl_weights(alpha, n_kp > 0, drawn)  # per frame
+        kp_t, ln_t = np.repeat(np.arange(T), n_kp), np.repeat(np.arange(T), n_ln)
+        arcs = [(t, world, pts, float(w_ln[t]), name) for t, world, pts, name in circles]
+        groups = group_circles(arcs)
+        frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [g.row_frames for g in groups])
 
         def cat(parts: list[tuple], i: int, shape: tuple, dtype=float) -> np.ndarray:
             return np.concatenate([p[i] for p in parts]).astype(dtype) if parts else np.zeros(shape, dtype)
 
-        kp_t = np.repeat(np.array(kp_frames, int), kp_counts)
-        ln_t = np.repeat(np.array(ln_frames, int), ln_counts)
-        groups = group_circles(circles)
-        frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [g.row_frames for g in groups])
-        return cls(kp_t, cat(kp_parts, 0, (0, 3)), cat(kp_parts, 1, (0, 2)), cat(kp_parts, 2, (0,), bool),
-                   np.repeat(np.array(kp_weights, float), kp_counts), ln_t, cat(ln_rows, 0, (0, 3)),
-                   cat(ln_rows, 1, (0, 3)), cat(ln_rows, 2, (0, 2)), np.repeat(np.array(ln_weights, float), ln_counts),
-                   groups, frame.astype(int), items, circles, alpha)
+        return cls(kp_t, cat(kp, 0, (0, 3)), cat(kp, 1, (0, 2)), cat(kp, 2, (0,), bool), w_pt[kp_t],
+                   ln_t, cat(ln, 0, (0, 3)), cat(ln, 1, (0, 3)), cat(ln, 2, (0, 2)), w_ln[ln_t],
+                   groups, frame.astype(int), items, np.array(counts, int), arcs, alpha)
 
     def restricted(self, selections: Sequence[Selection | None]) -> _Rows:
-        """These rows (every observation of each frame, :meth:`stack` with nothing deselected) with
-        each frame restricted to ``selections[t]``: what :meth:`stack` gives for them, rows in the
-        same order, without going through the frames again."""
+        """These rows (every observation of each frame: :meth:`stack`) with each frame restricted to
+        ``selections[t]`` (None: everything), rows in the same order: what :meth:`stack` gives for
+        the frames without the observations left out."""
         T = len(selections)
         counts = np.bincount(self.kp_t, minlength=T)
         masks = [np.ones(n, bool) if s is None else s.keypoints for s, n in zip(selections, counts)]
@@ -402,22 +397,22 @@ class _Rows:
         kp = np.concatenate([masks[t] for t in np.flatnonzero(counts)]) if len(self.kp_t) else np.zeros(0, bool)
         lines_of = [None if s is None else set(s.lines) for s in selections]  # None: every class
         circles_of = [None if s is None else set(s.circles) for s in selections]
-        lines = [(t, name) for (t, name) in self.ln_items if (kept := lines_of[t]) is None or name in kept]
+        keep = np.array([(kept := lines_of[t]) is None or name in kept for t, name in self.ln_items], bool)
         circles = [it for it in self.circle_items if (kept := circles_of[it[0]]) is None or it[4] in kept]
         K = np.bincount(self.kp_t[kp], minlength=T)  # each frame's keypoints left
         drawn = np.zeros(T, bool)  # ... and whether it keeps a line or a circle
-        drawn[[t for t, _ in lines] + [it[0] for it in circles]] = True
+        drawn[[t for (t, _), k in zip(self.ln_items, keep) if k] + [it[0] for it in circles]] = True
         w_pt, w_ln = pnl_weights(self.alpha, K > 0, drawn)  # per frame
-        ln_idx = [self.ln_items[key] for key in lines]
-        ln = np.concatenate(ln_idx).astype(int) if ln_idx else np.zeros(0, int)
-        ends = np.cumsum([0] + [len(i) for i in ln_idx])
-        items = {key: np.arange(a, b) for key, a, b in zip(lines, ends[:-1], ends[1:])}
+        n = self.ln_counts[keep]  # the kept runs' rows, back to back
+        starts = (np.cumsum(self.ln_counts) - self.ln_counts)[keep]
+        ln = np.repeat(starts - (np.cumsum(n) - n), n) + np.arange(n.sum(), dtype=int)
         kp_t, ln_t = self.kp_t[kp], self.ln_t[ln]
         groups = group_circles([(t, world, pts, float(w_ln[t]), name) for t, world, pts, _, name in circles])
         frame = np.concatenate([np.repeat(kp_t, 2), ln_t, ln_t] + [g.row_frames for g in groups])
         return _Rows(kp_t, self.kp_X[kp], self.kp_xy[kp], self.kp_pin[kp], w_pt[kp_t],
                      ln_t, self.ln_A[ln], self.ln_B[ln], self.ln_q[ln], w_ln[ln_t],
-                     groups, frame.astype(int), items, circles, self.alpha)
+                     groups, frame.astype(int), [it for it, k in zip(self.ln_items, keep) if k], n, circles,
+                     self.alpha)
 
 
 def _runs_max(values: np.ndarray, counts) -> list[float]:

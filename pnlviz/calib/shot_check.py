@@ -26,6 +26,7 @@ keypoints it keeps), and a shot whose solve did not converge gives no frame its 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -64,15 +65,20 @@ class CameraChoice:
         return {"use": self.use, "reason": self.reason, "worse": list(self.worse), "better": list(self.better)}
 
 
-def _items(data: FrameData, d: FrameDistances) -> dict[str, float]:
-    out = {f"keypoint {int(k)}": float(v) for k, v in zip(data.obs.kp_ids, d.keypoints)}
-    out.update(d.classes)
-    return out
+def _items(d: FrameDistances, classes: Sequence[str]) -> np.ndarray:
+    """The distances (px) in ``d`` of a frame's items: its keypoints, then ``classes``."""
+    return np.concatenate([d.keypoints, [d.classes[k] for k in classes]])
 
 
-def _prefers(a: float, b: float, tol: float) -> bool:
-    """An item ``a`` px from one camera and ``b`` px from the other prefers the first."""
-    return a <= tol < b and b > 2 * a
+def _names(data: FrameData, classes: Sequence[str], at: np.ndarray) -> tuple[str, ...]:
+    """The names of items ``at`` (indices into :func:`_items`)."""
+    n = data.obs.n_keypoints
+    return tuple(f"keypoint {int(data.obs.kp_ids[i])}" if i < n else classes[i - n] for i in at.tolist())
+
+
+def _prefers(a: np.ndarray, b: np.ndarray, tol: float) -> np.ndarray:
+    """Items ``a`` px from one camera and ``b`` px from the other that prefer the first."""
+    return (a <= tol) & (tol < b) & (b > 2 * a)
 
 
 def frame_noise(d: FrameDistances, floor: float, n_params: int) -> float:
@@ -106,15 +112,16 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
                                         "none of its own")
         return CameraChoice("shot", "the frame has no camera of its own: the shot carries it")
     d_own = own_distances or distances(data, own)
-    a, b = _items(data, d_shot), _items(data, d_own)
+    classes = list(d_shot.classes)
+    a, b = _items(d_shot, classes), _items(d_own, classes)
     tol = 3 * frame_noise(d_own, params.noise_px * W / 960.0, 8 if calib.refine_k1 else 7)
-    worse = tuple(k for k in a if _prefers(b[k], a[k], tol))
-    better = tuple(k for k in a if _prefers(a[k], b[k], tol))
+    worse_at, better_at = np.flatnonzero(_prefers(b, a, tol)), np.flatnonzero(_prefers(a, b, tol))
+    worse, better = _names(data, classes, worse_at), _names(data, classes, better_at)
     if fail:
         return CameraChoice("own", f"the shot's camera fails the frame's verdict ({fail})", worse, better)
     if len(worse) - len(better) >= WORSE_BY:
-        far = ", ".join(f"{k} ({a[k]:.0f} px, own {b[k]:.1f})" if math.isfinite(a[k]) else f"{k} (behind)"
-                        for k in worse[:3])
+        far = ", ".join(f"{k} ({a[i]:.0f} px, own {b[i]:.1f})" if math.isfinite(a[i]) else f"{k} (behind)"
+                        for k, i in zip(worse, worse_at[:3]))
         more = f" and {len(worse) - 3} more" if len(worse) > 3 else ""
         return CameraChoice("own", f"the shot's camera misses {far}{more}, which the frame's own camera fits",
                             worse, better, by_items=True)
