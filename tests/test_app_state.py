@@ -500,10 +500,12 @@ def test_the_panel_shows_the_frame_from_above(data, serve):
     app = serve(data)
     tab = app.session()
     tab.goto(app.state.find("00000"))
+    tab.flush()  # drawn as the tab's next action, after the frame
     first = tab.panels.top_view.image.copy()
     plain = top_view(None, px_per_m=3.0)[:, :, ::-1]
     assert first.shape == plain.shape and np.abs(first.astype(int) - plain).sum(axis=2).astype(bool).mean() > 0.05
     tab.goto(app.state.find("00001"))
+    tab.flush()
     assert (tab.panels.top_view.image != first).any()
 
 
