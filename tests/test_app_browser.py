@@ -224,13 +224,8 @@ def test_zoom_4x_then_a_drag_of_n_screen_pixels_moves_the_point_n_over_4(data, b
     stem = session.stem
     kid, uv = left_keypoint(session.view())
     page.mouse.move(*on_screen(page, session, uv))
-    page.keyboard.press("1")  # native resolution...
-    wait_until(lambda: abs(session.view_control.view2d.zoom - 1.0) < 1e-9)
-    # ... on the page too: a view the server moves resets a zoom the page has not sent yet (a "+"
-    # pressed before that view arrives is lost; a hand does not press that fast, a script does)
-    wait_until(lambda: page.evaluate("() => window.__pnlvizBridge.base") == session.view_control.version)
-    page.mouse.move(*on_screen(page, session, uv))
-    for _ in range(4):  # ...then four steps of sqrt(2) around the pointer
+    page.keyboard.press("1")  # native resolution, then at once (before the server's view is on the
+    for _ in range(4):  # page: the page keeps what the hand did since the key) four steps of sqrt(2)
         page.keyboard.press("+")
         time.sleep(0.15)
     wait_until(lambda: abs(session.view_control.view2d.zoom - 4.0) < 1e-6)
@@ -241,6 +236,29 @@ def test_zoom_4x_then_a_drag_of_n_screen_pixels_moves_the_point_n_over_4(data, b
     wait_until(lambda: str(kid) in (app.state.edits.get(stem).get("keypoints") or {}))
     moved = np.array(app.state.edits.get(stem)["keypoints"][str(kid)])
     np.testing.assert_allclose(moved - uv, [10.0, -5.0], atol=0.6)
+    page.close()
+
+
+def test_a_zoom_made_before_the_fit_key_does_not_survive_the_fit(data, browser, serve):
+    """"+" twice, then "0" before the zoom has gone to the server: the frame is fitted, and the
+    zoom the page showed is gone (the page does not carry it over the fitted view)."""
+    from pnlviz.app.view2d import View2D
+
+    app = serve(data)
+    page = open_page(browser, app, "focal")
+    session = tab(app)
+    box = canvas_box(page)
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    fit = session.view_control.view2d
+    page.keyboard.press("1")
+    wait_until(lambda: page.evaluate("() => window.__pnlvizBridge.base") == session.view_control.version)
+    page.keyboard.press("+")
+    page.keyboard.press("+")
+    page.keyboard.press("0")
+    settle(session, 1.5)
+    expected = View2D.fit(session.workspace.plane, session.view_control.canvas)
+    assert abs(session.view_control.view2d.zoom - expected.zoom) < 1e-9 and abs(fit.zoom - expected.zoom) < 1e-9
+    assert page.evaluate("() => window.__pnlvizBridge.T.s") == 1.0  # nothing of the zoom over the fit
     page.close()
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from pnlviz.app.bridge import VIEW_KEYS
+
 
 def bind(s) -> None:
     """Every widget of tab ``s``'s panel and every hotkey bound to the part that acts on it."""
@@ -68,8 +70,8 @@ def _bind_keys(s) -> None:
             ("undo", "Z", "cmd/ctrl", edit.undo),
             ("redo", "Z", "cmd/ctrl+shift", edit.redo),
             ("image view / 3D view", "V", None, s.toggle_mode),
-            ("fit the frame", "0", None, view.fit),
-            ("native resolution", "1", None, view.native),
+            ("fit the frame", VIEW_KEYS[0], None, view.fit),
+            ("native resolution", VIEW_KEYS[1], None, view.native),
             ("selected point: visible, occluded, absent", "O", None, edit.cycle_visibility),
             ("selected point not visible", "delete", None, edit.hide_selected),
             ("selected point not visible ", "backspace", None, edit.hide_selected),

@@ -10,6 +10,8 @@
 //   version (#pnlviz-view, pnlviz.app.pagesync). The bridge takes its transform off when that
 //   answer arrives, so the real render replaces the CSS one in the same frame. A gesture ended
 //   while the previous one is still unanswered is sent when the answer comes (rebased on it).
+//   After a key with which the server moves the view (0: fit, 1: native; data-view-keys), what
+//   the hand does before that view arrives is kept over it, and what it did before the key is not.
 // - Pan or point drag? The server lists the grabbable points and the view in #pnlviz-view; a
 //   press within the grab radius of one is left to viser (a point drag: a ring drawn here follows
 //   the pointer at display rate while the server moves the point and recalibrates; the ring goes
@@ -48,7 +50,8 @@
 (() => {
   const config = () => {
     const el = document.getElementById("pnlviz-bridge");
-    return el ? { input: el.dataset.input, mode: el.dataset.mode, backdrop: el.dataset.backdrop || "" } : null;
+    return el ? { input: el.dataset.input, mode: el.dataset.mode, backdrop: el.dataset.backdrop || "",
+      viewKeys: el.dataset.viewKeys || "" } : null;
   };
   if (window.__pnlvizBridge) return; // one bridge per page, whatever re-renders the panel
 
@@ -72,6 +75,7 @@
     logZoom: 0.0, nudgeX: 0, nudgeY: 0, seq: 0, x: 0.5, y: 0.5, over: false,
     T: { ...IDENTITY }, // the CSS transform on the canvas, over the view of version `base`
     base: -1, k: 0, sent: null, dirty: false, // the gesture in the air (unanswered), one waiting
+    asked: null, // a key asked the server for another view: the view's version and the transform then
     wheelTimer: null, idleMs: 120, press: null, point: null, swallowClick: false,
     view: null, gestures: 0, latency: [], pendingInputs: [], rafPending: false,
     boxPress: null, boxes: 0, box: null, // a ctrl+drag in the air; boxes drawn; the last one [k, x0, y0, x1, y1]
@@ -262,6 +266,8 @@
     state.gestures += 1;
     send();
   };
+  // T with U taken off it (T = G after U: G), for a transform over another render
+  const after = (T, U) => ({ s: T.s / U.s, tx: T.tx - (T.s / U.s) * U.tx, ty: T.ty - (T.s / U.s) * U.ty });
   // the server's answer: the render now shows the view the transform was sent for
   let seen = "";
   const onView = () => {
@@ -280,20 +286,25 @@
     state.view = d;
     const g = state.sent;
     if (g && d.answer >= g.k) {
-      // what is left of the transform over the new render (the hand may have gone on)
-      state.T = d.applied && d.answer === g.k ? {
-        s: state.T.s / g.s, tx: state.T.tx - (state.T.s / g.s) * g.tx, ty: state.T.ty - (state.T.s / g.s) * g.ty,
-      } : { ...IDENTITY };
+      // what is left of the transform over the new render (the hand may have gone on); a gesture
+      // refused because a view key's view came first was already taken off (below): the rest stays
+      const applied = d.applied && d.answer === g.k;
+      state.T = applied ? after(state.T, g) : g.moved ? state.T : { ...IDENTITY };
+      // a view key pressed since it was sent (before, and the server would have refused it)
+      if (applied && state.asked) state.asked = { base: d.v, T: after(state.asked.T, g) };
       state.sent = null;
       state.base = d.v;
       applyTransform();
-      if (state.dirty) endGesture();
+      if (state.dirty || (g.moved && !isIdentity(state.T))) endGesture();
     } else if (d.v !== state.base) {
-      state.base = d.v; // the server moved the view (fit, a frame of another size): its view rules
-      if (!g) {
-        state.T = { ...IDENTITY };
-        applyTransform();
-      }
+      // the server moved the view (fit, a frame of another size): its view rules, but what the
+      // hand did after a view key (a "+" right after "1") stays over the view that key asked for
+      const asked = state.asked;
+      state.base = d.v;
+      state.T = asked ? after(state.T, asked.T) : { ...IDENTITY };
+      state.asked = null; // answered
+      if (g) g.moved = true; // made on the view before: the server refuses it
+      applyTransform();
     }
     if (state.ring && state.ring.released && (!old || old.pointsText !== d.pointsText)) hideRing();
   };
@@ -620,6 +631,12 @@
       }
       const cfg = config();
       if (!cfg || cfg.mode !== "image" || event.ctrlKey || event.metaKey || event.altKey) return;
+      if (event.key.length === 1 && cfg.viewKeys.includes(event.key) && !event.repeat) {
+        // the server moves the view (viser's key binding): what the hand does from here is kept
+        // over that view when it comes
+        state.asked = { base: state.base, T: { ...state.T } };
+        return;
+      }
       if (event.key in ARROWS) {
         // nudge the selected point (instead of turning the camera, which the image view does not do)
         const step = event.shiftKey ? 10 : 1;

@@ -42,6 +42,11 @@ def _script() -> str:
 #: it; a mesh around the image cost every WebGL frame the pixels it covers)
 BACKDROP_RGB = (38, 40, 46)
 
+#: The keys with which the server moves the image view (fit, native resolution:
+#: :mod:`pnlviz.app.bindings`): the page keeps a zoom or pan made after one of them, before the
+#: server's view arrives, over that view
+VIEW_KEYS = ("0", "1")
+
 #: The label of the text field the bridge writes to: the page finds the field by it (a label no
 #: other widget has; the bridge hides its row).
 BRIDGE_FIELD = "pnlviz-pointer"
@@ -56,7 +61,7 @@ def bridge_html(input_label: str, mode: Mode | str) -> str:
     code = base64.b64encode(_script().encode("utf-8")).decode("ascii")
     safe_label = "".join(c for c in input_label if c.isalnum() or c in "-_")
     return (f'<div id="pnlviz-bridge" data-input="{safe_label}" data-mode="{mode.value}" '
-            f'data-backdrop="rgb{BACKDROP_RGB}" style="display:none"></div>'
+            f'data-backdrop="rgb{BACKDROP_RGB}" data-view-keys="{"".join(VIEW_KEYS)}" style="display:none"></div>'
             f'<img alt="" src="data:," style="display:none" onerror="eval(atob(\'{code}\'))">')
 
 
