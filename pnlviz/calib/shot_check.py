@@ -112,6 +112,9 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
                                         "none of its own")
         return CameraChoice("shot", "the frame has no camera of its own: the shot carries it")
     d_own = own_distances or distances(data, own)
+    if not len(d_shot.keypoints) == len(d_own.keypoints) == data.obs.n_keypoints:
+        raise ValueError(f"distances of {len(d_shot.keypoints)} and {len(d_own.keypoints)} keypoints for a frame of "
+                         f"{data.obs.n_keypoints}")
     classes = list(d_shot.classes)
     a, b = _items(d_shot, classes), _items(d_own, classes)
     tol = 3 * frame_noise(d_own, params.noise_px * W / 960.0, 8 if calib.refine_k1 else 7)
