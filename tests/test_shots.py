@@ -3,6 +3,7 @@ pipeline in the shot's problem, each frame judged against its own camera, a shot
 frames disagree with it; and one rule for what a clip is and where it cuts."""
 
 import numpy as np
+import pytest
 
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
 from pnlviz.calib.observations import Observations
@@ -100,6 +101,13 @@ def test_a_frame_keeps_its_own_camera_only_where_the_shot_is_clearly_worse():
     assert judge_frame(data, _moved(own, 30.0), None, p).use == "none"  # fails the verdict, nothing to keep
     assert judge_frame(data, truth, own, p, converged=False).use == "own"
     assert judge_frame(None, truth, own, p).use == "none"
+    # distances measured on another frame (another number of keypoints) are refused, not misread
+    from pnlviz.calib.shot_fit import distances
+
+    other = distances(fd, own)  # the three-keypoint frame's
+    for mixed in ({"shot_distances": other}, {"own_distances": other}):
+        with pytest.raises(ValueError, match=f"distances of 3 keypoints for a frame of {obs.n_keypoints}"):
+            judge_frame(data, own, own, p, **mixed)
 
 
 def test_the_shot_fits_circles_as_the_frame_does():

@@ -76,6 +76,11 @@ def _names(data: FrameData, classes: Sequence[str], at: np.ndarray) -> tuple[str
     return tuple(f"keypoint {int(data.obs.kp_ids[i])}" if i < n else classes[i - n] for i in at.tolist())
 
 
+def _check_length(d: FrameDistances, data: FrameData) -> None:
+    if len(d.keypoints) != data.obs.n_keypoints:
+        raise ValueError(f"distances of {len(d.keypoints)} keypoints for a frame of {data.obs.n_keypoints}")
+
+
 def _prefers(a: np.ndarray, b: np.ndarray, tol: float) -> np.ndarray:
     """Items ``a`` px from one camera and ``b`` px from the other that prefer the first."""
     return (a <= tol) & (tol < b) & (b > 2 * a)
@@ -105,6 +110,7 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
         return CameraChoice("own", f"{why}: the frame keeps its own camera")
     W = float(shot.width)
     d_shot = shot_distances or distances(data, shot)
+    _check_length(d_shot, data)
     fail = _verdict(data, d_shot, calib, W)
     if own is None:
         if fail:
@@ -112,9 +118,7 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
                                         "none of its own")
         return CameraChoice("shot", "the frame has no camera of its own: the shot carries it")
     d_own = own_distances or distances(data, own)
-    if not len(d_shot.keypoints) == len(d_own.keypoints) == data.obs.n_keypoints:
-        raise ValueError(f"distances of {len(d_shot.keypoints)} and {len(d_own.keypoints)} keypoints for a frame of "
-                         f"{data.obs.n_keypoints}")
+    _check_length(d_own, data)
     classes = list(d_shot.classes)
     a, b = _items(d_shot, classes), _items(d_own, classes)
     tol = 3 * frame_noise(d_own, params.noise_px * W / 960.0, 8 if calib.refine_k1 else 7)
