@@ -274,7 +274,8 @@ class Painter:
             self.tab.queue.enqueue(lambda: self._draw_top_view(key, cam, kps))
 
     def _draw_top_view(self, key: tuple, cam, kps: dict) -> None:
-        if key == self._top_key:  # not when a later camera's view is on its way
+        # not when a later camera's view is on its way, nor for a tab that has gone
+        if key == self._top_key and not self.tab.queue.closed:
             image = top_view(cam, keypoints=kps, px_per_m=TOP_PX_PER_M)
             self.tab.panels.top_view.image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
