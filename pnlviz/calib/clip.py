@@ -424,7 +424,7 @@ class ClipSolver:
             m = p.fit.distances[i]
         else:
             m = distances(d, cam)
-        r = np.concatenate([m.keypoints, list(m.classes.values())]) if m is not None else np.zeros(0)
+        r = m.values() if m is not None else np.zeros(0)
         r = np.sort(r[np.isfinite(r)])  # the median of a few values (np.median costs ten times as much)
         return self._errors.setdefault(t, float(r[(len(r) - 1) // 2] + r[len(r) // 2]) / 2 if len(r) else 0.0)
 

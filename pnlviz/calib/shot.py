@@ -137,6 +137,12 @@ class FrameDistances:
         fitted, fit_lines, fit_circles = pnl_set(obs, calib, kp, lines, circles, unmarked or {})
         return Selection(fitted, tuple(fit_lines), tuple(fit_circles), int((kp & ~fitted).sum()))
 
+    def values(self, classes: Sequence[str] | None = None) -> np.ndarray:
+        """The distances as one array: each keypoint's, then those of ``classes`` (default: every
+        class measured)."""
+        names = self.classes if classes is None else classes
+        return np.concatenate([self.keypoints, [self.classes[k] for k in names]])
+
     def kept(self, sel: Selection) -> np.ndarray:
         """The distances of the selected observations (keypoints, then classes)."""
         return np.concatenate([self.keypoints[sel.keypoints],

@@ -65,13 +65,8 @@ class CameraChoice:
         return {"use": self.use, "reason": self.reason, "worse": list(self.worse), "better": list(self.better)}
 
 
-def _items(d: FrameDistances, classes: Sequence[str]) -> np.ndarray:
-    """The distances (px) in ``d`` of a frame's items: its keypoints, then ``classes``."""
-    return np.concatenate([d.keypoints, [d.classes[k] for k in classes]])
-
-
 def _names(data: FrameData, classes: Sequence[str], at: np.ndarray) -> tuple[str, ...]:
-    """The names of items ``at`` (indices into :func:`_items`)."""
+    """The names of items ``at`` (indices into :meth:`FrameDistances.values` with ``classes``)."""
     n = data.obs.n_keypoints
     return tuple(f"keypoint {int(data.obs.kp_ids[i])}" if i < n else classes[i - n] for i in at.tolist())
 
@@ -120,7 +115,7 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
     d_own = own_distances or distances(data, own)
     _check_length(d_own, data)
     classes = list(d_shot.classes)
-    a, b = _items(d_shot, classes), _items(d_own, classes)
+    a, b = d_shot.values(classes), d_own.values(classes)
     tol = 3 * frame_noise(d_own, params.noise_px * W / 960.0, 8 if calib.refine_k1 else 7)
     worse_at, better_at = np.flatnonzero(_prefers(b, a, tol)), np.flatnonzero(_prefers(a, b, tol))
     worse, better = _names(data, classes, worse_at), _names(data, classes, better_at)
