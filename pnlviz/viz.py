@@ -49,7 +49,7 @@ def draw_pitch(image: np.ndarray, camera: Camera, colour=PITCH_BGR, thickness: i
     if (camera.width, camera.height) != (w, h):
         camera = camera.scaled(w, h)
     model = model or load_field_model()
-    for pts in project_polylines(camera, model.sample_polylines(0.5, 0.25), w, h).values():
+    for pts in project_polylines(camera, model.sample_polylines(0.5, 0.25), w, h, skip_folded=True).values():
         if len(pts) >= 2:
             cv2.polylines(image, [_to_int(pts)], False, colour, thickness, cv2.LINE_AA, shift=4)
     return image

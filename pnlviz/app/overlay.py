@@ -19,6 +19,7 @@ import numpy as np
 
 from pnlviz.app.state import FrameView
 from pnlviz.field.model import FieldModel, load_field_model
+from pnlviz.geometry.lens import imaged
 from pnlviz.geometry.polylines import project_polylines
 from pnlviz.viz import (
     FINDING_ANNOTATED_RGB,
@@ -152,7 +153,7 @@ def simplify_polyline(uv: np.ndarray, tolerance: float = PITCH_TOLERANCE_PX) -> 
 
 def _pitch(camera, W: int, H: int, model: FieldModel, color) -> Segments:
     polys = project_polylines(camera.scaled(W, H) if (camera.width, camera.height) != (W, H) else camera,
-                              model.sample_polylines(0.5, 0.25), W, H)
+                              model.sample_polylines(0.5, 0.25), W, H, skip_folded=True)
     return Segments.from_polylines([simplify_polyline(p) for p in polys.values()], color)
 
 
@@ -165,9 +166,10 @@ def _ghosts(view: FrameView, model: FieldModel, hidden: set[int]) -> Markers:
     ids = [int(k) for k in model.keypoint_ids if int(k) not in seen and int(k) not in hidden]
     if not ids:
         return Markers()
-    uv = cam.project(model.keypoint_xyz(ids))  # NaN behind the camera: never inside
+    xyz = model.keypoint_xyz(ids)
+    uv = cam.project(xyz)  # NaN behind the camera: never inside
     with np.errstate(invalid="ignore"):
-        inside = (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1) & imaged(cam, xyz)
     keep = [i for i in range(len(ids)) if inside[i]]
     return Markers([ids[i] for i in keep], uv[keep].reshape(-1, 2),
                    np.tile(np.array(GHOST_RGB, np.uint8), (len(keep), 1)), [str(ids[i]) for i in keep])

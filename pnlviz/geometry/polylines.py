@@ -20,15 +20,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from pnlviz.geometry.camera import MIN_DEPTH, Camera
 from pnlviz.errors import ArgumentError
+from pnlviz.geometry.camera import MIN_DEPTH, Camera
+from pnlviz.geometry.lens import imaged
 from pnlviz.geometry.shapes import as_array, as_points
 
 
-def _project_like_evaluator(camera: Camera, X: np.ndarray, evaluator_precision: bool) -> tuple[np.ndarray, np.ndarray]:
+def _project_like_evaluator(camera: Camera, X: np.ndarray, evaluator_precision: bool,
+                            skip_folded: bool = False) -> tuple[np.ndarray, np.ndarray]:
     Xc = camera.to_camera(X)
     z = Xc[:, 2]
-    ok = z > MIN_DEPTH
+    ok = imaged(camera, X) if skip_folded else z > MIN_DEPTH
     xn = np.zeros((len(X), 2))
     xn[ok] = Xc[ok, :2] / z[ok, None]
     xn[ok] = camera.distort(xn[ok])
@@ -115,14 +117,19 @@ def clip_polyline(uv: np.ndarray, valid: np.ndarray, width: float, height: float
 
 
 def project_polylines(camera: Camera, polylines: dict[str, np.ndarray], width: float | None = None,
-                      height: float | None = None, *, evaluator_precision: bool = False) -> dict[str, np.ndarray]:
+                      height: float | None = None, *, evaluator_precision: bool = False,
+                      skip_folded: bool = False) -> dict[str, np.ndarray]:
     """``{class: (N, 3) world points}`` -> ``{class: (M, 2) pixels}`` of the classes that are
-    visible, clipped at the border of a ``width`` x ``height`` image (default: the camera's)."""
+    visible, clipped at the border of a ``width`` x ``height`` image (default: the camera's).
+    ``skip_folded``: skip the points beyond the lens model's fold as well as those behind the camera
+    (:func:`pnlviz.geometry.lens.imaged`): the model draws them inside the image where nothing of
+    them is seen. For pictures; the evaluator keeps them, so metrics leave it False."""
     width = camera.width if width is None else width
     height = camera.height if height is None else height
     names = list(polylines)
     counts = [len(polylines[n]) for n in names]
-    uv_all, ok_all = _project_like_evaluator(camera, np.vstack([polylines[n] for n in names]), evaluator_precision)
+    uv_all, ok_all = _project_like_evaluator(camera, np.vstack([polylines[n] for n in names]), evaluator_precision,
+                                             skip_folded)
     out: dict[str, np.ndarray] = {}
     start = 0
     for name, n in zip(names, counts):

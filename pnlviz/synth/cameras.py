@@ -18,13 +18,12 @@ A camera is usable when, at the 960 x 540 evaluation scale:
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from pnlviz.conventions import EVAL_SIZE
 from pnlviz.field.model import load_field_model
 from pnlviz.geometry.camera import MIN_DEPTH, Camera
+from pnlviz.geometry.lens import fold_radius
 from pnlviz.geometry.polylines import visible_pitch
 
 KINDS: tuple[str, ...] = ("main", "closeup", "behind_goal", "reverse")
@@ -104,7 +103,7 @@ def distortion_folds(camera: Camera, width: float, height: float) -> bool:
     k1 = float(camera.radial[0])
     if k1 >= 0 or np.any(camera.radial[1:]):
         return False
-    r_fold = 1.0 / math.sqrt(-3.0 * k1)
+    r_fold = fold_radius(camera)
     for X in load_field_model().sample_polylines(0.9).values():
         Xc = camera.to_camera(X)
         front = Xc[:, 2] > MIN_DEPTH
