@@ -100,21 +100,75 @@ def _distance_to_segments(points, segments):
 
 
 def test_the_app_draws_the_pitch_and_ghosts_where_the_true_camera_does(folded_frames):
+    from dataclasses import replace
+
     from pnlviz.app.overlay import Layers, overlay_geometry
     from pnlviz.app.state import AppState
 
+    # each frame shown with its true pose and a k1 < 0 as the calibration used to fit them (it
+    # now refuses a lens that folds the evaluator's samples, not every fold a finer drawing meets)
     with AppState(folded_frames) as st:
-        for stem in ("00000", "00004"):
+        for stem, k1 in (("00000", -0.0052), ("00004", -0.0535)):
             view = st.view(stem)
-            cam, truth = view.result.camera, view.reference_camera
-            assert math.isfinite(fold_radius(cam))  # the fitted lens folds: what this test is about
+            truth = view.reference_camera
+            cam = Camera(truth.fx, truth.fy, truth.cx, truth.cy, truth.R, truth.C, truth.width, truth.height,
+                         radial=[k1, 0, 0, 0, 0, 0])
+            view = replace(view, result=replace(view.result, estimate=cam))
             geom = overlay_geometry(view, Layers(), st.model)
+            reference = geom.segments["reference_pitch"].points
             drawn = geom.segments["refined_pitch"].points.reshape(-1, 2)
-            # every drawn vertex lies on the pitch as the true camera draws it (the fold put
-            # vertices 228 and 260 px off it)
-            assert np.max(_distance_to_segments(drawn, geom.segments["reference_pitch"].points)) < 3.0, stem
-            assert geom.ghosts.keys
-            where = truth.project(st.model.keypoint_xyz(geom.ghosts.keys))
+            # every drawn vertex lies on the pitch as the true camera draws it: k1 moves the
+            # picture's corners by up to 2 px; the fold put vertices 228 and 260 px off it
+            assert np.max(_distance_to_segments(drawn, reference)) < 3.0, stem
+            folded = project_polylines(cam, st.model.sample_polylines(0.5, 0.25), *view.size)
+            assert np.max(_distance_to_segments(np.vstack(list(folded.values())), reference)) > 100, stem
             # a ghost is where the true camera puts its keypoint (the fold put two of 00004's
             # 17,000 px away from it)
+            assert geom.ghosts.keys
+            where = truth.project(st.model.keypoint_xyz(geom.ghosts.keys))
             assert np.max(np.hypot(*(where - geom.ghosts.uv).T)) < 3.0, stem
+            if stem == "00004":
+                ids = [int(k) for k in st.model.keypoint_ids]
+                uv = cam.project(st.model.keypoint_xyz(ids))
+                assert not np.all(imaged(cam, st.model.keypoint_xyz(ids))[cam.in_image(np.nan_to_num(uv, nan=-1))])
+
+
+def test_folds_into_view_names_a_lens_that_draws_the_pitch_where_it_is_not():
+    from pnlviz.geometry.lens import folds_into_view
+
+    truth = _sample_camera("00000")
+    points = np.vstack(list(load_field_model().sample_polylines(0.9).values()))
+
+    def with_k1(k1):
+        return Camera(truth.fx, truth.fy, truth.cx, truth.cy, truth.R, truth.C, 960, 540, radial=[k1, 0, 0, 0, 0, 0])
+
+    assert not folds_into_view(truth, points)
+    assert not folds_into_view(with_k1(-0.0052), points)  # its fold falls between the 0.9 m samples
+    assert folds_into_view(with_k1(-0.01), points)  # the left touchline, beside the camera
+    assert not folds_into_view(with_k1(0.05), points)  # k1 > 0 never folds
+    assert not folds_into_view(with_k1(-0.01), points[points[:, 0] > 0])  # the right half stays clear
+
+
+def test_calibration_refuses_a_lens_that_folds_the_pitch_into_its_picture(shared_dir):
+    from pnlviz.calib.calibrate import CalibParams, calibrate
+    from pnlviz.calib.inputs import observations_from_annotation
+    from pnlviz.data import open_dataset
+    from pnlviz.geometry.lens import folds_into_view
+
+    # SN22 from its human annotations: 19 of 398 cameras fitted with k1 folded the pitch into
+    # their own picture, where the official evaluator draws (and scores) it
+    ds = open_dataset(shared_dir / "data" / "sn22_test_subset" / "annotations.zip")
+    points = np.vstack(list(load_field_model().sample_polylines(0.9).values()))
+    folded = refitted = 0
+    for stem in ds.stems:
+        obs = observations_from_annotation(ds.annotation(stem), 960, 540)[0]
+        result = calibrate(obs)
+        if not result.ok:
+            continue
+        folded += folds_into_view(result.camera, points)
+        if folds_into_view(calibrate(obs, CalibParams(refuse_folding_lens=False)).camera, points):
+            refitted += 1
+            assert result.camera.radial[0] == 0.0, stem  # fitted again without k1
+            assert not folds_into_view(result.camera, points)
+    assert folded == 0
+    assert refitted >= 10  # the rule is exercised on this set, not only allowed

@@ -72,3 +72,16 @@ def imaged(camera: Camera, world: ArrayLike) -> np.ndarray:
     with np.errstate(all="ignore"):
         r = np.hypot(Xc[:, 0], Xc[:, 1]) / z
     return front & (r < limit)
+
+
+def folds_into_view(camera: Camera, points: ArrayLike) -> bool:
+    """Whether ``camera``'s lens model puts any of the world ``points`` (N, 3) that it does not
+    image (:func:`imaged`: beyond its fold, in front of it) inside its own image: a lens that draws
+    the pitch where it is not. False at once when the lens cannot fold (:func:`fold_radius` inf)."""
+    if math.isinf(fold_radius(camera)):
+        return False
+    X = np.asarray(points, float)
+    with np.errstate(all="ignore"):
+        uv, z = camera.project_with_depth(X)
+        folded = (z > MIN_DEPTH) & ~imaged(camera, X)
+    return bool(np.any(camera.in_image(np.where(folded[:, None], uv, -1.0))))
