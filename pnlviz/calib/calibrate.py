@@ -49,13 +49,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-import cv2
 import numpy as np
 
 from pnlviz.calib.line_start import CHECKED_CLASSES, LINE_SUBSET, MIN_SPAN_PX, line_sets
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.pins import PinFailure, pin_camera
-from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_frame, plane_masks, refit_with
+from pnlviz.calib.pipeline import Candidate, FrameResult, calibrate_with, plane_masks, refit_with
+from pnlviz.calib.plane_cameras import camera_from_plane_homography, plane_homography
 from pnlviz.calib.problem import FrameData
 from pnlviz.calib.refine import CameraProblem, RefineParams
 from pnlviz.calib.voting import SUBSETS, subset_mask
@@ -63,7 +63,6 @@ from pnlviz.conventions import DEFAULT_ALPHA, EVAL_WIDTH
 from pnlviz.conventions import FAILURE_CODES as _FAILURE_CODES
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.geometry.camera import Camera
-from pnlviz.geometry.homography import camera_from_ground_homography
 from pnlviz.geometry.lens import folds_into_view
 
 
@@ -165,37 +164,6 @@ class CalibrationResult(FrameResult):
     @property
     def initial_camera(self) -> Camera | None:
         return self.initial_estimate
-
-
-# ------------------------------------------------------------------------------ initial cameras
-def plane_homography(local_xy: np.ndarray, xy: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """RANSAC homography (OpenCV, least-squares refit on the inliers) from plane coordinates to
-    pixels, with its inlier mask; exact for 4 points; None when degenerate."""
-    if len(xy) < 4:
-        return None
-    if len(xy) == 4:
-        H, _ = cv2.findHomography(local_xy, xy, 0)
-        mask = np.ones(4, bool)
-    else:
-        H, mask = cv2.findHomography(local_xy, xy, cv2.RANSAC, threshold, maxIters=500, confidence=0.999)
-    if H is None or mask is None or mask.sum() < 4:
-        return None
-    return H, np.asarray(mask).ravel().astype(bool)
-
-
-def camera_from_plane_homography(H: np.ndarray, plane: str, width: int, height: int,
-                                  model: FieldModel) -> Camera | None:
-    """Decompose a homography from a plane's local coordinates (see
-    :func:`pnlviz.calib.pipeline.plane_frame`) to pixels into a world camera (centred principal
-    point, square pixels)."""
-    cam = camera_from_ground_homography(H, width, height)
-    if cam is None:
-        return None
-    if plane == "ground":  # its local frame is the world's
-        return cam
-    B, origin = plane_frame(plane, model)
-    # back to the world frame: x_cam = R_l (B (X - o) - C_l) = (R_l B) (X - (o + B^T C_l))
-    return cam.with_pose(cam.R @ B, origin + B.T @ cam.C)
 
 
 def _sane(cam: Camera, params: CalibParams) -> str | None:
