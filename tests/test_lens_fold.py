@@ -172,3 +172,20 @@ def test_calibration_refuses_a_lens_that_folds_the_pitch_into_its_picture(shared
             assert not folds_into_view(result.camera, points)
     assert folded == 0
     assert refitted >= 10  # the rule is exercised on this set, not only allowed
+
+
+def test_a_keypoint_finding_is_not_drawn_where_a_lens_fold_puts_it():
+    from pnlviz.calib.qa import FrameQA, finding_marks
+    from pnlviz.calib.qa_checks import Finding
+
+    truth = _sample_camera("00004")
+    cam = Camera(truth.fx, truth.fy, truth.cx, truth.cy, truth.R, truth.C, truth.width, truth.height,
+                 radial=[-0.0535, 0, 0, 0, 0, 0])
+    model = load_field_model()
+    assert cam.in_image(cam.project(model.keypoint_xyz([44, 4]))).tolist() == [True, True]  # 44 by the fold
+    qa = FrameQA(2.0, [Finding("off_keypoint", "keypoint 44 is off", 2.0, keypoint=44),
+                       Finding("off_keypoint", "keypoint 4 is off", 2.0, keypoint=4)], cam)
+    marks = finding_marks(qa, {}, (960, 540), model)
+    points = {m.finding.keypoint: m.points for m in marks}
+    np.testing.assert_allclose(points[4], cam.project(model.keypoint_xyz([4])))
+    assert 44 not in points  # the camera does not see 44: nothing to draw (the fold put it inside)
