@@ -65,6 +65,9 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         lines.append(f"won: subset **{res.subset}**, RANSAC {res.threshold:g} px, {res.plane} plane, "
                      f"{len(res.inliers)} inliers; PnL set: {len(res.pnl_lines)} lines/circles"
                      + _left_out(res.lines_alone, state.model.unmarked_points()))
+    if res.half is not None:
+        lines.append(f"its points name **both ends** of the pitch and gave no camera together: this one is from "
+                     f"the **{res.half} half**'s points alone; the others may carry the wrong end's ids")
     lines += pin_lines(res)
     if view.jac:
         lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))

@@ -386,11 +386,49 @@ def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: Fie
     """Calibrate one frame. Never raises on bad geometry: failures come back with a reason; a
     frame with hand-placed points that cannot give a camera says which condition they fail."""
     result = calibrate_with(CameraKind.of(obs, params, model), params)
+    if not result.ok and params.one_half_when_both_fail and not obs.pins.any():
+        result = _one_half(obs, params, model) or result
     if not result.ok and obs.pins.any():
         why = pin_camera(obs, params.min_hfov_deg, params.max_hfov_deg, params.px(params.max_rms, obs.width))
         if isinstance(why, PinFailure):
             result.failure, result.failure_code, result.pin_condition = why.message, "pins", why.condition.value
     return result
+
+
+def _half_of(x: np.ndarray) -> float:
+    """-1 for a class entirely on the left half (x < 0), 1 entirely on the right, 0 otherwise."""
+    return float(np.sign(x[0])) if np.all(np.sign(np.round(x, 6)) == np.sign(x[0])) else 0.0
+
+
+def _one_half(obs: Observations, params: CalibParams, model: FieldModel | None) -> CalibrationResult | None:
+    """A frame whose keypoints and classes name both halves of the pitch and give no camera together,
+    calibrated from each half's alone (with those that span both or lie on the half-way line): a
+    detector or an annotator unsure of the side names some of one end with the other end's ids.
+    The half whose camera fits its inlier keypoints best, or None when neither gives one
+    (``result.half`` says which)."""
+    model = model or load_field_model()
+    side = np.sign(np.round(obs.kp_xyz[:, 0], 6))
+    class_side = {n: _half_of(pts[:, 0]) for n, pts in model.sample_polylines(1.0, 1.0).items()}
+    named = [*side, *(class_side.get(n, 0.0) for n in (*obs.lines, *obs.circles))]
+    if not (min(named, default=0) < 0 < max(named, default=0)):
+        return None
+    best, best_rms = None, np.inf
+    for name, drop in (("left", 1.0), ("right", -1.0)):
+        half = replace(obs.subset(side != drop),
+                       lines={n: v for n, v in obs.lines.items() if class_side.get(n, 0.0) != drop},
+                       circles={n: v for n, v in obs.circles.items() if class_side.get(n, 0.0) != drop})
+        result = calibrate_with(CameraKind.of(half, params, model), params)
+        if not result.ok:
+            continue
+        inl = [result.point_residuals[int(k)] for k in result.inliers if int(k) in result.point_residuals]
+        rms = float(np.sqrt(np.mean(np.square(inl)))) if inl else np.inf
+        if best is None or rms < best_rms:
+            best, best_rms = result, rms
+            best.half = name
+    if best is not None and best.camera is not None:  # every observation's residual, the other half's too
+        best.point_residuals = point_residuals(best.camera, obs)
+        best.line_residuals = line_residuals(best.camera, FrameData.build(obs, model))
+    return best
 
 
 def refit(obs: Observations, start: Camera, params: CalibParams = CalibParams(),

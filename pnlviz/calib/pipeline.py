@@ -80,6 +80,9 @@ class FrameResult:
     #: ids of the derived keypoints the final fit left out (all of them, when its lines and circles
     #: fix the model alone: :func:`lines_alone`); the verdict judges the other inliers if any
     lines_alone: list[int] = field(default_factory=list)
+    #: "left" or "right": the frame's keypoints named both halves and gave no camera together, and
+    #: this one comes from that half's keypoints alone (the others left out); None otherwise
+    half: str | None = None
 
     @property
     def ok(self) -> bool:

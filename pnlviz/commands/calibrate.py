@@ -121,6 +121,7 @@ def calibrate_stem(reader, stem: str, settings) -> tuple[str, dict | None, dict]
         "ms": round(fc.ms, 2), "keypoints": int(fc.observations.n_keypoints), "origin": fc.origin,
         "subset": res.subset, "threshold": res.threshold, "plane": res.plane,
         "inliers": [int(i) for i in res.inliers], "pnl_lines": res.pnl_lines, "lines_alone": res.lines_alone,
+        "half": res.half,
         "point_residuals": {str(k): round(v, 3) for k, v in res.point_residuals.items()},
         "line_residuals_initial": {k: round(v, 3) for k, v in res.line_residuals_initial.items()},
         "line_residuals": {k: round(v, 3) for k, v in res.line_residuals.items()},
