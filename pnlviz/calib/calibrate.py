@@ -27,7 +27,12 @@ Refinement Module", plus what the data asked for):
    Optionally the classes left with a point beyond ``class_tolerance_px`` are then pulled in
    (:meth:`CameraProblem.tighten`: the evaluator counts a class right only when all its points
    are within its threshold; off by default since the verdict judges a fit from the lines alone
-   by its lines, see below).
+   by its lines, see below). A k1 whose lens model folds part of the pitch back into the image
+   (:func:`pnlviz.geometry.lens.folds_into_view`) is refused and the frame fitted again with
+   k1 = 0 (``refuse_folding_lens``).
+
+A frame whose keypoints and classes name both ends of the pitch and that gets no camera is
+calibrated from each half alone (``one_half_when_both_fail``, ``result.half``).
 
 The keypoints derived from the frame's own lines (the labels of an annotation, the intersections
 of detected lines) are left out of the PnL when its lines and circles alone fix the camera
@@ -38,8 +43,8 @@ Throughout, the line points on the image border are aimed ``border_aim_px`` insi
 stays inside the image; +0.5 FS@5 on SN22, +0.4 on WC14); residuals are reported against the
 points as observed.
 
-Every threshold is a :class:`CalibParams` field, given at 960 px image width and scaled with the
-image width.
+Every threshold is a :class:`CalibParams` field (:mod:`pnlviz.calib.params`), given at 960 px image
+width and scaled with the image width.
 """
 
 from __future__ import annotations
