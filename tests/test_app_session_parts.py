@@ -235,6 +235,33 @@ def test_a_page_gesture_moves_the_camera_once_to_where_the_page_showed():
     assert control.view2d.zoom == MAX_ZOOM and told[-1][:2] == (3, True)
 
 
+
+def test_a_view_key_sent_as_a_gesture_is_done_on_whatever_view_the_page_was_on():
+    """Fit and native resolution come from the page as gestures with their key: done even when
+    the page's view is older than the server's (a frame of another size came first), answered
+    with the gesture's number; native resolution centred on what the page showed."""
+    from pnlviz.app.bridge import FIT, NATIVE
+    from pnlviz.app.view2d import View2D
+
+    client = FakeClient()
+    control, _, _ = view_control(client)
+    told = []
+    control.on_push = lambda answer, applied: told.append((answer, applied))
+    plane, canvas = control.workspace.plane, control.canvas
+    control.push(View2D(100.0, 80.0, 3.0))  # the server moved the view: the page's base is older
+    control.gesture(Gesture(1, control.version - 1, 2.0, (5.0, 5.0), FIT))
+    assert told[-1] == (1, True) and control.view2d == View2D.fit(plane, canvas).clamped(plane, canvas)
+    # native resolution around the centre of what the page showed (zoomed 2x about the canvas centre
+    # and panned by 40 CSS px to the right: the centre shows 20 screen px / zoom to the left)
+    v = control.view2d
+    centre = np.asarray(canvas, float) / 2
+    s, t = 2.0, (1 - 2.0) * centre + [40.0, 0.0]
+    shown = v.to_pixel(centre, canvas)  # what the canvas centre showed before the page's transform
+    control.gesture(Gesture(2, control.version, s, tuple(t), NATIVE))
+    assert told[-1] == (2, True) and control.view2d.zoom == 1.0
+    np.testing.assert_allclose([control.view2d.cu, control.view2d.cv], shown - [20.0 / v.zoom, 0.0], atol=1e-9)
+
+
 def test_bridge_messages_carry_the_page_gesture():
     control, _, _ = view_control(FakeClient())
     zoom = control.view2d.zoom

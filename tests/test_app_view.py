@@ -136,8 +136,10 @@ def test_a_bridge_message_carries_a_checked_gesture():
     g = parse_pointer(_msg(view=[4, 7, 2.0, -12.5, 30.0])).gesture
     assert g == Gesture(4, 7, 2.0, (-12.5, 30.0))
     assert parse_pointer(_msg()).gesture is None and parse_pointer(_msg(view=None)).gesture is None
+    # a view key pressed at its end: fit (1) or native resolution (2)
+    assert parse_pointer(_msg(view=[5, 7, 1.0, 0.0, 0.0, 2])).gesture == Gesture(5, 7, 1.0, (0.0, 0.0), 2)
     for bad in ([4, 7, 2.0, 1.0], [4, 7, 0.0, 0, 0], [4, 7, "nan", 0, 0], [-1, 7, 2.0, 0, 0], [4, 7, 2.0, 1e9, 0],
-                "x", [4, 7, 2.0, None, 0]):
+                "x", [4, 7, 2.0, None, 0], [4, 7, 1.0, 0, 0, 3], [4, 7, 1.0, 0, 0, 1, 0]):
         assert parse_pointer(_msg(view=bad)) is None, bad
 
 

@@ -75,7 +75,7 @@
     logZoom: 0.0, nudgeX: 0, nudgeY: 0, seq: 0, x: 0.5, y: 0.5, over: false,
     T: { ...IDENTITY }, // the CSS transform on the canvas, over the view of version `base`
     base: -1, k: 0, sent: null, dirty: false, // the gesture in the air (unanswered), one waiting
-    asked: null, // a key asked the server for another view: the view's version and the transform then
+    viewKey: 0, // a view key pressed (1 fit, 2 native), to go with the next gesture
     wheelTimer: null, idleMs: 120, press: null, point: null, swallowClick: false,
     view: null, gestures: 0, latency: [], pendingInputs: [], rafPending: false,
     boxPress: null, boxes: 0, box: null, // a ctrl+drag in the air; boxes drawn; the last one [k, x0, y0, x1, y1]
@@ -124,7 +124,7 @@
       kind: "pointer", n: state.seq, log_zoom: state.logZoom, x: state.x, y: state.y,
       nudge: [state.nudgeX, state.nudgeY],
       canvas: canvas ? [canvas.clientWidth, canvas.clientHeight] : null,
-      view: g ? [g.k, g.base, g.s, g.tx, g.ty] : null,
+      view: g ? [g.k, g.base, g.s, g.tx, g.ty, g.view] : null,
       box: state.box,
     });
     Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set.call(input, message);
@@ -260,9 +260,11 @@
       return;
     }
     state.dirty = false;
-    if (isIdentity(state.T) || state.base < 0) return;
+    if ((isIdentity(state.T) && !state.viewKey) || state.base < 0) return;
     state.k += 1;
-    state.sent = { k: state.k, base: state.base, ...state.T };
+    // a view key goes as a gesture: the view that answers it is known by its number
+    state.sent = { k: state.k, base: state.base, ...state.T, view: state.viewKey };
+    state.viewKey = 0;
     state.gestures += 1;
     send();
   };
@@ -288,22 +290,18 @@
     if (g && d.answer >= g.k) {
       // what is left of the transform over the new render (the hand may have gone on); a gesture
       // refused because a view key's view came first was already taken off (below): the rest stays
+      // (a view key is done whatever view came first: what the hand did since that view is kept)
       const applied = d.applied && d.answer === g.k;
-      state.T = applied ? after(state.T, g) : g.moved ? state.T : { ...IDENTITY };
-      // a view key pressed since it was sent (before, and the server would have refused it)
-      if (applied && state.asked) state.asked = { base: d.v, T: after(state.asked.T, g) };
+      state.T = applied && !g.moved ? after(state.T, g) : g.moved ? state.T : { ...IDENTITY };
       state.sent = null;
       state.base = d.v;
       applyTransform();
       if (state.dirty || (g.moved && !isIdentity(state.T))) endGesture();
     } else if (d.v !== state.base) {
-      // the server moved the view (fit, a frame of another size): its view rules, but what the
-      // hand did after a view key (a "+" right after "1") stays over the view that key asked for
-      const asked = state.asked;
+      // the server moved the view (a button, a frame of another size): its view rules
       state.base = d.v;
-      state.T = asked ? after(state.T, asked.T) : { ...IDENTITY };
-      state.asked = null; // answered
-      if (g) g.moved = true; // made on the view before: the server refuses it
+      state.T = { ...IDENTITY };
+      if (g) g.moved = true; // made on the view before: the server refuses it (a view key: does it)
       applyTransform();
     }
     if (state.ring && state.ring.released && (!old || old.pointsText !== d.pointsText)) hideRing();
@@ -631,10 +629,16 @@
       }
       const cfg = config();
       if (!cfg || cfg.mode !== "image" || event.ctrlKey || event.metaKey || event.altKey) return;
-      if (event.key.length === 1 && cfg.viewKeys.includes(event.key) && !event.repeat) {
-        // the server moves the view (viser's key binding): what the hand does from here is kept
-        // over that view when it comes
-        state.asked = { base: state.base, T: { ...state.T } };
+      if (event.key.length === 1 && cfg.viewKeys.includes(event.key)) {
+        // fit or native resolution, sent as a gesture that ends here (a zoom still resting goes
+        // with it): what the hand does from here is kept over the view that answers it
+        event.preventDefault();
+        event.stopImmediatePropagation();
+        if (event.repeat) return;
+        state.viewKey = cfg.viewKeys.indexOf(event.key) + 1;
+        clearTimeout(state.wheelTimer);
+        state.wheelTimer = null;
+        endGesture();
         return;
       }
       if (event.key in ARROWS) {

@@ -42,10 +42,13 @@ def _script() -> str:
 #: it; a mesh around the image cost every WebGL frame the pixels it covers)
 BACKDROP_RGB = (38, 40, 46)
 
-#: The keys with which the server moves the image view (fit, native resolution:
-#: :mod:`pnlviz.app.bindings`): the page keeps a zoom or pan made after one of them, before the
-#: server's view arrives, over that view
+#: The keys that move the image view: fit, native resolution (:mod:`pnlviz.app.bindings`). In
+#: the image view the page sends them as a gesture (:attr:`Gesture.view`: the key's place here
+#: plus one), so the view that answers it is known by its number, and a zoom or pan made after
+#: the key stays over that view whatever else arrives first
 VIEW_KEYS = ("0", "1")
+#: :attr:`Gesture.view` of each view key
+FIT, NATIVE = 1, 2
 
 #: The label of the text field the bridge writes to: the page finds the field by it (a label no
 #: other widget has; the bridge hides its row).
@@ -78,12 +81,15 @@ def page_url(url: str, dpr: float = 1.0) -> str:
 class Gesture:
     """A pan and zoom done in the page: ``k`` its sequence number, ``base`` the version of the view
     it was made on (:attr:`pnlviz.app.viewcontrol.ViewControl.version`), and the CSS transform
-    it left on the canvas: a canvas point ``p`` (CSS pixels) shows what was at ``(p - t) / s``."""
+    it left on the canvas: a canvas point ``p`` (CSS pixels) shows what was at ``(p - t) / s``.
+    ``view``: 0, or a view key pressed at its end (:data:`FIT`, :data:`NATIVE`), whose view
+    replaces the transform."""
 
     k: int
     base: int
     s: float
     t: tuple[float, float]
+    view: int = 0
 
 
 @dataclass(frozen=True)
@@ -130,13 +136,16 @@ def _box(value) -> Box | None:
 
 
 def _gesture(value) -> Gesture | None:
-    """A gesture field ``[k, base, s, tx, ty]``; ValueError when malformed."""
+    """A gesture field ``[k, base, s, tx, ty]`` or ``[k, base, s, tx, ty, view]``; ValueError when
+    malformed."""
     if value is None:
         return None
-    k, base, s, tx, ty = value  # ValueError / TypeError when not five
-    g = Gesture(int(k), int(base), float(s), (float(tx), float(ty)))
+    k, base, s, tx, ty, *rest = value  # ValueError / TypeError when fewer than five
+    if len(rest) > 1:
+        raise ValueError("gesture: five or six fields")
+    g = Gesture(int(k), int(base), float(s), (float(tx), float(ty)), int(rest[0]) if rest else 0)
     if g.k < 0 or not all(math.isfinite(v) for v in (g.s, *g.t)) or not 1e-4 <= g.s <= 1e4 \
-            or max(abs(g.t[0]), abs(g.t[1])) > 1e7:
+            or max(abs(g.t[0]), abs(g.t[1])) > 1e7 or g.view not in (0, FIT, NATIVE):
         raise ValueError("gesture out of range")
     return g
 

@@ -22,7 +22,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from pnlviz.app.bridge import Gesture, parse_pointer
+from pnlviz.app.bridge import FIT, NATIVE, Gesture, parse_pointer
 from pnlviz.app.modes import DragPhase, Mode
 from pnlviz.app.view2d import FOV_Y, PLANE_Z, View2D
 
@@ -85,18 +85,28 @@ class ViewControl:
 
     def gesture(self, g: Gesture) -> None:
         """A pan and zoom the page did (a CSS transform on the view of version ``g.base``): the
-        camera goes where the page showed, in one push, and the page is answered either way."""
+        camera goes where the page showed, in one push, and the page is answered either way. With
+        a view key (``g.view``) the key's view instead (native resolution around the centre of
+        what the page showed), made whatever view the page was on."""
         if g.k <= self.gesture_seen:
             return
         self.gesture_seen = g.k
-        if not self.in_image or g.base != self.version:
+        made_here = g.base == self.version
+        plane = self.workspace.plane
+        if not self.in_image or plane is None or not (made_here or g.view):  # a view key: on any view
             if self.on_push is not None:  # not applied: the page takes its transform off
                 self.on_push(g.k, False)
             return
         v, canvas = self.view2d, np.asarray(self.canvas, float)
         assert v is not None  # in the image view
-        centre = np.array([v.cu, v.cv]) + ((1.0 - g.s) * canvas / 2 - np.asarray(g.t)) / (g.s * v.zoom)
-        self.push(View2D(float(centre[0]), float(centre[1]), v.zoom * g.s), answer=g.k)
+        centre = np.array([v.cu, v.cv])
+        if made_here:  # where the page showed
+            centre = centre + ((1.0 - g.s) * canvas / 2 - np.asarray(g.t)) / (g.s * v.zoom)
+        if g.view == FIT:
+            self.push(View2D.fit(plane, self.canvas), answer=g.k)
+        else:  # native resolution around the centre of what the page showed, or the gesture's zoom
+            zoom = 1.0 if g.view == NATIVE else v.zoom * g.s
+            self.push(View2D(float(centre[0]), float(centre[1]), zoom), answer=g.k)
 
     def zoom_by(self, factor: float, at_screen=None) -> None:
         """Zoom by ``factor`` around a canvas point (pixels; default: the centre)."""
