@@ -55,3 +55,16 @@ def running_app(data, host: str = "127.0.0.1", **state_options):
     finally:
         app.stop()
         app.state.close()
+
+
+def copy_sample_set(dst: Path, stems) -> Path:
+    """Frames ``stems`` of the bundled sample with their annotations and known cameras, copied into
+    a new dataset folder ``dst``."""
+    from pnlviz import EXAMPLES_DIR
+
+    src = EXAMPLES_DIR / "sample"
+    (dst / "cameras").mkdir(parents=True)
+    for stem in stems:
+        for name in (f"{stem}.jpg", f"{stem}.json", f"cameras/camera_{stem}.json"):
+            shutil.copy(src / name, dst / name)
+    return dst

@@ -6,14 +6,13 @@ clip playback, the panel's texts and the typed modes."""
 import asyncio
 import contextlib
 import json
-import shutil
 import time
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from pnlviz import EXAMPLES_DIR
+from helpers import copy_sample_set
 from pnlviz.app import cards
 from pnlviz.app.bridge import Gesture
 from pnlviz.app.editing import Drag, EditTrail
@@ -299,13 +298,7 @@ def test_bridge_messages_zoom_nudge_and_resize_once_each():
 # ---------------------------------------------------------------------- edits
 @pytest.fixture()
 def data(tmp_path):
-    src = EXAMPLES_DIR / "sample"
-    dst = tmp_path / "set"
-    (dst / "cameras").mkdir(parents=True)
-    for stem in ("00000", "00001"):
-        for name in (f"{stem}.jpg", f"{stem}.json", f"cameras/camera_{stem}.json"):
-            shutil.copy(src / name, dst / name)
-    return dst
+    return copy_sample_set(tmp_path / "set", ("00000", "00001"))
 
 
 def test_the_edit_trail_undoes_and_redoes_across_frames(data):

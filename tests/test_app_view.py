@@ -3,12 +3,11 @@ the pointer bridge's messages, the overlay geometry, and the undo history kept w
 
 import json
 import math
-import shutil
 
 import numpy as np
 import pytest
 
-from pnlviz import EXAMPLES_DIR
+from helpers import copy_sample_set
 from pnlviz.app.bridge import Gesture, bridge_html, page_url, parse_pointer
 from pnlviz.app.pagesync import page_data
 from pnlviz.app.view2d import FOV_Y, MAX_ZOOM, MIN_ZOOM_OF_FIT, PLANE_Z, ImagePlane, View2D, snap
@@ -206,13 +205,7 @@ def test_the_bridge_element_carries_the_script_and_a_clean_field_label():
 # ---------------------------------------------------------------------- overlays and history
 @pytest.fixture()
 def data(tmp_path):
-    src = EXAMPLES_DIR / "sample"
-    dst = tmp_path / "set"
-    (dst / "cameras").mkdir(parents=True)
-    for stem in ("00000", "00001"):
-        for name in (f"{stem}.jpg", f"{stem}.json", f"cameras/camera_{stem}.json"):
-            shutil.copy(src / name, dst / name)
-    return dst
+    return copy_sample_set(tmp_path / "set", ("00000", "00001"))
 
 
 def test_overlay_geometry_residuals_and_ghosts(data):

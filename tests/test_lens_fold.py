@@ -4,11 +4,11 @@ evaluator's rule (it draws the fold)."""
 
 import json
 import math
-import shutil
 
 import numpy as np
 import pytest
 
+from helpers import copy_sample_set
 from pnlviz import EXAMPLES_DIR
 from pnlviz.field import load_field_model
 from pnlviz.geometry import Camera, project_polylines
@@ -79,13 +79,7 @@ def test_a_folded_line_is_skipped_in_pictures_and_kept_for_the_evaluator():
 
 @pytest.fixture()
 def folded_frames(tmp_path):
-    src = EXAMPLES_DIR / "sample"
-    dst = tmp_path / "set"
-    (dst / "cameras").mkdir(parents=True)
-    for stem in ("00000", "00004"):
-        for name in (f"{stem}.jpg", f"{stem}.json", f"cameras/camera_{stem}.json"):
-            shutil.copy(src / name, dst / name)
-    return dst
+    return copy_sample_set(tmp_path / "set", ("00000", "00004"))
 
 
 def _distance_to_segments(points, segments):

@@ -20,8 +20,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pnlviz.errors import ArgumentError
 from pnlviz.geometry.camera import MIN_DEPTH, Camera
+from pnlviz.geometry.shapes import as_points
 
 #: the radii scanned for a fold when the lens has more than ``k1`` (normalised, log-spaced: 0.4 %
 #: apart, up to 89.99 degrees off the axis)
@@ -60,9 +60,7 @@ def imaged(camera: Camera, world: ArrayLike) -> np.ndarray:
     >>> imaged(cam, [[0, 0, 0], [0, 100, 0], [60, 52, 0]]).tolist()  # ahead, behind, beside it
     [True, False, False]
     """
-    X = np.asarray(world, float)
-    if X.ndim != 2 or X.shape[1] != 3:
-        raise ArgumentError(f"world: expected points (N, 3) in metres, got an array of shape {X.shape}")
+    X = as_points(world, 3, "world")
     Xc = camera.to_camera(X)
     z = Xc[:, 2]
     front = z > MIN_DEPTH
