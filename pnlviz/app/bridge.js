@@ -289,8 +289,8 @@
     const g = state.sent;
     if (g && d.answer >= g.k) {
       // what is left of the transform over the new render (the hand may have gone on); a gesture
-      // refused because a view key's view came first was already taken off (below): the rest stays
-      // (a view key is done whatever view came first: what the hand did since that view is kept)
+      // refused because another view came first was already taken off (below): the rest stays (a
+      // view key is done whatever view came first: what the hand did since that view is kept)
       const applied = d.applied && d.answer === g.k;
       state.T = applied && !g.moved ? after(state.T, g) : g.moved ? state.T : { ...IDENTITY };
       state.sent = null;
