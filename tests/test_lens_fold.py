@@ -131,7 +131,7 @@ def test_folds_into_view_names_a_lens_that_draws_the_pitch_where_it_is_not():
     from pnlviz.geometry.lens import folds_into_view
 
     truth = _sample_camera("00000")
-    points = np.vstack(list(load_field_model().sample_polylines(0.9).values()))
+    points = load_field_model().sample_points(0.9)
 
     def with_k1(k1):
         return Camera(truth.fx, truth.fy, truth.cx, truth.cy, truth.R, truth.C, 960, 540, radial=[k1, 0, 0, 0, 0, 0])
@@ -152,7 +152,7 @@ def test_calibration_refuses_a_lens_that_folds_the_pitch_into_its_picture(shared
     # SN22 from its human annotations: 19 of 398 cameras fitted with k1 folded the pitch into
     # their own picture, where the official evaluator draws (and scores) it
     ds = open_dataset(shared_dir / "data" / "sn22_test_subset" / "annotations.zip")
-    points = np.vstack(list(load_field_model().sample_polylines(0.9).values()))
+    points = load_field_model().sample_points(0.9)
     folded = refitted = 0
     for stem in ds.stems:
         obs = observations_from_annotation(ds.annotation(stem), 960, 540)[0]

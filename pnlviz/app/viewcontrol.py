@@ -103,10 +103,11 @@ class ViewControl:
         if made_here:  # where the page showed
             centre = centre + ((1.0 - g.s) * canvas / 2 - np.asarray(g.t)) / (g.s * v.zoom)
         if g.view == FIT:
-            self.push(View2D.fit(plane, self.canvas), answer=g.k)
-        else:  # native resolution around the centre of what the page showed, or the gesture's zoom
-            zoom = 1.0 if g.view == NATIVE else v.zoom * g.s
-            self.push(View2D(float(centre[0]), float(centre[1]), zoom), answer=g.k)
+            self.fit(answer=g.k)
+        elif g.view == NATIVE:  # around the centre of what the page showed
+            self.native((float(centre[0]), float(centre[1])), answer=g.k)
+        else:
+            self.push(View2D(float(centre[0]), float(centre[1]), v.zoom * g.s), answer=g.k)
 
     def zoom_by(self, factor: float, at_screen=None) -> None:
         """Zoom by ``factor`` around a canvas point (pixels; default: the centre)."""
@@ -116,15 +117,18 @@ class ViewControl:
         at = v.to_pixel(at_screen, self.canvas) if at_screen is not None else None
         self.push(v.zoomed(factor, at))
 
-    def fit(self) -> None:
+    def fit(self, answer: int | None = None) -> None:
+        """The whole frame in the canvas; ``answer``: the page gesture it answers (a view key)."""
         if self.mode is Mode.IMAGE and self.workspace.plane is not None:
-            self.push(View2D.fit(self.workspace.plane, self.canvas))
+            self.push(View2D.fit(self.workspace.plane, self.canvas), answer=answer)
 
-    def native(self) -> None:
-        """One image pixel per screen pixel, around the centre of the view."""
+    def native(self, centre: tuple[float, float] | None = None, answer: int | None = None) -> None:
+        """One image pixel per screen pixel, around ``centre`` (image pixels; default: the centre
+        of the view); ``answer``: the page gesture it answers (a view key)."""
         v = self.view2d
         if self.in_image and v is not None:  # in_image: there is a view
-            self.push(View2D(v.cu, v.cv, 1.0))
+            cu, cv = centre if centre is not None else (v.cu, v.cv)
+            self.push(View2D(cu, cv, 1.0), answer=answer)
 
     def to_pixel(self, fractions) -> np.ndarray:
         """The image pixel under a canvas point given as fractions of the canvas."""

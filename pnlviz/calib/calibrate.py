@@ -99,11 +99,6 @@ def _sane(cam: Camera, params: CalibParams) -> str | None:
     return None
 
 
-def _pitch_samples(model: FieldModel) -> np.ndarray:
-    """Every class of the pitch as points (N, 3), sampled as the evaluator samples it (0.9 m)."""
-    return np.vstack(list(model.sample_polylines(0.9).values()))
-
-
 def _kp_errors(cam: Camera, obs: Observations) -> np.ndarray:
     uv, z = cam.project_with_depth(obs.kp_xyz)
     err = np.linalg.norm(uv - obs.kp_xy, axis=1)
@@ -372,14 +367,15 @@ class CameraKind:
         if prob.n_res < prob.n_free + 1:
             return None
         new, _ = prob.solve()
-        if _sane(new, p):
-            return None
-        if p.refine_k1 and p.refuse_folding_lens and folds_into_view(new, _pitch_samples(self.data.model)):
+        # the pitch sampled as the evaluator samples it (0.9 m): a lens that folds it into the image
+        # is fitted again without k1
+        if p.refine_k1 and p.refuse_folding_lens and not _sane(new, p) \
+                and folds_into_view(new, self.data.model.sample_points(0.9)):
             prob = CameraProblem(replace(cam, radial=np.zeros(6)), self.data, replace(rp, refine_k1=False),
                                  use_keypoints=keypoints, lines=lines, circles=circles)
             new, _ = prob.solve()
-            if _sane(new, p):
-                return None
+        if _sane(new, p):
+            return None
         if intrinsics and p.class_tolerance_px > 0:
             tight = prob.tighten(new, p.px(p.class_tolerance_px, self.data.obs.width))
             if tight is not new and not _sane(tight, p):

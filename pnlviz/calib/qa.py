@@ -44,7 +44,6 @@ from pnlviz.conventions import EVAL_SIZE
 from pnlviz.field.model import FieldModel, load_field_model
 from pnlviz.field.names import MODEL_CLASSES
 from pnlviz.geometry.camera import Camera
-from pnlviz.geometry.lens import imaged
 
 __all__ = ["KINDS", "Finding", "FindingMarks", "FrameQA", "QAParams", "apply_fix", "check_frame", "finding_marks",
            "frame_score"]
@@ -295,9 +294,8 @@ def finding_marks(qa: FrameQA, annotation: Mapping[str, np.ndarray], size: tuple
                 if cam is not None and name in polys:
                     expected += _visible_parts(*trusted_projection(cam, polys[name]), W, H, 0.1 * W)
         elif f.keypoint is not None and cam is not None and f.keypoint in model.keypoints:
-            xyz = model.keypoint_xyz([f.keypoint])
-            uv = cam.project(xyz)
-            if np.isfinite(uv).all() and imaged(cam, xyz).all():  # not where a lens fold puts it
+            uv, ok = trusted_projection(cam, model.keypoint_xyz([f.keypoint]))  # as the classes' marks
+            if ok.all():
                 points = uv.reshape(-1, 2)
         fix = f.fix or {}
         if fix.get("op") == "drop_points" and len(annotated):

@@ -127,6 +127,15 @@ class FieldModel:
             self._cache[key] = out
         return self._cache[key]
 
+    def sample_points(self, spacing: float = 0.1, circle_spacing: float = 0.2) -> np.ndarray:
+        """Every class's :meth:`sample_polylines` as one array (N, 3), made once."""
+        key = ("points", float(spacing), float(circle_spacing))
+        if key not in self._cache:
+            points = np.vstack(list(self.sample_polylines(spacing, circle_spacing).values()))
+            points.setflags(write=False)
+            self._cache[key] = points
+        return self._cache[key]
+
     # ------------------------------------------------------------------ WC14 template
     def field_to_template(self, xy: np.ndarray) -> np.ndarray:
         """Field metres (X, Y) -> WC14 template yards: (X + 52.5, Y + 34) * 1.09361."""

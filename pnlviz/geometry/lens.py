@@ -60,8 +60,11 @@ def imaged(camera: Camera, world: ArrayLike) -> np.ndarray:
     >>> imaged(cam, [[0, 0, 0], [0, 100, 0], [60, 52, 0]]).tolist()  # ahead, behind, beside it
     [True, False, False]
     """
-    X = as_points(world, 3, "world")
-    Xc = camera.to_camera(X)
+    return imaged_in_camera(camera, camera.to_camera(as_points(world, 3, "world")))
+
+
+def imaged_in_camera(camera: Camera, Xc: np.ndarray) -> np.ndarray:
+    """:func:`imaged` of points already in ``camera``'s frame (N, 3), for callers that have them."""
     z = Xc[:, 2]
     front = z > MIN_DEPTH
     limit = fold_radius(camera)
@@ -78,8 +81,9 @@ def folds_into_view(camera: Camera, points: ArrayLike) -> bool:
     the pitch where it is not. False at once when the lens cannot fold (:func:`fold_radius` inf)."""
     if math.isinf(fold_radius(camera)):
         return False
-    X = np.asarray(points, float)
-    with np.errstate(all="ignore"):
-        uv, z = camera.project_with_depth(X)
-        folded = (z > MIN_DEPTH) & ~imaged(camera, X)
-    return bool(np.any(camera.in_image(np.where(folded[:, None], uv, -1.0))))
+    X = as_points(points, 3, "points")
+    Xc = camera.to_camera(X)
+    folded = (Xc[:, 2] > MIN_DEPTH) & ~imaged_in_camera(camera, Xc)
+    if not folded.any():
+        return False
+    return bool(np.any(camera.in_image(camera.project(X[folded]))))  # only those beyond the fold projected

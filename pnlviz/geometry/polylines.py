@@ -22,7 +22,7 @@ import numpy as np
 
 from pnlviz.errors import ArgumentError
 from pnlviz.geometry.camera import MIN_DEPTH, Camera
-from pnlviz.geometry.lens import imaged
+from pnlviz.geometry.lens import imaged_in_camera
 from pnlviz.geometry.shapes import as_array, as_points
 
 
@@ -30,7 +30,7 @@ def _project_like_evaluator(camera: Camera, X: np.ndarray, evaluator_precision: 
                             skip_folded: bool = False) -> tuple[np.ndarray, np.ndarray]:
     Xc = camera.to_camera(X)
     z = Xc[:, 2]
-    ok = imaged(camera, X) if skip_folded else z > MIN_DEPTH
+    ok = imaged_in_camera(camera, Xc) if skip_folded else z > MIN_DEPTH
     xn = np.zeros((len(X), 2))
     xn[ok] = Xc[ok, :2] / z[ok, None]
     xn[ok] = camera.distort(xn[ok])
