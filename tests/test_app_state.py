@@ -263,6 +263,47 @@ def test_drag_end_recalibrates_on_the_server(data, serve):
     assert tab.editor.last_recalibration_ms > 0 and tab.editor.grabs == tab.editor.releases == 1
 
 
+@pytest.mark.parametrize("let_go", ["elsewhere", "there"])
+def test_a_preview_is_given_up_when_its_point_is_let_go_elsewhere(data, serve, monkeypatch, let_go):
+    """The hand lets go while the frame is being recalibrated for where the point was a moment ago:
+    let go elsewhere, that preview stops (the release's own calibration need not wait for it) and
+    the release keeps the camera the frame gives with the point where it was let go; let go there,
+    the preview finishes and is the view the release keeps."""
+    from pnlviz.pipeline import frame_view
+
+    app = serve(data)
+    st, tab = app.state, app.session()
+    tab.goto(st.find("00002"))
+    tab.flush()
+    view = tab.view()
+    kid, uv0 = int(view.observations.kp_ids[0]), view.observations.kp_xy[0].copy()
+    moved, released = uv0 + [6.0, 3.0], (uv0 + [12.0, 5.0] if let_go == "elsewhere" else uv0 + [6.0, 3.0])
+    original, shown = st.preview, []
+
+    def preview(stem, settings, k, x, y):  # the release arrives while this preview computes
+        tab.editor.drag(DragEvent(PointKind.KEYPOINTS, kid, DragPhase.END, released))
+        shown.append(original(stem, settings, k, x, y))
+        return shown[-1]
+
+    monkeypatch.setattr(st, "preview", preview)
+    tab.editor.drag(DragEvent(PointKind.KEYPOINTS, kid, DragPhase.START, uv0))
+    tab.editor.drag(DragEvent(PointKind.KEYPOINTS, kid, DragPhase.UPDATE, moved))
+    tab.flush()
+    tab.flush()  # the release, queued while the preview ran
+    np.testing.assert_allclose(st.edits.get("00002")["keypoints"][str(kid)], released, atol=1e-6)
+    kept = st.view("00002")
+    i = list(kept.observations.kp_ids).index(kid)
+    np.testing.assert_allclose(kept.observations.kp_xy[i], released, atol=1e-6)
+    if let_go == "elsewhere":
+        assert tab.editor.previews_given_up == 1 and not shown  # stopped before it returned
+        fresh = frame_view(st.reader, "00002", st.default_settings)
+        np.testing.assert_allclose(kept.result.camera.R, fresh.result.camera.R)
+        np.testing.assert_allclose(kept.result.camera.C, fresh.result.camera.C)
+    else:
+        assert tab.editor.previews_given_up == 0 and kept is shown[0]
+    assert tab.painter.shown is kept and tab.editor.releases == 1
+
+
 def tab_on(serve, data, stem: str):
     """The app on ``data`` and a tab of it (no browser) showing frame ``stem``, drawn."""
     app = serve(data)

@@ -204,6 +204,41 @@ def test_the_solver_takes_a_jacobian_asked_for_at_accepted_steps_and_sparse():
         assert np.array_equal(x, [1.0, 1.0]) and info["iterations"] == 1 and len(calls) == expected
 
 
+def test_a_solve_stops_when_its_scope_says_so_and_only_inside_it():
+    """Inside ``cancellable``, a solve asks before each iteration and raises ``Cancelled`` (which an
+    ``except Exception`` does not swallow) once told; scopes nest, and outside them nothing asks."""
+    from pnlviz.calib.solver import Cancelled, cancellable, levenberg_marquardt
+
+    t = np.linspace(0, 1, 20)
+
+    def evaluate(x, jac):
+        return x[0] * t + x[1] - (3 * t + 1), (np.column_stack([t, np.ones_like(t)]) if jac else None)
+
+    asked = []
+
+    def after(n):
+        return lambda: asked.append(1) or len(asked) > n
+
+    with cancellable(after(2)):
+        with pytest.raises(Cancelled):
+            try:
+                levenberg_marquardt(evaluate, lambda x, d: x + d, np.array([0.0, 0.0]))
+            except Exception:  # noqa: BLE001 - what a frame's "internal error" catch does
+                pytest.fail("Cancelled was caught as an Exception")
+    assert len(asked) == 3  # asked before the start and each iteration until it said yes
+    asked.clear()
+    with cancellable(lambda: True):
+        with cancellable(lambda: asked.append(1) or False):  # the inner scope decides, and lets it run
+            x, info = levenberg_marquardt(evaluate, lambda x, d: x + d, np.array([0.0, 0.0]))
+        np.testing.assert_allclose(x, [3.0, 1.0])
+        assert asked
+        with pytest.raises(Cancelled):  # the outer one is back
+            levenberg_marquardt(evaluate, lambda x, d: x + d, np.array([0.0, 0.0]))
+    x, info = levenberg_marquardt(evaluate, lambda x, d: x + d, np.array([0.0, 0.0]))  # no scope: runs
+    np.testing.assert_allclose(x, [3.0, 1.0])
+    assert info["success"]
+
+
 def test_refinement_recovers_focal_pose_and_k1_from_lines_and_circles():
     rng = np.random.default_rng(6)
     for _ in range(10):

@@ -25,6 +25,7 @@ from pnlviz.app.panels import choice_id
 from pnlviz.app.state import REVIEW_STATES, EditError
 from pnlviz.app.trail import EditTrail
 from pnlviz.app.view2d import snap
+from pnlviz.calib.solver import Cancelled, cancellable
 
 if TYPE_CHECKING:
     from pnlviz.app.drawing import Painter
@@ -117,6 +118,7 @@ class Editor:
         #: the bulk action whose count was shown: applying the same again runs it
         self.bulk_asked: tuple | None = None
         self.last_recalibration_ms = 0.0
+        self.previews_given_up = 0  # previews abandoned because their point was let go elsewhere
 
     # ------------------------------------------------------------------ choices
     def select(self, selected: Selection | None) -> None:
@@ -451,16 +453,23 @@ class Editor:
                 enqueue(self.tab.show)
 
     def _preview(self) -> None:
-        """The frame as it would be with the dragged keypoint where it is now (not kept)."""
+        """The frame as it would be with the dragged keypoint where it is now (not kept). Given up
+        as soon as the point is let go somewhere else: the release's own calibration, which the
+        hand waits for, then starts at once instead of after this one."""
         drag = self.dragging
         if drag is None:
             return
         drag.pending = False
         if drag.point.kind is not PointKind.KEYPOINTS or drag.stem != self.tab.stem:
             return  # a ghost becomes a keypoint (and a line point changes no keypoint) on release
+        uv = drag.uv.copy()
         try:
-            view = self.tab.state.preview(drag.stem, self.tab.settings, drag.point.kid, *drag.uv)
+            with cancellable(lambda: self.dragging is not drag and not np.array_equal(drag.uv, uv)):
+                view = self.tab.state.preview(drag.stem, self.tab.settings, drag.point.kid, *uv)
         except EditError:
+            return
+        except Cancelled:
+            self.previews_given_up += 1
             return
         if self.dragging is drag:  # still dragging: show the frame as it would be
             self.tab.painter.show_overlay(view, preview=True)

@@ -8,18 +8,51 @@ Jacobians come with the residuals at no extra cost: each trial step is evaluated
 Jacobian, which the next iteration uses when the step is accepted. The clip's model (one camera
 per shot, :mod:`pnlviz.calib.shot`) has no analytic Jacobian: it gives its own by finite
 differences, asked for only at accepted steps, as a sparse matrix.
+
+A caller that may no longer want an answer (the app's preview of a dragged point, once the point
+was let go elsewhere) runs the work inside :func:`cancellable`: every solve checks there before each
+iteration and raises :class:`Cancelled` when told to stop.
 """
 
 from __future__ import annotations
 
+import contextlib
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
 LOSSES = ("linear", "huber", "soft_l1", "cauchy")
+
+#: the check of the innermost :func:`cancellable` scope of this thread (None: nothing can stop it)
+_stop_check: ContextVar[Callable[[], bool] | None] = ContextVar("pnlviz_stop_check", default=None)
+
+
+class Cancelled(BaseException):
+    """The work was given up (:func:`cancellable`'s check said so). A ``BaseException``, as
+    ``KeyboardInterrupt`` is, so that code which turns any ``Exception`` into a failure (a frame's
+    "internal error") lets it through to the caller who asked for it."""
+
+
+@contextlib.contextmanager
+def cancellable(should_stop: Callable[[], bool]) -> Iterator[None]:
+    """Within it, every solve of this thread asks ``should_stop()`` before each iteration and
+    raises :class:`Cancelled` when it says yes (an iteration of a frame's solve is well under a
+    millisecond). Scopes nest; outside them nothing is asked."""
+    token = _stop_check.set(should_stop)
+    try:
+        yield
+    finally:
+        _stop_check.reset(token)
+
+
+def _check_stop() -> None:
+    should_stop = _stop_check.get()
+    if should_stop is not None and should_stop():
+        raise Cancelled
 
 
 @dataclass(frozen=True)
@@ -95,10 +128,12 @@ def levenberg_marquardt(evaluate: Evaluate, retract: Callable[[Any, np.ndarray],
     """
     p = params
     x = x0
+    _check_stop()
     r, J = evaluate(x, jacobian is None)
     cost = robust_cost(r, p.loss, p.f_scale)
     lam, it, success = 1e-3, 0, False
     for it in range(1, p.max_iter + 1):
+        _check_stop()
         if J is None:
             assert jacobian is not None, "evaluate(x, True) gave no Jacobian"
             J = jacobian(x, r)
