@@ -274,7 +274,8 @@ def main() -> None:
         print(f"drag release -> overlay (no preview: release -> save -> recalibrate -> send -> draw): "
               f"{percentiles(round_trip)}")
         print(f"next frame -> image: {percentiles(steps)}")
-        print(f"server-side recalibration of the last drag: {session.editor.last_recalibration_ms:.0f} ms")
+        print(f"server-side recalibration of the last drag: {session.editor.last_recalibration_ms:.0f} ms; previews "
+              f"given up because their point was let go elsewhere: {session.editor.previews_given_up}")
         for name, (steps, during, after, latency) in (("pan (mouse move)", pans), ("zoom (wheel notch)", zooms)):
             print(f"{name}: server camera pushes per step {during / max(1, steps):.2f} ({during} during {steps} "
                   f"steps; {after} at the gestures' ends); input -> frame drawn: {percentiles(latency)}")

@@ -558,7 +558,8 @@ def test_the_title_stays_in_view_no_webgl_notice_covers_the_image_and_a_slow_act
                or page.evaluate("() => !/swiftshader|llvmpipe|software/i.test("
                                 "(document.createElement('canvas').getContext('webgl') || {getParameter: () => ''})"
                                 ".getParameter(7937) || '')"), timeout=20)
-    assert page.get_by_text("Software WebGL rendering").count() == 0
+    # closed (the notification leaves with a short transition)
+    wait_until(lambda: page.get_by_text("Software WebGL rendering").count() == 0, timeout=5)
     scrolled = page.evaluate("""() => {
         let el = document.getElementById('pnlviz-title');
         while (el && !['auto', 'scroll'].includes(getComputedStyle(el).overflowY)) el = el.parentElement;
@@ -598,7 +599,9 @@ def test_the_title_stays_in_view_no_webgl_notice_covers_the_image_and_a_slow_act
 def test_the_dark_frame_around_the_image_is_the_pages_and_goes_in_the_3d_view(data, browser, serve):
     """Around the frame the image view shows a dark frame: the page's background behind the
     canvas (a mesh there filled pixels on every software-WebGL frame); the 3D view is drawn on
-    viser's own background, and coming back brings the frame back."""
+    viser's own background, and coming back brings the frame back. WebGL draws nothing in the image
+    view, whatever the frame shown (everything seen there is the page's), and draws the 3D view;
+    coming back wipes what the 3D view left on the canvas."""
     import cv2
     import numpy as np
 
@@ -607,10 +610,22 @@ def test_the_dark_frame_around_the_image_is_the_pages_and_goes_in_the_3d_view(da
 
     app = serve(data)
     page = browser.new_page(viewport={"width": 1600, "height": 900})
+    page.add_init_script("""(() => { window.__glDraws = 0;  // the draw calls that reach a WebGL context
+      for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) for (const k of ["drawArrays", "drawElements",
+          "drawArraysInstanced", "drawElementsInstanced", "drawRangeElements"]) {
+        const f = C.prototype[k];
+        if (f) C.prototype[k] = function (...a) { window.__glDraws += 1; return f.apply(this, a); };
+      } })()""")
     page.goto(app.page_url)
     wait_for_text(page, "focal")
     session = tab(app)
     box = canvas_box(page)
+
+    def draws_while(action) -> int:  # WebGL draw calls while ``action`` is done and drawn
+        page.evaluate("() => { window.__glDraws = 0; }")
+        action()
+        time.sleep(1.0)  # viser draws for 250 ms after each change
+        return page.evaluate("() => window.__glDraws")
 
     def corner() -> np.ndarray:  # the canvas's top-left corner, outside the fitted frame
         png = page.screenshot(clip={"x": box["x"] + 4, "y": box["y"] + 4, "width": 8, "height": 8})
@@ -622,14 +637,19 @@ def test_the_dark_frame_around_the_image_is_the_pages_and_goes_in_the_3d_view(da
 
     wait_until(lambda: background() != "")
     assert np.abs(corner() - BACKDROP_RGB).max() <= 3, corner()
+    stem = session.stem
+    assert draws_while(lambda: page.keyboard.press("n")) == 0
+    assert session.stem != stem and draws_while(lambda: (page.keyboard.press("+"), page.keyboard.press("0"))) == 0
     session.queue.enqueue(lambda: session.set_mode(Mode.THREE_D))
     wait_until(lambda: background() == "")
     time.sleep(0.5)
     assert np.abs(corner() - BACKDROP_RGB).max() > 30, corner()  # viser's light background
+    assert draws_while(lambda: session.queue.enqueue(session.show)) > 0  # the 3D view is WebGL's
     session.queue.enqueue(lambda: session.set_mode(Mode.IMAGE))
     wait_until(lambda: background() != "")
     time.sleep(0.5)
-    assert np.abs(corner() - BACKDROP_RGB).max() <= 3, corner()
+    assert np.abs(corner() - BACKDROP_RGB).max() <= 3, corner()  # the 3D view's last frame wiped
+    assert draws_while(lambda: page.keyboard.press("n")) == 0
     page.close()
 
 

@@ -34,6 +34,8 @@
 //   the camera. viser's own camera moves in the image view are done here too, as the page's pan
 //   and zoom: a right (or middle) drag pans, W / S zoom, A / D / Q / E pan. viser's camera would
 //   move the overlays without the frame the page draws behind them (pageframes.js).
+// - In the image view the viewer's WebGL context skips its draw calls: everything seen there is
+//   the page's, and software WebGL filled the scene's invisible pointer meshes on every frame.
 // - Every <label for="..."> points at its input (viser labels inputs whose elements carry no id).
 // - The keys work at the window level except while typing in a text field: Enter and Escape leave
 //   a field; a dropdown gives the keyboard back once a choice is made, and its search starts from
@@ -199,6 +201,23 @@
     if (!st || !cfg) return;
     const colour = cfg.mode === "image" ? cfg.backdrop : "";
     if (st.clip.style.background !== colour) st.clip.style.background = colour;
+    quietGl(cfg.mode === "image");
+  };
+  // In the image view WebGL draws nothing anyone sees (the image, the overlays and the ids are the
+  // page's; the scene holds only invisible meshes that take the pointer, which three.js raycasts on
+  // the CPU), yet software WebGL filled every one of them pixel by pixel on every frame viser drew.
+  // There the viewer's context skips its draw calls (its clears still go: the canvas shows the
+  // background three.js clears it to, never what the 3D view left); the 3D view gets them back.
+  const GL_DRAWS = ["drawArrays", "drawElements", "drawArraysInstanced", "drawElementsInstanced", "drawRangeElements"];
+  const quietGl = (quiet) => {
+    const canvas = glCanvas();
+    const gl = canvas && (canvas.getContext("webgl2") || canvas.getContext("webgl"));
+    if (!gl || !!gl.pnlvizQuiet === quiet) return;
+    gl.pnlvizQuiet = quiet;
+    for (const k of GL_DRAWS) {
+      if (quiet) gl[k] = () => {};
+      else delete gl[k]; // the context's own method again
+    }
   };
   // keep the transform within what the server allows: the zoom limits, the frame's centre on screen
   const clamp = (T) => {
