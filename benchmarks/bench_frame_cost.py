@@ -6,8 +6,10 @@ viser renders on demand: every change opens a 250 ms window of frames drawn back
 software WebGL (SwiftShader, headless Chromium with the flags of the browser tests, 1600x900) a
 frame is filled pixel by pixel and read back for compositing, so a change reaches the screen
 one to three frames after it arrives, and the frame's cost sets the latency of every action.
-This keeps the page rendering for ``--seconds`` (the server toggles an overlay layer every
-150 ms) and prints the mean interval between the page's animation frames: as the app runs, then
+This keeps the page rendering for ``--seconds`` (the server shows and hides the invisible
+surface around the frame every 150 ms: a scene change viser draws, as every change of the scene
+is; the overlays are the page's since 2026-12-06 and no longer make viser draw) and prints the
+mean interval between the page's animation frames: as the app runs, then
 with the frame's image hidden (what drawing the image's pixels costs), alternately for
 ``--rounds`` rounds. The app is served on a ``pnlviz synth`` set with its background pass
 working, as ``pnlviz serve`` runs; nothing in the app is changed but the image's visibility (the page's frame layer,
@@ -44,6 +46,7 @@ def main() -> None:
     with served_page(args.frames, f"({FRAMES})()") as (app, page, _):
         time.sleep(5)  # the first frame's nodes made
         tab = app.tabs()[0]
+        backdrop = tab.workspace._pick["backdrop"]  # the invisible surface around the frame (takes pans)
 
         def image(visible: bool) -> None:  # the page's frame layer (pnlviz/app/pageframes.js)
             page.evaluate(f"() => {{ document.getElementById('pnlviz-frames').style.visibility = "
@@ -52,7 +55,7 @@ def main() -> None:
         def interval() -> tuple[float, int]:
             page.evaluate("() => { window.__frames = []; }")
             for i in range(int(args.seconds / 0.15)):
-                tab.queue.enqueue(lambda on=i % 2 == 0: tab.painter.set_layer("initial_pitch", on))
+                tab.queue.enqueue(lambda on=i % 2 == 0: setattr(backdrop, "visible", on))
                 page.wait_for_timeout(150)
             t = np.array(page.evaluate("() => window.__frames"))
             return float(np.mean(np.diff(t))), len(t)
