@@ -3,7 +3,7 @@ is calibrated from each half alone (`CalibParams.one_half_when_both_fail`)."""
 
 import numpy as np
 
-from pnlviz.calib.calibrate import CalibParams, _one_half, calibrate
+from pnlviz.calib.calibrate import CalibParams, CameraKind, _one_half, calibrate
 from pnlviz.calib.observations import Observations
 from pnlviz.field import load_field_model
 from pnlviz.geometry import Camera
@@ -38,13 +38,14 @@ def test_each_half_is_tried_and_the_one_that_fits_is_kept():
         mixed[twins[k]] = left[k]
     obs = Observations.from_keypoints(960, 540, mixed)
     before = obs.kp_ids.copy()
-    result = _one_half(obs, CalibParams(), model)
+    result = _one_half(CameraKind.of(obs, CalibParams(), model), CalibParams())
     assert result is not None and result.ok and result.half == "left"
     np.testing.assert_allclose(result.camera.project(X[seen]), uv[seen], atol=1e-6)
     assert set(result.inliers.tolist()) == set(left)
     np.testing.assert_array_equal(obs.kp_ids, before)  # the frame's observations are left as they were
     # one half named only: nothing to split
-    assert _one_half(Observations.from_keypoints(960, 540, left), CalibParams(), model) is None
+    assert _one_half(CameraKind.of(Observations.from_keypoints(960, 540, left), CalibParams(), model),
+                     CalibParams()) is None
 
 
 def test_a_frame_annotated_with_both_ends_gets_the_camera_of_one(shared_dir):

@@ -201,7 +201,7 @@
     if (!st || !cfg) return;
     const colour = cfg.mode === "image" ? cfg.backdrop : "";
     if (st.clip.style.background !== colour) st.clip.style.background = colour;
-    quietGl(cfg.mode === "image");
+    quietGl(st.canvas, cfg.mode === "image");
   };
   // In the image view WebGL draws nothing anyone sees (the image, the overlays and the ids are the
   // page's; the scene holds only invisible meshes that take the pointer, which three.js raycasts on
@@ -209,9 +209,8 @@
   // There the viewer's context skips its draw calls (its clears still go: the canvas shows the
   // background three.js clears it to, never what the 3D view left); the 3D view gets them back.
   const GL_DRAWS = ["drawArrays", "drawElements", "drawArraysInstanced", "drawElementsInstanced", "drawRangeElements"];
-  const quietGl = (quiet) => {
-    const canvas = glCanvas();
-    const gl = canvas && (canvas.getContext("webgl2") || canvas.getContext("webgl"));
+  const quietGl = (canvas, quiet) => {
+    const gl = canvas.getContext("webgl2") || canvas.getContext("webgl");
     if (!gl || !!gl.pnlvizQuiet === quiet) return;
     gl.pnlvizQuiet = quiet;
     for (const k of GL_DRAWS) {

@@ -367,14 +367,16 @@ class CameraKind:
         if prob.n_res < prob.n_free + 1:
             return None
         new, _ = prob.solve()
+        insane = _sane(new, p)
         # the pitch sampled as the evaluator samples it (0.9 m): a lens that folds it into the image
         # is fitted again without k1
-        if p.refine_k1 and p.refuse_folding_lens and not _sane(new, p) \
+        if not insane and p.refine_k1 and p.refuse_folding_lens \
                 and folds_into_view(new, self.data.model.sample_points(0.9)):
             prob = CameraProblem(replace(cam, radial=np.zeros(6)), self.data, replace(rp, refine_k1=False),
                                  use_keypoints=keypoints, lines=lines, circles=circles)
             new, _ = prob.solve()
-        if _sane(new, p):
+            insane = _sane(new, p)
+        if insane:
             return None
         if intrinsics and p.class_tolerance_px > 0:
             tight = prob.tighten(new, p.px(p.class_tolerance_px, self.data.obs.width))
@@ -386,9 +388,10 @@ class CameraKind:
 def calibrate(obs: Observations, params: CalibParams = CalibParams(), model: FieldModel | None = None) -> CalibrationResult:
     """Calibrate one frame. Never raises on bad geometry: failures come back with a reason; a
     frame with hand-placed points that cannot give a camera says which condition they fail."""
-    result = calibrate_with(CameraKind.of(obs, params, model), params)
+    whole = CameraKind.of(obs, params, model)
+    result = calibrate_with(whole, params)
     if not result.ok and params.one_half_when_both_fail and not obs.pins.any():
-        result = _one_half(obs, params, model) or result
+        result = _one_half(whole, params) or result
     if not result.ok and obs.pins.any():
         why = pin_camera(obs, params.min_hfov_deg, params.max_hfov_deg, params.px(params.max_rms, obs.width))
         if isinstance(why, PinFailure):
@@ -401,13 +404,13 @@ def _half_of(x: np.ndarray) -> float:
     return float(np.sign(x[0])) if np.all(np.sign(np.round(x, 6)) == np.sign(x[0])) else 0.0
 
 
-def _one_half(obs: Observations, params: CalibParams, model: FieldModel | None) -> CalibrationResult | None:
-    """A frame whose keypoints and classes name both halves of the pitch and give no camera together,
-    calibrated from each half's alone (with those that span both or lie on the half-way line): a
-    detector or an annotator unsure of the side names some of one end with the other end's ids.
-    The half whose camera fits its inlier keypoints best, or None when neither gives one
-    (``result.half`` says which)."""
-    model = model or load_field_model()
+def _one_half(whole: CameraKind, params: CalibParams) -> CalibrationResult | None:
+    """A frame (``whole``: its observations as the pipeline laid them out) whose keypoints and
+    classes name both halves of the pitch and give no camera together, calibrated from each half's
+    alone (with those that span both or lie on the half-way line): a detector or an annotator
+    unsure of the side names some of one end with the other end's ids. The half whose camera fits
+    its inlier keypoints best, or None when neither gives one (``result.half`` says which)."""
+    obs, model = whole.observed.obs, whole.observed.model
     side = np.sign(np.round(obs.kp_xyz[:, 0], 6))
     class_side = {n: _half_of(pts[:, 0]) for n, pts in model.sample_polylines(1.0, 1.0).items()}
     named = [*side, *(class_side.get(n, 0.0) for n in (*obs.lines, *obs.circles))]
@@ -428,7 +431,7 @@ def _one_half(obs: Observations, params: CalibParams, model: FieldModel | None) 
             best.half = name
     if best is not None and best.camera is not None:  # every observation's residual, the other half's too
         best.point_residuals = point_residuals(best.camera, obs)
-        best.line_residuals = line_residuals(best.camera, FrameData.build(obs, model))
+        best.line_residuals = whole.class_errors(best.camera)
     return best
 
 
