@@ -372,6 +372,69 @@ def test_steps_already_in_the_history_are_kept_and_a_new_bad_one_is_refused(data
         assert st.edits.history("00000") == (5, 0) and st.edits.get("00000")["keypoints"][str(kid)] == [x + 5, y]
 
 
+class _Node:
+    """A scene node as viser's grab meshes are used here: positions, scales, handlers, removal."""
+
+    def __init__(self, name, positions, scales):
+        self.name, self.batched_positions, self.batched_scales = name, positions, scales
+        self.removed, self.handlers, self.visible = False, {}, True
+
+    def on_click(self, f=None, *, modifier=None):  # viser's: a decorator, with a modifier filter
+        if f is None:
+            return lambda g: self.handlers.__setitem__(("click", modifier), g)
+        self.handlers["click"] = f
+
+    def on_drag(self, f):
+        self.handlers["drag"] = f
+
+    def remove(self):
+        self.removed = True
+
+
+class _Scene:
+    def __init__(self):
+        self.nodes = []
+
+    def add_batched_meshes_simple(self, name, vertices, faces, wxyz, pos, **kw):
+        self.nodes.append(_Node(name, pos, kw["batched_scales"]))
+        return self.nodes[-1]
+
+
+def test_points_a_fraction_of_a_pixel_off_keep_their_grab_mesh():
+    """Another tab's redraw after a shot's re-solve moves its points a fraction of a pixel: no new
+    grab mesh goes to the page for that (the press takes the nearest point wherever the disc is),
+    and the points the server resolves presses against are the new ones. A point moved a pixel,
+    another zoom, or another count makes the mesh anew."""
+    from types import SimpleNamespace
+
+    from pnlviz.app.modes import PointKind
+    from pnlviz.app.overlay import Markers
+    from pnlviz.app.points import GRAB_SLACK_PX, PointNodes
+
+    scene = _Scene()
+    events = SimpleNamespace(drag=lambda e: None, screen_to_pixel=lambda xy: np.asarray(xy, float),
+                             pan=lambda *a: None)
+    nodes = PointNodes(scene, "/t", PointKind.GHOSTS, events=events)
+    plane = ImagePlane(960, 540)
+    wpp = plane.scale / 2.0  # 2 screen pixels per image pixel
+    uv = np.array([[100.0 + 50 * i, 200.0] for i in range(5)])
+    black = np.zeros((5, 3), np.uint8)
+    nodes.show(Markers(list(range(1, 6)), uv, black), plane, wpp)
+    assert len(scene.nodes) == 1
+    near = uv + [0.9 * GRAB_SLACK_PX / 2.0, -0.2]  # under half a screen pixel at 2 screen px per image px
+    nodes.show(Markers(list(range(1, 6)), near, black), plane, wpp)
+    assert len(scene.nodes) == 1 and nodes.grab is scene.nodes[0]
+    assert np.allclose(nodes.uv, near)  # presses resolve against where the points are now
+    assert nodes._instance(None, near[3] + [3.0, 0.0]) == 3
+    for moved, scale in ((uv + [1.0, 0.0], wpp), (uv, 0.5 * wpp)):  # a pixel farther; a zoom
+        n0 = len(scene.nodes)
+        nodes.show(Markers(list(range(1, 6)), moved, black), plane, scale)
+        assert len(scene.nodes) == n0 + 1 and nodes.grab is scene.nodes[-1]
+    nodes.show(Markers(list(range(1, 10)), np.vstack([uv, uv[:4] + [0.0, 80.0]]), np.zeros((9, 3), np.uint8)),
+               plane, 0.5 * wpp)  # more points than the mesh holds
+    assert len(scene.nodes) == 4
+
+
 def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_names():
     """Another tab's edit can reorder the points after this browser picked instance i, and where
     points overlap the browser names either: the point nearest where the pointer hit wins over
@@ -411,34 +474,10 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     from pnlviz.app import points
     from pnlviz.app.points import GRACE_S, PointNodes
 
-    class Node:
-        def __init__(self, name, positions, scales):
-            self.name, self.batched_positions, self.batched_scales = name, positions, scales
-            self.removed, self.handlers, self.visible = False, {}, True
-
-        def on_click(self, f=None, *, modifier=None):  # viser's: a decorator, with a modifier filter
-            if f is None:
-                return lambda g: self.handlers.__setitem__(("click", modifier), g)
-            self.handlers["click"] = f
-
-        def on_drag(self, f):
-            self.handlers["drag"] = f
-
-        def remove(self):
-            self.removed = True
-
-    class Scene:
-        def __init__(self):
-            self.nodes = []
-
-        def add_batched_meshes_simple(self, name, vertices, faces, wxyz, pos, **kw):
-            self.nodes.append(Node(name, pos, kw["batched_scales"]))
-            return self.nodes[-1]
-
     dragged, panned = [], []
     events = SimpleNamespace(drag=dragged.append, screen_to_pixel=lambda xy: np.asarray(xy, float),
                              pan=lambda *a: panned.append(a))
-    scene = Scene()
+    scene = _Scene()
     nodes = PointNodes(scene, "/t", PointKind.KEYPOINTS, events=events)
     plane = ImagePlane(960, 540)
     uv = np.array([[100.0 + 50 * i, 200.0] for i in range(8)])

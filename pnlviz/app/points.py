@@ -21,6 +21,11 @@ from pnlviz.app.view2d import PLANE_Z, ImagePlane, placed
 DISC_PX, RIM_PX, GRAB_PX = 4.5, 6.0, 8.0
 #: seconds a replaced grab mesh still takes presses (see :class:`PointNodes`)
 GRACE_S = 3.0
+#: the grab mesh is not made anew for points that all moved less than this (screen px): a press
+#: takes the point nearest the pointer, so a disc half a pixel off takes the same presses, and
+#: another tab's redraw after a shot's re-solve (its points a fraction of a pixel off) sends no
+#: new mesh to the page
+GRAB_SLACK_PX = 0.5
 #: scene units a replaced grab mesh sinks towards the image (0.0005 -> 0.0002 in front of it: five
 #: float32 steps behind the grab mesh in use at z 1000, where the browser compares depths; of hits
 #: at one depth, its pick takes the mesh made first)
@@ -90,9 +95,9 @@ class PointNodes:
         """The grab mesh's instances: made anew when they changed (see the class docstring), in
         place while a point is dragged and the capacity holds."""
         made = self._grab_made  # None once changed in place: the browser's picking is stale
-        if made is not None and made[0].shape == pos.shape and np.array_equal(made[0], pos) \
-                and np.array_equal(made[1], scales):
-            return
+        if made is not None and made[0].shape == pos.shape and np.array_equal(made[1], scales) \
+                and np.max(np.abs(made[0] - pos), initial=0.0) <= GRAB_SLACK_PX * self.world_per_px:
+            return  # where the points are (self.uv) decides what a press takes; the discs are close enough
         if self.grab is not None and self.dragging and len(self.grab.batched_positions) == len(pos):
             update_changed(self.grab, batched_positions=pos, batched_scales=scales)
             self._grab_made = None
