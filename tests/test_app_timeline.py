@@ -110,3 +110,36 @@ def test_no_part_of_a_tab_holds_the_session(tmp_path, serve):
     # and each still reaches what it uses: the frame shown, through its handle
     assert tab.editor.tab.stem == tab.painter.tab.stem == tab.stem
     assert tab.clip.tab.index() == tab.index
+
+
+def _strip_by_frames(errors, width, height, scale):
+    """The strip's bands painted frame by frame, later frames over earlier ones (the reference)."""
+    img = np.zeros((height, width, 3), np.uint8)
+    edges = np.linspace(0, width, len(errors) + 1).round().astype(int)
+    for i, v in enumerate(errors):
+        if np.isnan(v):
+            colour = (90, 90, 90)
+        elif np.isinf(v):
+            colour = (120, 0, 0)
+        else:
+            t = min(max(v / scale, 0.0), 1.0)
+            colour = (int(255 * min(1.0, 2 * t)), int(255 * min(1.0, 2 * (1 - t))), 40)
+        img[3:height - 3, edges[i]:max(edges[i + 1], edges[i] + 1)] = colour
+    return img
+
+
+@pytest.mark.parametrize("n", [1, 7, 250, 320, 333, 1000])
+def test_the_strip_paints_every_frame_as_a_band_and_the_last_of_those_sharing_a_column(n):
+    from pnlviz.app.timeline import STRIP_SCALE_PX
+
+    rng = np.random.default_rng(n)
+    errors = rng.uniform(-1.0, 2.5 * STRIP_SCALE_PX, n)
+    errors[rng.random(n) < 0.1] = np.inf
+    errors[rng.random(n) < 0.1] = np.nan
+    errors[:3] = [0.0, STRIP_SCALE_PX / 2, STRIP_SCALE_PX][:n]
+    img = strip_image(errors, None, width=320, height=26)
+    assert np.array_equal(img, _strip_by_frames(errors, 320, 26, STRIP_SCALE_PX))
+    if n == 1000:  # three frames or more to a column: the column shows the last of them
+        edges = np.linspace(0, 320, n + 1).round().astype(int)
+        last = max(i for i in range(n) if edges[i] <= 100)
+        assert np.array_equal(img[10, 100], _strip_by_frames(errors[last:last + 1], 1, 26, STRIP_SCALE_PX)[10, 0])

@@ -95,6 +95,39 @@ def test_the_quick_answer_moves_the_frames_near_the_edit_toward_the_full_solve(s
         assert quick.labels(t)[kid].provenance == "hand"
 
 
+def test_each_frames_error_follows_every_answer_and_only_the_changed_frames_are_measured_again(shot):
+    """The clip's strip asks every frame's error on every redraw: after a quick answer only the
+    window's frames (and the edited one) are measured again, after the full answer the frames on
+    the shot's camera, and each error is what a solver that never measured one gives. (The first
+    edit of a detection by more than ``DISTRUST_PX`` leaves that id out on every frame of the shot:
+    every frame is measured again then; the second edit of it, here, changes only the answer.)"""
+    plan, obs = shot
+    t = 45
+    kid, xy = _edit(plan, t)
+    s, fresh = _solver(obs), _solver(obs)
+    s.set_keypoint(t, kid, xy)
+    fresh.set_keypoint(t, kid, xy)
+    first = [s.frame_error(u) for u in range(90)]
+    xy = [xy[0] + 2.0, xy[1] + 1.0]  # the same point moved again (still far from its detection)
+    k = s.set_keypoint(t, kid, xy, solve=False)
+    fresh.set_keypoint(t, kid, xy, solve=False)
+    assert s.quick_solve(t) and fresh.quick_solve(t)
+    held = dict(s._errors)
+    again = [s.frame_error(u) for u in range(90)]
+    remeasured = {u for u in range(90) if s._errors[u] is not held[u]}
+    free = window_of(t, 90, WINDOW_RADIUS)
+    window = set(range(free.start - 2, free.stop + 2))  # and the two frames held at each end (made anew)
+    assert t in remeasured and remeasured <= window
+    assert all(again[u] == first[u] for u in range(90) if u not in free)
+    assert again == [fresh.frame_error(u) for u in range(90)]  # measured from scratch on the same answer
+    s.install(s.solve_job(k).run())
+    fresh.install(fresh.solve_job(k).run())
+    held = dict(s._errors)
+    final = [s.frame_error(u) for u in range(90)]
+    assert all(s._errors[u] is not held[u] for u in range(90) if s.choice(u).use == "shot")
+    assert final == [fresh.frame_error(u) for u in range(90)] and final != again
+
+
 def test_a_job_overtaken_by_a_later_edit_is_not_taken(shot):
     plan, obs = shot
     s = _solver(obs)

@@ -46,20 +46,21 @@ def strip_image(errors: Sequence[float], current: int | None, width: int = 320, 
     and more), dark red for no camera, grey for not calibrated yet; the current frame framed in
     white; a cut (before frame t, a shot's first frame) a black line across the strip with a
     white tick above and below; a keyframe (corrected by hand) a cyan mark along the top."""
-    e = np.asarray(errors, float)
+    e = np.asarray(errors, float).reshape(-1)
     n = max(len(e), 1)
     img = np.zeros((height, width, 3), np.uint8)
     edges = np.linspace(0, width, n + 1).round().astype(int)
-    for i, v in enumerate(e):
-        if np.isnan(v):
-            colour = (90, 90, 90)
-        elif np.isinf(v):
-            colour = (120, 0, 0)
-        else:
-            t = float(np.clip(v / scale, 0.0, 1.0))
-            colour = (int(255 * min(1.0, 2 * t)), int(255 * min(1.0, 2 * (1 - t))), 40)
-        a, b = edges[i], max(edges[i + 1], edges[i] + 1)
-        img[3:height - 3, a:b] = colour
+    if len(e):
+        # frame i spans columns edges[i] .. max(edges[i + 1], edges[i] + 1); where more frames than
+        # columns share one, the last of them shows: a column's frame is the last one starting at
+        # or before it
+        share = np.clip(np.where(np.isfinite(e), e, 0.0) / scale, 0.0, 1.0)
+        colours = np.stack([255 * np.minimum(1.0, 2 * share), 255 * np.minimum(1.0, 2 * (1 - share)),
+                            np.full(len(e), 40.0)], axis=1).astype(np.uint8)  # truncated, as int() does
+        colours[np.isinf(e)] = (120, 0, 0)
+        colours[np.isnan(e)] = (90, 90, 90)
+        owner = np.searchsorted(edges[:len(e)], np.arange(width), side="right") - 1
+        img[3:height - 3] = colours[owner][None]
     for t in keyframes:
         if 0 <= t < n:
             a, b = edges[t], max(edges[t + 1], edges[t] + 1)

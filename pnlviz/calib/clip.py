@@ -143,7 +143,10 @@ class ClipSolver:
         self._parts = parts
         self._seconds = [0.0] * len(parts)
         self._labels: dict[int, dict[int, Label]] | None = None
-        self._errors: dict[int, float] | None = None
+        #: per frame: what its error was measured from (its camera, data and shot distances, held
+        #: so that their ids stay theirs) and the error; an entry is good while they are the same
+        #: objects (a quick answer changes a window of the shot, not its other frames)
+        self._errors: dict[int, tuple[tuple, float]] = {}
         self._carried_by_shot: dict[int, dict[int, dict[int, np.ndarray]]] | None = None
         self._drop: list[frozenset[int]] = [frozenset()] * len(parts)
         #: per shot (by its first frame): when it last changed (a job made before is no answer)
@@ -197,7 +200,7 @@ class ClipSolver:
             d = self._solver.data[t]
             self._solver.own[t] = _own_camera(self.calib_params, self.field_model, d.obs if d is not None else None)
             self._solver.forget(t)
-            self._labels = self._carried_by_shot = self._errors = None  # a frame on its own camera shows another
+            self._labels = self._carried_by_shot = None  # a frame on its own camera shows another
         return self._solver.own[t]
 
     def cameras_of(self) -> list[Camera | None]:
@@ -363,7 +366,7 @@ class ClipSolver:
         """Shot ``k`` has another answer: what was derived from the old one goes."""
         self._clock += 1
         self._stamps[self._parts[k].frames.start] = self._clock
-        self._labels = self._carried_by_shot = self._errors = None
+        self._labels = self._carried_by_shot = None
 
     # ------------------------------------------------------------------ labels
     def labels(self, t: int) -> dict[int, Label]:
@@ -410,23 +413,26 @@ class ClipSolver:
     def frame_error(self, t: int) -> float:
         """What the app ranks frame ``t`` by: the median distance (px) of its observations (each
         keypoint, the farthest point of each line and circle, the left-out ones too) to the camera
-        it uses; inf without one. Measured once per solve (the clip's strip asks for every frame)."""
-        if self._errors is None:
-            self._errors = {}
-        if t in self._errors:
-            return self._errors[t]
+        it uses; inf without one. Measured again only when what it is measured from changed (the
+        clip's strip asks for every frame on every redraw)."""
         cam, d = self.camera(t), self._solver.data[t]
-        if cam is None or d is None:
-            return self._errors.setdefault(t, float("inf") if cam is None else 0.0)
         p = self._parts[self.shot_of(t)]
         i = t - p.frames.start
-        if p.choices[i].use == "shot" and p.fit is not None and p.fit.distances is not None:
-            m = p.fit.distances[i]
+        fit = p.fit
+        shot = p.choices[i].use == "shot" and fit is not None and fit.distances is not None
+        key = (cam, d, fit.distances[i] if shot and fit is not None and fit.distances is not None else None)
+        held = self._errors.get(t)
+        if held is not None and all(a is b for a, b in zip(held[0], key)):
+            return held[1]
+        if cam is None or d is None:
+            error = float("inf") if cam is None else 0.0
         else:
-            m = distances(d, cam)
-        r = m.values() if m is not None else np.zeros(0)
-        r = np.sort(r[np.isfinite(r)])  # the median of a few values (np.median costs ten times as much)
-        return self._errors.setdefault(t, float(r[(len(r) - 1) // 2] + r[len(r) // 2]) / 2 if len(r) else 0.0)
+            m = key[2] if shot else distances(d, cam)
+            r = m.values() if m is not None else np.zeros(0)
+            r = np.sort(r[np.isfinite(r)])  # the median of a few values (np.median costs ten times as much)
+            error = float(r[(len(r) - 1) // 2] + r[len(r) // 2]) / 2 if len(r) else 0.0
+        self._errors[t] = (key, error)
+        return error
 
     def _solve(self, k: int, warm: bool) -> None:
         p = self._parts[k]
