@@ -24,7 +24,7 @@ GRACE_S = 3.0
 #: the grab mesh is not made anew for points that all moved less than this (screen px): a press
 #: takes the point nearest the pointer, so a disc half a pixel off takes the same presses, and
 #: another tab's redraw after a shot's re-solve (its points a fraction of a pixel off) sends no
-#: new mesh to the page
+#: new mesh to the page (measured from the mesh as it was made, so small moves do not add up)
 GRAB_SLACK_PX = 0.5
 #: scene units a replaced grab mesh sinks towards the image (0.0005 -> 0.0002 in front of it: five
 #: float32 steps behind the grab mesh in use at z 1000, where the browser compares depths; of hits

@@ -418,16 +418,17 @@ class ClipSolver:
         cam, d = self.camera(t), self._solver.data[t]
         p = self._parts[self.shot_of(t)]
         i = t - p.frames.start
-        fit = p.fit
-        shot = p.choices[i].use == "shot" and fit is not None and fit.distances is not None
-        key = (cam, d, fit.distances[i] if shot and fit is not None and fit.distances is not None else None)
+        fit, shot_distances, shot = p.fit, None, False
+        if p.choices[i].use == "shot" and fit is not None and fit.distances is not None:
+            shot_distances, shot = fit.distances[i], True
+        key = (cam, d, shot_distances)
         held = self._errors.get(t)
         if held is not None and all(a is b for a, b in zip(held[0], key)):
             return held[1]
         if cam is None or d is None:
             error = float("inf") if cam is None else 0.0
         else:
-            m = key[2] if shot else distances(d, cam)
+            m = shot_distances if shot else distances(d, cam)
             r = m.values() if m is not None else np.zeros(0)
             r = np.sort(r[np.isfinite(r)])  # the median of a few values (np.median costs ten times as much)
             error = float(r[(len(r) - 1) // 2] + r[len(r) // 2]) / 2 if len(r) else 0.0
