@@ -91,12 +91,23 @@ class Screencast:
         self.wait(settle)
         events = self.page.evaluate("() => window.__events")
         t0 = [t for k, t in events if k == kind][-1] / 1000.0
+        return self.settled_since(n0, t0, region, 1.5)
+
+    def settled_since(self, n0: int, t0: float, region, tolerance: float, changed: bool = False) -> float | None:
+        """ms from ``t0`` (seconds, wall clock) to the first frame composited at ``t0`` or later
+        (among those from ``n0 - 5`` on) whose ``region`` is within ``tolerance`` grey levels (mean)
+        of the last frame's, the settled picture; with ``changed``, also unlike the last frame
+        before ``t0``. None: no such frame (with ``changed``: or no frame before ``t0``); 0.0: no
+        frame after ``t0`` (the screen already showed it), unless ``changed``."""
         frames = [f for f in self.frames[max(0, n0 - 5):] if f[0] >= t0 - 0.001]
-        if not frames:
-            return 0.0  # nothing was drawn after the event: the screen already showed it
+        before = [f for f in self.frames if f[0] < t0 - 0.001] if changed else []
+        if not frames or (changed and not before):
+            return None if changed else 0.0
+        pre = self.crop(before[-1][1], region) if changed else None
         final = self.crop(frames[-1][1], region)
         for t, data in frames:
-            if np.mean(np.abs(self.crop(data, region) - final)) < 1.5:
+            shown = self.crop(data, region)
+            if (pre is None or not np.array_equal(shown, pre)) and np.mean(np.abs(shown - final)) < tolerance:
                 return 1e3 * (t - t0)
         return None
 

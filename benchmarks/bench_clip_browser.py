@@ -49,26 +49,15 @@ def make_clip(folder: Path, frames: int, seed: int = 7) -> None:
 
 
 def settled_after(cast: Screencast, t0: float, settle: float = 1.5) -> float | None:
-    """ms from ``t0`` (seconds, wall clock) to the first frame ``cast`` got that shows the canvas
+    """ms from ``t0`` (seconds, wall clock) to the first frame ``cast`` got that shows the viewer
     changed from the last frame before ``t0`` and as it is once everything has settled (None:
     never, or the edit changed nothing there). The quick answer's picture is a few hundredths of a
     grey level from the settled one, so a frame the page composites for another reason before its
     redraw (a heartbeat render) would pass the second test: it fails the first."""
     n0 = len(cast.frames)
     cast.wait(settle)
-    frames = [f for f in cast.frames[max(0, n0 - 5):] if f[0] >= t0 - 0.001]
     w, h = cast.page.viewport_size["width"], cast.page.viewport_size["height"]
-    region = (0, 0, int(0.7 * w), h)  # the viewer, not the panel
-    before = [f for f in cast.frames if f[0] < t0 - 0.001]
-    if not frames or not before:
-        return None
-    pre = cast.crop(before[-1][1], region)
-    final = cast.crop(frames[-1][1], region)
-    for t, data in frames:
-        shown = cast.crop(data, region)
-        if not np.array_equal(shown, pre) and np.mean(np.abs(shown - final)) < 0.5:
-            return 1e3 * (t - t0)
-    return None
+    return cast.settled_since(n0, t0, (0, 0, int(0.7 * w), h), 0.5, changed=True)  # the viewer, not the panel
 
 
 def main() -> None:
