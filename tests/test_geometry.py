@@ -122,6 +122,41 @@ def test_visible_pitch_is_identical_to_the_official_get_polylines(evaluator):
             np.testing.assert_array_equal(ours[name], [[p["x"], p["y"]] for p in pts])
 
 
+def _crossing_with_numpy(cur, prev, width, height):
+    """The border crossing as the evaluator writes it (np.cross, numpy division and norm)."""
+    line = np.cross(cur, prev)
+    best, best_d = None, np.inf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for side in ((1.0, 0.0, 0.0), (1.0, 0.0, -width + 1), (0.0, 1.0, 0.0), (0.0, 1.0, -height + 1)):
+            p = np.cross(line, side)
+            p = p / p[2]
+            if 0 <= p[0] < width and 0 <= p[1] < height:
+                d = np.sqrt(np.sum(np.square(p - cur)))
+                if d < best_d:
+                    best, best_d = p, d
+    return best
+
+
+def test_border_crossing_in_python_floats_has_numpys_bits():
+    """The crossing is computed on Python floats (numpy's overhead on three numbers was most of an
+    overlay's time); it must give numpy's result bit for bit, degenerate segments included."""
+    from pnlviz.geometry.polylines import _border_crossing
+
+    rng = np.random.default_rng(11)
+    found = 0
+    for i in range(4000):
+        cur = np.r_[rng.integers(-2, 962, 2).astype(float) if i % 3 == 0 else rng.uniform(-300, 1300, 2), 1.0]
+        prev = [np.r_[rng.uniform(-300, 1300, 2), 1.0], np.zeros(3),  # a segment's first point: nothing before
+                np.r_[cur[0], rng.uniform(-60, 600), 1.0], np.r_[rng.uniform(-60, 1000), cur[1], 1.0],  # axis-parallel
+                cur.copy()][i % 5]  # the same point twice: no line
+        ours, theirs = _border_crossing(cur, prev, 960, 540), _crossing_with_numpy(cur, prev, 960, 540)
+        assert (ours is None) == (theirs is None), (cur, prev)
+        if theirs is not None:
+            found += 1
+            assert np.array_equal(ours, theirs), (cur, prev, ours, theirs)
+    assert found > 1000  # most segments do cross the border
+
+
 def test_visible_pitch_in_float64_stays_within_a_millipixel_of_the_evaluator(evaluator):
     rng = np.random.default_rng(8)
     for _ in range(30):

@@ -18,6 +18,8 @@ The evaluator's rules, restated:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pnlviz.errors import ArgumentError
@@ -68,20 +70,30 @@ def segment_in_image(p: np.ndarray, q: np.ndarray, width: float, height: float) 
     return (s0, s1) if s0 <= s1 else None
 
 
-def _border_crossing(cur: np.ndarray, prev: np.ndarray, width: float, height: float) -> np.ndarray | None:
-    """Crossing of the line through two homogeneous points with the border lines, as the evaluator
-    computes it (the candidate inside the image closest to ``cur``), or None."""
-    line = np.cross(cur, prev)
-    best, best_d = None, np.inf
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for side in ((1.0, 0.0, 0.0), (1.0, 0.0, -width + 1), (0.0, 1.0, 0.0), (0.0, 1.0, -height + 1)):
-            p = np.cross(line, side)
-            p = p / p[2]
-            if 0 <= p[0] < width and 0 <= p[1] < height:
-                d = np.sqrt(np.sum(np.square(p - cur)))
-                if d < best_d:  # np.argmin keeps the first minimum
-                    best, best_d = p, d
-    return best
+def _cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
+    """``np.cross`` of two 3-vectors in Python floats: the same products in the same order, so the
+    same bits, without numpy's overhead on three numbers (the crossing below took most of an
+    overlay's time)."""
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+def _border_crossing(cur, prev, width: float, height: float) -> np.ndarray | None:
+    """Crossing of the line through two homogeneous points (3 numbers each) with the border lines,
+    as the evaluator computes it (the candidate inside the image closest to ``cur``), or None."""
+    cx, cy, cw = (float(v) for v in cur)
+    line = _cross((cx, cy, cw), (float(prev[0]), float(prev[1]), float(prev[2])))
+    best, best_d = None, math.inf
+    right, bottom = float(-width + 1), float(-height + 1)  # as numpy turns the sides into float64
+    for side in ((1.0, 0.0, 0.0), (1.0, 0.0, right), (0.0, 1.0, 0.0), (0.0, 1.0, bottom)):
+        x, y, w = _cross(line, side)
+        if w == 0:  # a point at infinity: numpy's division gives inf or NaN, never inside
+            continue
+        x, y, one = x / w, y / w, w / w
+        if 0 <= x < width and 0 <= y < height:
+            d = math.sqrt((x - cx) * (x - cx) + (y - cy) * (y - cy) + (one - cw) * (one - cw))
+            if d < best_d:  # the first of equal distances, as np.argmin
+                best, best_d = (x, y, one), d
+    return None if best is None else np.array(best)
 
 
 def clip_polyline(uv: np.ndarray, valid: np.ndarray, width: float, height: float) -> np.ndarray:
@@ -130,13 +142,16 @@ def project_polylines(camera: Camera, polylines: dict[str, np.ndarray], width: f
     counts = [len(polylines[n]) for n in names]
     uv_all, ok_all = _project_like_evaluator(camera, np.vstack([polylines[n] for n in names]), evaluator_precision,
                                              skip_folded)
+    with np.errstate(invalid="ignore"):
+        seen = ok_all & (uv_all[:, 0] >= 0) & (uv_all[:, 0] < width) & (uv_all[:, 1] >= 0) & (uv_all[:, 1] < height)
     out: dict[str, np.ndarray] = {}
     start = 0
     for name, n in zip(names, counts):
-        clipped = clip_polyline(uv_all[start:start + n], ok_all[start:start + n], width, height)
+        if seen[start:start + n].any():  # else nothing of it is drawn (clip_polyline would say so)
+            clipped = clip_polyline(uv_all[start:start + n], ok_all[start:start + n], width, height)
+            if len(clipped):
+                out[name] = clipped
         start += n
-        if len(clipped):
-            out[name] = clipped
     return out
 
 
