@@ -70,6 +70,12 @@ def segment_in_image(p: np.ndarray, q: np.ndarray, width: float, height: float) 
     return (s0, s1) if s0 <= s1 else None
 
 
+def _inside(uv: np.ndarray, width: float, height: float) -> np.ndarray:
+    """(N,) whether each pixel of ``uv`` (N, 2) is inside a ``width`` x ``height`` image, by the
+    evaluator's rule (``0 <= u < W`` and ``0 <= v < H``; NaN is outside)."""
+    return (uv[:, 0] >= 0) & (uv[:, 0] < width) & (uv[:, 1] >= 0) & (uv[:, 1] < height)
+
+
 def _cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
     """``np.cross`` of two 3-vectors in Python floats: the same products in the same order, so the
     same bits, without numpy's overhead on three numbers (the crossing below took most of an
@@ -104,7 +110,7 @@ def clip_polyline(uv: np.ndarray, valid: np.ndarray, width: float, height: float
         raise ArgumentError(f"valid: expected one flag per point ({len(uv)},), got shape {np.shape(valid)}")
     idx = np.flatnonzero(valid)  # the evaluator skips the others entirely
     pts = uv[idx]
-    inside = (pts[:, 0] >= 0) & (pts[:, 0] < width) & (pts[:, 1] >= 0) & (pts[:, 1] < height)
+    inside = _inside(pts, width, height)
     if not inside.any():
         # A polyline can cross the image between two outside samples; the evaluator ignores that
         # case (it only looks for crossings next to an inside sample), and so do we.
@@ -142,8 +148,7 @@ def project_polylines(camera: Camera, polylines: dict[str, np.ndarray], width: f
     counts = [len(polylines[n]) for n in names]
     uv_all, ok_all = _project_like_evaluator(camera, np.vstack([polylines[n] for n in names]), evaluator_precision,
                                              skip_folded)
-    with np.errstate(invalid="ignore"):
-        seen = ok_all & (uv_all[:, 0] >= 0) & (uv_all[:, 0] < width) & (uv_all[:, 1] >= 0) & (uv_all[:, 1] < height)
+    seen = ok_all & _inside(uv_all, width, height)
     out: dict[str, np.ndarray] = {}
     start = 0
     for name, n in zip(names, counts):
