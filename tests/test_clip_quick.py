@@ -196,15 +196,16 @@ def served(clip_folder, tmp_path):
 
 def test_the_app_tells_the_shots_tabs_twice_and_keeps_the_latest_full_answer(served):
     """Two threads (two tabs) edit frames of one 70-frame shot at once: the shot's other frames
-    are told once for the quick answer (the edited frame is not: its tab redraws as it changed)
-    and once for the full one; when both are done the shot holds a full answer of every edit."""
+    are told once for the quick answer, as provisional (the edited frame is not: its tab redraws
+    as it changed), and once for the full one; when both are done the shot holds a full answer of
+    every edit."""
     plan, st, settings, stems, solver = served
-    told: list[list[str]] = []
-    st.shots.listen(told.append)
+    told: list[tuple[list[str], bool]] = []
+    st.shots.listen(lambda stems, provisional: told.append((stems, provisional)))
     kid, xy = _edit(plan, 35)
     st.move_keypoint(stems[35], kid, *xy, settings)
-    assert len(told) == 2
-    assert set(told[0]) == set(stems) - {stems[35]} and set(told[1]) == set(stems)
+    assert [provisional for _, provisional in told] == [True, False]
+    assert set(told[0][0]) == set(stems) - {stems[35]} and set(told[1][0]) == set(stems)
     assert not solver.fit(0).provisional
 
     errors: list[BaseException] = []
@@ -237,6 +238,8 @@ def test_a_full_solve_that_fails_leaves_the_edit_saved_and_the_shot_provisional_
     from pnlviz.calib.clip import ShotJob
 
     plan, st, settings, stems, solver = served
+    told: list[bool] = []
+    st.shots.listen(lambda stems, provisional: told.append(provisional))
 
     def broken(self):
         raise RuntimeError("solver failed")
@@ -246,6 +249,7 @@ def test_a_full_solve_that_fails_leaves_the_edit_saved_and_the_shot_provisional_
         kid, xy = _edit(plan, 35)
         with pytest.raises(RuntimeError, match="solver failed"):
             st.move_keypoint(stems[35], kid, *xy, settings)
+    assert told == [True, False]  # the tabs drew the quick answer, then whole (panels too) as it stands
     assert st.edits.get(stems[35])["keypoints"][str(kid)] == pytest.approx(xy)  # the edit is saved
     assert solver.edits[35][str(kid)] == pytest.approx(xy) and solver.fit(0).provisional
     full = solver.solve_job(0).run().part.fit.cameras  # a full solve from where it stands
@@ -271,17 +275,30 @@ def test_a_tab_on_another_frame_of_a_long_shot_draws_the_quick_answer_then_the_f
     b.show()
     b.flush()
     before = b.view().camera
-    cameras: list = []
-    original = b.show
-    b.show = lambda: (original(), cameras.append(b.view().camera))[0]
+    drawn: list[tuple[bool, object]] = []  # (with its panel, the camera drawn) per redraw
+    panels: list = []  # the camera of each panel drawn
+    original, show_panel = b.show, b.painter.show_panel
+    b.painter.show_panel = lambda view: (panels.append(view.camera), show_panel(view))[1]
+
+    def show(panel: bool = True):
+        view = original(panel)
+        drawn.append((panel, b.view().camera))
+        return view
+
+    b.show = show
     kid, xy = _edit(plan, 35)
     st.move_keypoint(stems[35], kid, *xy, a.settings)
     b.flush()
     # the quick answer, then the full one it ends on (under load the background pass can redraw it
     # once more meanwhile: the same frame)
+    cameras = [c for _, c in drawn]
     assert b.stem == stems[40] and cameras[-1] is solver.camera(40) and not solver.fit(0).provisional
-    quick = [c for c in cameras[:-1] if c is not before and c is not cameras[-1]]
+    quick = [(p, c) for p, c in drawn[:-1] if c is not before and c is not cameras[-1]]
     assert quick
+    # the quick answer redraws the picture alone; the full one the panel too
+    assert quick[0][0] is False and all(c is not quick[0][1] for c in panels)
+    assert drawn[-1][0] is True and panels[-1] is cameras[-1]
+    quick = [c for _, c in quick]
     # five frames from the edit, on this 70-frame shot, the edit moves the camera half a pixel and
     # the quick answer (the shot's centre held) is as far from the full one: within a pixel
     assert _max_error(quick[:1], cameras[-1:]) < 1.0

@@ -208,7 +208,7 @@ def test_an_edit_on_a_clip_frame_redraws_the_other_tabs_on_its_shot(video, tmp_p
     before = b.view().camera
     drawn: list[str] = []
     original = b.show
-    b.show = lambda: (drawn.append(b.stem), original())[1]
+    b.show = lambda panel=True: (drawn.append(b.stem), original(panel))[1]
     model = load_field_model()
     ids = np.array(model.keypoint_ids)
     uv, z = plan.cameras[8].project_with_depth(model.keypoint_xyz(ids))

@@ -88,15 +88,17 @@ class Painter:
         """The frame on the tab's screen (the tab's frame until it is first drawn)."""
         return self.shown.stem if self.shown is not None else self.tab.stem
 
-    def draw(self, view: FrameView) -> None:
-        """``view`` on the tab: image, overlays, panel, and the 3D view when it is open."""
+    def draw(self, view: FrameView, panel: bool = True) -> None:
+        """``view`` on the tab: image, overlays, panel (unless not ``panel``), and the 3D view when
+        it is open."""
         tab = self.tab
         self.shown = view
         self.drawn += 1
         with self._atomic():
             self.show_image(view)
             self.show_overlay(view)
-            self.show_panel(view)
+            if panel:
+                self.show_panel(view)
             if tab.view_control.mode is Mode.THREE_D:
                 tab.scene3d.show(view, render(view, tab.state.image(view.stem), self.layers,
                                               findings=self.findings(view)))

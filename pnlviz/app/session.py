@@ -121,15 +121,16 @@ class Session:
             return
         self.client.add_notification(title, body, auto_close_seconds=8.0, color="red" if error else None)
 
-    def show(self) -> FrameView | None:
-        """Recompute (or fetch from the cache) this tab's frame and send what changed to this tab."""
+    def show(self, panel: bool = True) -> FrameView | None:
+        """Recompute (or fetch from the cache) this tab's frame and send what changed to this tab
+        (without ``panel``: the picture and its overlays, the panel left as it is)."""
         with self.lock:
             if self.queue.closed:
                 return None
             if self.state.needs_detection(self.stem):
                 self.app.detect_in_background(self.stem)
             view = self.view()
-            self.painter.draw(view)
+            self.painter.draw(view, panel=panel)
             return view
 
     def flush(self, timeout: float = 30.0) -> None:

@@ -51,15 +51,18 @@ class ClipShots:
         self._building: set[tuple] = set()
         self._gates: dict[tuple, threading.Lock] = {}
         self._lock = threading.RLock()
-        #: ``callback(stems)`` after a shot was solved again: its frames show another camera
+        #: ``callback(stems, provisional)`` after a shot was solved again: its frames show another
+        #: camera (``provisional``: a quick answer, the full one follows)
         self._shot_listeners: list = []
         #: full solves waiting for :meth:`finish`, ``(model key, model, job)``, per thread: the thread
         #: whose edit made the quick answer runs them (its caller returns with the full answer in)
         self._pending = threading.local()
 
     def listen(self, callback) -> None:
-        """Call ``callback(stems)`` with the frames of a shot whenever it is solved again after an
-        edit (the tabs showing any of them redraw)."""
+        """Call ``callback(stems, provisional)`` with the frames of a shot whenever it is solved
+        again after an edit (the tabs showing any of them redraw). ``provisional``: the quick answer
+        of :meth:`changed`, which the full one follows within a few hundred ms (a tab may draw the
+        picture and leave its panel until then)."""
         self._shot_listeners.append(callback)
 
     def place(self, stem: str, settings, build: bool = True) -> ShotPlace | None:
@@ -142,6 +145,7 @@ class ClipShots:
         clip, t = where
         record = self.host.edits.get(stem)
         solved: set[str] = set()
+        quick: set[str] = set()
         with self._lock:
             for key, solver in list(self._solvers.items()):
                 if key[0] != clip:
@@ -152,13 +156,17 @@ class ClipShots:
                 edits = dict(record.get("keypoints") or {})
                 if edits != solver.edits.get(t, {}):
                     k = solver.set_edits(t, edits, solve=False)
+                    frames = {self.clips[clip][u] for u in solver.shots[k]}
                     if solver.quick_solve(t):
                         self._jobs().append((key, solver, solver.solve_job(k)))
+                        quick |= frames
                     else:
                         solver.solve(k)
                         self._after_solve(key, solver, k)
-                    solved |= {self.clips[clip][u] for u in solver.shots[k]}
-        self._tell(solved - {stem})  # the edited frame's tabs redraw as it changed
+                        solved |= frames
+        # the edited frame's tabs redraw as it changed
+        self._tell(solved - {stem})
+        self._tell(quick - solved - {stem}, provisional=True)
 
     def finish(self) -> None:
         """The full solves the quick answers of this thread's :meth:`changed` wait for, run outside
@@ -177,6 +185,7 @@ class ClipShots:
                 job.run()
             except Exception as exc:  # noqa: BLE001 - raised below, once the other shots are solved
                 failed = failed or exc
+                self._tell({self.clips[key[0]][u] for u in job.frames})  # what the quick answer left
                 continue
             with self._lock:
                 if not solver.install(job):
@@ -196,10 +205,10 @@ class ClipShots:
         if key[1] == self.host.default_settings:
             self._refresh_reviewed(key[0], solver, k, key[1])
 
-    def _tell(self, stems: set[str]) -> None:
+    def _tell(self, stems: set[str], provisional: bool = False) -> None:
         if stems:
             for callback in list(self._shot_listeners):
-                callback(sorted(stems))
+                callback(sorted(stems), provisional)
 
     def _refresh_reviewed(self, clip: str, solver: ClipSolver, k: int, settings) -> None:
         """The frames of shot ``k`` reviewed with their shot record what it shows now."""
@@ -284,6 +293,6 @@ class ClipShots:
                 if key[0] == place.clip and other is not solver:
                     del self._solvers[key]
         for callback in list(self._shot_listeners):  # the clip's frames show other shots: every tab redraws
-            callback(list(place.stems))
+            callback(list(place.stems), False)
         return cut
 
