@@ -50,6 +50,7 @@ width and scaled with the image width.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -94,6 +95,10 @@ def _sane(cam: Camera, params: CalibParams) -> str | None:
         return "non-finite camera"
     if cam.C[2] >= 0:
         return "camera below the pitch"
+    if -cam.C[2] < params.min_height_m:
+        return f"camera {-cam.C[2]:.1f} m above the pitch (a broadcast's: {params.min_height_m:g} m or more)"
+    if math.hypot(cam.C[0], cam.C[1]) > params.max_distance_m:
+        return f"camera {math.hypot(cam.C[0], cam.C[1]):.0f} m from the centre mark (at most {params.max_distance_m:g})"
     if not params.min_hfov_deg <= cam.hfov_deg <= params.max_hfov_deg:
         return f"field of view {cam.hfov_deg:.1f} deg out of range"
     return None
@@ -263,6 +268,8 @@ class CameraKind:
         points on the border are aimed inside: :attr:`CalibParams.border_aim_px`)."""
         self.data, self.params = data, params
         self.observed = data if observed is None else observed
+        #: why the last plane camera was refused as no broadcast's (:func:`_sane`), for the failure
+        self.refused: str | None = None
 
     @classmethod
     def of(cls, obs: Observations, params: CalibParams, model: FieldModel | None = None) -> "CameraKind":
@@ -300,7 +307,11 @@ class CameraKind:
             return None
         Hp, inl_plane = fit
         cam0 = camera_from_plane_homography(Hp, plane, obs.width, obs.height, self.data.model)
-        if cam0 is None or _sane(cam0, p):
+        if cam0 is None:
+            return None
+        insane = _sane(cam0, p)
+        if insane:
+            self.refused = insane
             return None
         err = _kp_errors(cam0, sub)
         inl = err < max(thr_px, p.px(5.0, obs.width))
@@ -344,6 +355,8 @@ class CameraKind:
         return lines + (prior_candidates(self.data, p) if p.prior_search else [])
 
     def degenerate(self) -> str:
+        if self.refused:  # the points fit a plane, through a camera no broadcast has
+            return f"no camera a broadcast can have: the keypoints fit a {self.refused}"
         planes = plane_masks(self.data.obs.kp_xyz, self.data.model)
         counts = ", ".join(f"{p} {int(m.sum())}" for p, m in planes.items())
         return f"degenerate geometry: no plane with {self.params.min_points} consistent keypoints ({counts})"

@@ -22,6 +22,13 @@ class CalibParams:
     max_rms: float = 15.0  #: a calibration whose inlier RMS (px) is above this is a failure
     min_hfov_deg: float = 1.0
     max_hfov_deg: float = 130.0
+    #: a camera a broadcast can have: at least this high above the pitch (m; a camera on the grass
+    #: sees every line edge-on, and a few weak detections fit one there exactly: a pitch corner or
+    #: the half-way line's end as the camera's centre) ...
+    min_height_m: float = 2.0
+    #: ... and no farther than this from the centre mark (m; a stadium's far stand is about 150 m
+    #: away); the development halves' cameras: 3.4-27 m high, at most 107 m away
+    max_distance_m: float = 250.0
     pnl: bool = True  #: run the PnL refinement
     alpha: float = DEFAULT_ALPHA  #: PnL weight of lines vs points (paper: 0.6)
     line_gate_px: float = 20.0  #: a line/circle joins PnL when all its points are this close to its projection

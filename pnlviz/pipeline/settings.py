@@ -18,6 +18,7 @@ __all__ = ["check_settings"]
 _RANGES: dict[str, tuple[float, float]] = {
     "alpha": (0.0, 1.0), "min_hfov_deg": (0.01, 179.0), "max_hfov_deg": (0.01, 179.0), "tol": (1e-15, 0.5),
     "min_points": (3, 1000), "refine_top": (1, 1000), "class_tolerance_px": (0.0, 1000.0),  # 0: off
+    "min_height_m": (0.0, 1000.0),  # 0: any camera above the pitch
 }
 _POSITIVE_MAX = 1e6
 
