@@ -156,14 +156,13 @@ class ClipShots:
                 edits = dict(record.get("keypoints") or {})
                 if edits != solver.edits.get(t, {}):
                     k = solver.set_edits(t, edits, solve=False)
-                    frames = {self.clips[clip][u] for u in solver.shots[k]}
                     if solver.quick_solve(t):
                         self._jobs().append((key, solver, solver.solve_job(k)))
-                        quick |= frames
+                        quick |= {self.clips[clip][u] for u in solver.shots[k]}
                     else:
                         solver.solve(k)
                         self._after_solve(key, solver, k)
-                        solved |= frames
+                        solved |= {self.clips[clip][u] for u in solver.shots[k]}
         # the edited frame's tabs redraw as it changed
         self._tell(solved - {stem})
         self._tell(quick - solved - {stem}, provisional=True)
