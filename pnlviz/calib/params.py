@@ -26,9 +26,11 @@ class CalibParams:
     #: sees every line edge-on, and a few weak detections fit one there exactly: a pitch corner or
     #: the half-way line's end as the camera's centre) ...
     min_height_m: float = 2.0
-    #: ... and no farther than this from the centre mark (m; a stadium's far stand is about 150 m
-    #: away); the development halves' cameras: 3.4-27 m high, at most 107 m away
-    max_distance_m: float = 250.0
+    #: ... and no farther than this from the centre mark (m): a camera kilometres away is a
+    #: degenerate fit (one came 3e7 m away), not a telephoto from the far stand (about 150 m away).
+    #: The development halves' cameras: 3.4-27 m high, at most 107 m away; a pin dragged 60 px
+    #: against ten detections zoomed out can give a camera 300 m away that fits what is seen
+    max_distance_m: float = 1000.0
     pnl: bool = True  #: run the PnL refinement
     alpha: float = DEFAULT_ALPHA  #: PnL weight of lines vs points (paper: 0.6)
     line_gate_px: float = 20.0  #: a line/circle joins PnL when all its points are this close to its projection
