@@ -291,7 +291,6 @@ class ClipShots:
             for key, other in list(self._solvers.items()):  # the other settings' models follow the saved cuts
                 if key[0] == place.clip and other is not solver:
                     del self._solvers[key]
-        for callback in list(self._shot_listeners):  # the clip's frames show other shots: every tab redraws
-            callback(list(place.stems), False)
+        self._tell(set(place.stems))  # the clip's frames show other shots: every tab on them redraws
         return cut
 

@@ -95,10 +95,11 @@ def _sane(cam: Camera, params: CalibParams) -> str | None:
         return "non-finite camera"
     if cam.C[2] >= 0:
         return "camera below the pitch"
-    if -cam.C[2] < params.min_height_m:
-        return f"camera {-cam.C[2]:.1f} m above the pitch (a broadcast's: {params.min_height_m:g} m or more)"
-    if math.hypot(cam.C[0], cam.C[1]) > params.max_distance_m:
-        return f"camera {math.hypot(cam.C[0], cam.C[1]):.0f} m from the centre mark (at most {params.max_distance_m:g})"
+    height, distance = -float(cam.C[2]), math.hypot(cam.C[0], cam.C[1])
+    if height < params.min_height_m:
+        return f"camera {height:.1f} m above the pitch (a broadcast's: {params.min_height_m:g} m or more)"
+    if distance > params.max_distance_m:
+        return f"camera {distance:.0f} m from the centre mark (at most {params.max_distance_m:g})"
     if not params.min_hfov_deg <= cam.hfov_deg <= params.max_hfov_deg:
         return f"field of view {cam.hfov_deg:.1f} deg out of range"
     return None
