@@ -98,6 +98,7 @@ def render_and_detect(plan, cache: Path | None):
     if where is not None and (where / "preds.zip").exists():
         preds = read_predictions(where / "preds.zip")
         return anns, [preds[s] for s in stems], json.loads((where / "changes.json").read_text())
+    from pnlviz.calib.looks import take_look
     from pnlviz.detect.run import Detector
     from pnlviz.synth.clip import clip_frame
 
@@ -108,7 +109,7 @@ def render_and_detect(plan, cache: Path | None):
         if prev is not None:
             changes.append(image_change(prev, img))
         prev = img
-        preds.append(det.detect([img])[0])
+        preds.append(take_look(det.detect([img])[0], (img.shape[1], img.shape[0]), det.calibration)[0])
     if where is not None:
         where.mkdir(parents=True, exist_ok=True)
         write_predictions(where / "preds.zip", dict(zip(stems, preds)))

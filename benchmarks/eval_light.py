@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
+from pnlviz.calib.looks import take_look
 from pnlviz.data import open_dataset
 from pnlviz.detect.run import DEFAULT_MODEL, Detector, light_detector
 from pnlviz.labels import LabelParams, keypoints_from_annotation, line_extremities
@@ -75,6 +76,7 @@ def evaluate_synthetic(det: Detector, frames: int, seed: int) -> dict:
         t0 = time.perf_counter()
         pred = det.detect([img])[0]
         times.append(time.perf_counter() - t0)
+        pred = take_look(pred, (img.shape[1], img.shape[0]), det.calibration)[0]  # the second look, where needed
         H, W = img.shape[:2]
         ann = ds.annotation(stem)
         labels = keypoints_from_annotation(ann, W, H, LabelParams(lr_disambiguation=True))
@@ -126,7 +128,7 @@ def main() -> None:
         img = cv2.imread(str(args.shared / "data" / "frames" / name))
         if img is None:
             continue
-        pred = det.detect([img])[0]
+        pred = take_look(det.detect([img])[0], (img.shape[1], img.shape[0]), det.calibration)[0]
         tiles.append(caption(draw_detections(img, pred), f"{name}: {len(pred.keypoints)} keypoints, "
                                                           f"{len(pred.lines)} lines"))
     if tiles:

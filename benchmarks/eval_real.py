@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
+from pnlviz.calib.looks import take_look
 from pnlviz.data import read_homographies
 from pnlviz.data.layout import sort_stems
 from pnlviz.detect.run import DEFAULT_MODEL, Detector, light_detector
@@ -79,6 +80,7 @@ def run_frames(det: Detector, images: dict[str, np.ndarray], homographies: dict[
         t0 = time.perf_counter()
         pred = det.detect([img])[0]
         times.append(time.perf_counter() - t0)
+        pred = take_look(pred, (img.shape[1], img.shape[0]), det.calibration)[0]  # the second look, where needed
         preds[stem] = pred
         Hs = homography_for_size(homographies[stem], SIZE)
         truth = labels_from_homography(Hs, W, H).labels.keypoints
@@ -176,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
                                      f"reprojection {e:.1f} px"))
             messi = cv2.imread(str(data / "frames" / "messi_sample.png"))
             if messi is not None:
-                pred = det.detect([messi])[0]
+                pred = take_look(det.detect([messi])[0], (messi.shape[1], messi.shape[0]), det.calibration)[0]
                 fc = calibrate_frame(FrameInputs((messi.shape[1], messi.shape[0]), detections=pred),
                                      FrameSettings(detection_settings=det.calibration))
                 tiles.append(caption(draw(messi, pred, fc.result.camera if fc.ok else None),

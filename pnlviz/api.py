@@ -425,9 +425,10 @@ def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: f
     >>> pnlviz.calibrate(**found, image_size=(960, 540)).ok
     True
     """
+    from pnlviz.calib.looks import take_look
     from pnlviz.detect.image import detect_image
 
-    return detect_image(image, weights, threshold=threshold)
+    return detect_image(image, weights, threshold=threshold, look=take_look)
 
 
 def top_view(camera: Camera | None = None, image: np.ndarray | None = None, points_pitch: ArrayLike | None = None,

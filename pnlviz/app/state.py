@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from pnlviz.calib.frame import SOURCES, detection_settings_apply
+from pnlviz.calib.looks import take_look
 from pnlviz.conventions import EVAL_SIZE
 from pnlviz.data import DataError
 from pnlviz.data.annotations import annotation_to_json, parse_annotation
@@ -204,7 +205,8 @@ class AppState:
         img = self.image(stem)
         if img is None:
             return
-        pred = self.detector.detect([img])[0]
+        pred, _ = take_look(self.detector.detect([img])[0], (img.shape[1], img.shape[0]),
+                            self.reader.detection_settings, self.model)
         self.detected[stem] = pred
         with self._lock:
             # views the detections change are computed again; the others stay (a frame calibrated

@@ -111,7 +111,10 @@ def _load_detector(args):
 
 
 def _detect_here(ds, det, stems: list[str], step: int):
-    """``(stem, Predictions | None, problem | None)`` of every frame, ``step`` frames per pass."""
+    """``(stem, Predictions | None, problem | None)`` of every frame, ``step`` frames per pass;
+    each frame's second reading kept where its first gives no camera
+    (:func:`pnlviz.calib.looks.take_look`)."""
+    from pnlviz.calib.looks import take_look
     from pnlviz.data import DataError
 
     for i in range(0, len(stems), step):
@@ -122,7 +125,8 @@ def _detect_here(ds, det, stems: list[str], step: int):
                 batch.append(stem)
             except DataError as exc:
                 yield stem, None, str(exc)
-        yield from ((stem, p, None) for stem, p in zip(batch, det.detect(images) if images else []))
+        for stem, img, p in zip(batch, images, det.detect(images) if images else []):
+            yield stem, take_look(p, (img.shape[1], img.shape[0]), det.calibration)[0], None
 
 
 def _detector_key(kw: dict) -> str:
@@ -191,6 +195,8 @@ def _sidecar(args, det, frames: int) -> dict:
         "precision": "float16" if args.half else "float32",
         "kp_threshold": det.kp_threshold,
         "line_threshold": det.line_threshold, "peak_refine": det.refine,
+        "second_look": (None if det.second_look is None
+                        else dict(zip(("kp_threshold", "line_threshold"), det.second_look))),
         "calibration": det.calibration, "frames": frames,
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }

@@ -68,6 +68,10 @@ class Predictions:
 
     keypoints: dict[int, KeypointPred] = field(default_factory=dict)
     lines: dict[int, LinePred] = field(default_factory=dict)
+    #: the same heatmaps read again at a detector's lower ``second_look`` thresholds, when that
+    #: finds more: kept for a frame these detections leave without a camera
+    #: (:func:`pnlviz.calib.looks.take_look` decides). In memory only: a zip holds one reading.
+    second: "Predictions | None" = field(default=None, compare=False, repr=False)
 
     def keypoints_px(self, width: float, height: float) -> dict[int, KeypointPred]:
         """``{id: (x_px, y_px, p)}`` for an image of ``width`` x ``height`` pixels."""

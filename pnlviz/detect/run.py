@@ -37,6 +37,10 @@ class Detector:
     input_size: tuple[int, int] = DEFAULT_INPUT_SIZE
     kp_threshold: float = 0.1
     line_threshold: float = 0.1
+    #: (keypoint, line) thresholds of a second reading of the heatmaps, at or below the first's,
+    #: attached to a frame's detections when it finds more (``Predictions.second``): the light
+    #: model's sidecar names them; the reading is kept only where the first gives no camera
+    second_look: tuple[float, float] | None = None
     #: How input pixels map back to the frame when the frame was resized. False: ``X = x / s``
     #: (``s`` = input / frame size), PnLCalib's own scaling, kept for its published networks.
     #: True: ``X = (x + 0.5) / s - 0.5``, the exact inverse of ``cv2.resize`` (which aligns pixel
@@ -60,6 +64,11 @@ class Detector:
     half: bool = False
 
     def __post_init__(self) -> None:
+        if self.second_look is not None:  # never above the first reading's
+            kp, line = (float(v) for v in self.second_look)
+            if not (0.0 <= kp <= 1.0 and 0.0 <= line <= 1.0):
+                raise ValueError(f"second_look: two thresholds in [0, 1] (keypoints, lines), got {self.second_look!r}")
+            self.second_look = (min(kp, self.kp_threshold), min(line, self.line_threshold))
         if self.device != "cpu":
             for net in (self.kp_net, self.line_net):
                 if net is not None:
@@ -119,13 +128,23 @@ class Detector:
         kp, lines = self.heatmaps(images_bgr)
         out = []
         for b, img in enumerate(images_bgr):
-            pred = extract_predictions(None if kp is None else kp[b], None if lines is None else lines[b],
-                                       self.input_size, kp_threshold=self.kp_threshold,
-                                       line_threshold=self.line_threshold, refine=self.refine)
-            if self.centre_aligned_resize:
-                pred = undo_centre_aligned_resize(pred, self.input_size, (img.shape[1], img.shape[0]))
+            pred = self._read(None if kp is None else kp[b], None if lines is None else lines[b], img,
+                              self.kp_threshold, self.line_threshold)
+            if self.second_look is not None:
+                second = self._read(None if kp is None else kp[b], None if lines is None else lines[b], img,
+                                    *self.second_look)
+                if len(second.keypoints) + len(second.lines) > len(pred.keypoints) + len(pred.lines):
+                    pred.second = second
             out.append(pred)
         return out
+
+    def _read(self, kp, lines, img: np.ndarray, kp_threshold: float, line_threshold: float) -> Predictions:
+        """One frame's heatmaps read at the given peak thresholds, normalised for ``img``'s size."""
+        pred = extract_predictions(kp, lines, self.input_size, kp_threshold=kp_threshold,
+                                   line_threshold=line_threshold, refine=self.refine)
+        if self.centre_aligned_resize:
+            pred = undo_centre_aligned_resize(pred, self.input_size, (img.shape[1], img.shape[0]))
+        return pred
 
 
 class DeviceError(ValueError):
@@ -168,6 +187,17 @@ def undo_centre_aligned_resize(pred: Predictions, input_size, frame_size) -> Pre
     return Predictions(keypoints=keypoints, lines=lines)
 
 
+def _second_look(look, weights) -> tuple[float, float] | None:
+    """A sidecar's ``"second_look": {"kp_threshold": k, "line_threshold": l}`` -> (k, l)."""
+    if look is None:
+        return None
+    try:
+        return float(look["kp_threshold"]), float(look["line_threshold"])
+    except (TypeError, KeyError, ValueError):
+        raise ValueError(f"{weights}: the sidecar's second_look must be "
+                         f"{{\"kp_threshold\": k, \"line_threshold\": l}}, got {look!r}"[:300]) from None
+
+
 def light_detector(weights: str | Path, input_size: tuple[int, int] | None = None, **kw) -> Detector:
     """A ``Detector`` on a light checkpoint. ``input_size`` defaults to the size it was trained at,
     the peak thresholds (``kp_threshold``, ``line_threshold``), the sub-pixel refinement
@@ -182,7 +212,8 @@ def light_detector(weights: str | Path, input_size: tuple[int, int] | None = Non
         else:
             input_size = DEFAULT_INPUT_SIZE
     tuned = {"kp_threshold": side.get("kp_threshold"), "line_threshold": side.get("line_threshold"),
-             "refine": side.get("peak_refine"), "calibration": side.get("calibration")}
+             "refine": side.get("peak_refine"), "calibration": side.get("calibration"),
+             "second_look": _second_look(side.get("second_look"), weights)}
     for name, value in tuned.items():  # what the caller leaves at None comes from the sidecar
         if kw.get(name) is None:
             kw.pop(name, None)

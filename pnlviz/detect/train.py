@@ -376,6 +376,7 @@ def _provenance(config: TrainConfig, sources: list[Source], net: LightNet, run: 
         "kp_threshold": float(config.kp_threshold),
         "line_threshold": float(config.line_threshold),
         "peak_refine": str(config.peak_refine),
+        "second_look": None if config.second_look is None else dict(config.second_look),
         "calibration": dict(config.calibration),
         "config": config.to_dict(),
         "seed": config.seed,

@@ -32,6 +32,9 @@ class TrainConfig:
     kp_threshold: float = 0.1  # peak thresholds the detector uses with this model (kept in the sidecar)
     line_threshold: float = 0.1
     peak_refine: str = "log"  # sub-pixel peak refinement the detector uses with this model (sidecar)
+    #: lower peak thresholds of a second reading for frames the first leaves without a camera
+    #: (``{"kp_threshold": k, "line_threshold": l}``, sidecar; None: none)
+    second_look: dict | None = None
     calibration: dict = field(default_factory=dict)  # CalibParams overrides for its detections (sidecar)
     seed: int = 0
     threads: int = 2
@@ -123,6 +126,11 @@ def check_config(cfg: TrainConfig) -> None:
     for name in ("calibration", "augment"):
         if not isinstance(getattr(cfg, name), dict):
             raise ValueError(f"{name} must be an object, got {getattr(cfg, name)!r}"[:100])
+    look = cfg.second_look
+    if look is not None and not (isinstance(look, dict) and set(look) == {"kp_threshold", "line_threshold"}
+                                 and all(_range_problem(k, v, False, 0.0, 1.0) is None for k, v in look.items())):
+        raise ValueError(f"second_look must be {{\"kp_threshold\": k, \"line_threshold\": l}} in [0, 1], "
+                         f"got {look!r}"[:120])
     if not isinstance(cfg.real, list):
         raise ValueError(f"real must be a list of sources, got {cfg.real!r}"[:100])
 

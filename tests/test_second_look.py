@@ -1,0 +1,133 @@
+"""A second look at a frame's detections (issue #35): the detector reads its heatmaps again at
+lower thresholds, and the frame keeps that reading only where the first gives no camera
+(:func:`pnlviz.calib.looks.take_look`); `pnlviz detect` and the app keep what it decides."""
+
+import numpy as np
+import pytest
+
+from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
+from pnlviz.calib.looks import take_look
+from pnlviz.data import Predictions
+from pnlviz.field import load_field_model
+from pnlviz.geometry.camera import Camera
+
+W, H = 960, 540
+MODEL = load_field_model()
+
+
+def _camera() -> Camera:
+    return Camera.from_look_at(np.array([0.0, 55.0, -18.0]), np.array([-30.0, 5.0, 0.0]), hfov_deg=40.0,
+                               width=W, height=H)
+
+
+def _seen(cam: Camera, p: float = 0.9) -> Predictions:
+    """The ground keypoints (PnLCalib's ids, not 52) the camera shows, as detections scoring ``p``."""
+    ids = [k for k in range(1, 58) if k != 52 and abs(MODEL.keypoint_xyz([k])[0, 2]) < 1e-9]
+    uv, z = cam.project_with_depth(MODEL.keypoint_xyz(ids))
+    inside = (z > 0) & cam.in_image(uv)
+    return Predictions(keypoints={k: (float(u) / W, float(v) / H, p) for k, (u, v), ok in zip(ids, uv, inside) if ok})
+
+
+def _calibrates(pred: Predictions) -> bool:
+    return calibrate_frame(FrameInputs((W, H), detections=pred), FrameSettings(source="detections")).ok
+
+
+def test_a_frame_keeps_its_first_reading_unless_only_the_second_gives_a_camera():
+    full = _seen(_camera())
+    assert len(full.keypoints) >= 6 and _calibrates(full)
+    one = Predictions(keypoints=dict(list(full.keypoints.items())[:1]))
+    assert not _calibrates(one)
+
+    # the first gives no camera, the second does: the second, without anything attached
+    weak = Predictions(keypoints=dict(one.keypoints), second=full)
+    kept, second = take_look(weak, (W, H))
+    assert second and kept == full and kept.second is None
+
+    # the first gives a camera: kept as it is, the weaker peaks dropped
+    more = Predictions(keypoints={**full.keypoints, 99: (0.5, 0.5, 0.2)})
+    strong = Predictions(keypoints=dict(full.keypoints), second=more)
+    kept, second = take_look(strong, (W, H))
+    assert not second and kept == full and kept.second is None
+
+    # neither gives one: the first; no second reading: the detections as they came
+    kept, second = take_look(Predictions(keypoints=dict(one.keypoints), second=one), (W, H))
+    assert not second and kept == one and kept.second is None
+    assert take_look(full, (W, H)) == (full, False)
+
+
+def test_the_detector_attaches_a_second_reading_only_where_it_finds_more():
+    torch = pytest.importorskip("torch")
+    from pnlviz.detect.run import Detector
+
+    class Fixed(torch.nn.Module):
+        """A network whose heatmaps are given (one frame)."""
+
+        def __init__(self, maps):
+            super().__init__()
+            self.maps = torch.from_numpy(maps)
+
+        def forward(self, x):
+            return self.maps[None].expand(x.shape[0], -1, -1, -1)
+
+    h, w = 64, 112  # heatmaps of a 224x128 input
+    kp = np.zeros((58, h, w), np.float32)
+    kp[0, 20, 30] = 0.9  # keypoint 1: a strong peak
+    kp[4, 40, 80] = 0.25  # keypoint 5: under the first threshold, over the second
+    kp[9, 10, 10] = 0.1  # keypoint 10: under both
+    lines = np.zeros((24, h, w), np.float32)
+    lines[2, 10, 10], lines[2, 50, 90] = 0.8, 0.35  # line 3: one end under the first threshold
+    image = np.zeros((128, 224, 3), np.uint8)
+    kw = dict(input_size=(224, 128), kp_threshold=0.3, line_threshold=0.4)
+
+    pred = Detector(Fixed(kp), Fixed(lines), second_look=(0.2, 0.3), **kw).detect([image])[0]
+    assert set(pred.keypoints) == {1} and pred.lines == {}
+    assert pred.second is not None and set(pred.second.keypoints) == {1, 5} and set(pred.second.lines) == {3}
+    assert pred.second.keypoints[1] == pred.keypoints[1]  # the same peak, the same place
+    # nothing between the two thresholds: no second reading; none asked for: none either
+    kp[4, 40, 80] = 0.1
+    lines[2, 50, 90] = 0.2
+    assert Detector(Fixed(kp), Fixed(lines), second_look=(0.2, 0.3), **kw).detect([image])[0].second is None
+    kp[4, 40, 80] = 0.25
+    assert Detector(Fixed(kp), Fixed(lines), **kw).detect([image])[0].second is None
+    with pytest.raises(ValueError, match="second_look"):
+        Detector(Fixed(kp), Fixed(lines), second_look=(0.2, 1.5), **kw)
+
+
+class _Stub:
+    """A detector whose detections of every frame are given: a first reading that gives no camera
+    and a second that does."""
+
+    calibration: dict = {}
+
+    def __init__(self, weak: Predictions):
+        self.weak = weak
+
+    def detect(self, images):
+        return [Predictions(keypoints=dict(self.weak.keypoints), second=self.weak.second) for _ in images]
+
+
+def _weak_frame() -> Predictions:
+    full = _seen(_camera())
+    return Predictions(keypoints=dict(list(full.keypoints.items())[:1]), second=full)
+
+
+def test_pnlviz_detect_and_the_app_keep_the_reading_take_look_decides(tmp_path):
+    from helpers import copy_sample_frames
+    from pnlviz.app.state import AppState
+    from pnlviz.commands.detect import _detect_here
+    from pnlviz.data import open_dataset
+
+    frames = copy_sample_frames(tmp_path / "frames", 2)
+    weak = _weak_frame()
+    ds = open_dataset(frames)
+    out = list(_detect_here(ds, _Stub(weak), ds.stems, 2))
+    assert [s for s, _, _ in out] == list(ds.stems) and all(problem is None for _, _, problem in out)
+    # the sample frames are 960x540: the second reading, as a zip holds it (nothing attached)
+    assert all(p == weak.second and p.second is None for _, p, _ in out)
+
+    st = AppState(frames, edits=tmp_path / "edits", detector=_Stub(weak))
+    try:
+        st.run_detector(ds.stems[0])
+        assert st.detected[ds.stems[0]] == weak.second and st.detected[ds.stems[0]].second is None
+    finally:
+        st.close()
