@@ -154,12 +154,24 @@ class PerFrame:
 class ShotModel:
     """Edits drive the shot's solve (:class:`pnlviz.calib.clip.ClipSolver`)."""
 
-    def __init__(self, start: PerFrame, changes, params, calib_params, size, model):
+    def __init__(self, start: PerFrame, preds, settings, changes, params, calib_params, size, model):
         from pnlviz.calib.clip import ClipSolver
+        from pnlviz.calib.frame import FrameInputs, observations_for
+        from pnlviz.calib.looks import for_shot
 
-        T = len(start.frames)
-        self.solver = ClipSolver([start.observations(t) for t in range(T)], size, params, calib_params,
-                                 cameras=[start.camera(t) for t in range(T)], changes=changes, model=model)
+        obs, cams, looked = [], [], set()
+        for t, pred in enumerate(preds):  # as the app does: the shot fits the first reading alone
+            inputs = FrameInputs(size, detections=pred)
+            seen = for_shot(inputs, calib_params)
+            if seen is inputs:
+                obs.append(start.observations(t))
+                cams.append(start.camera(t))
+            else:  # a second look: its first reading gave no camera
+                obs.append(observations_for(seen, settings.source, model)[0])
+                cams.append(None)
+                looked.add(t)
+        self.solver = ClipSolver(obs, size, params, calib_params, cameras=cams, changes=changes, model=model,
+                                 looked=frozenset(looked))
         self.seconds: list[tuple[int, float]] = []
 
     def camera(self, t):
@@ -381,7 +393,7 @@ def run_clip(seed: int, args) -> dict:
     params = TemporalParams(fit_k1=cp.refine_k1)
     out = {"frames": len(plan.cameras), "true_shots": len(set(plan.shot_of)), "prep_s": prep}
     per = PerFrame(preds, settings, size, model)
-    shot = ShotModel(per, changes, params, cp, size, model)  # from the per-frame cameras before any edit
+    shot = ShotModel(per, preds, settings, changes, params, cp, size, model)  # before any edit
     out["shots"] = len(shot.solver.shots)
     for name, mode in (("per_frame", per), ("shot", shot)):
         if name not in args.arms:

@@ -413,7 +413,9 @@ def detect(image: np.ndarray, weights: str | Path | None = None, *, threshold: f
     the same as ``pnlviz.detect(image)`` (type checkers see ``pnlviz.detect`` as the package: typed
     code imports this one, ``from pnlviz.api import detect``). Needs ``pip install 'pnlviz[detect]'``
     (PyTorch). ``weights``: a light model (default: the shipped one); ``threshold``: the
-    keypoint score below which a detection is left out.
+    keypoint score below which a detection is left out. An image whose detections give no camera
+    is read again at the model's lower ``second_look`` thresholds, kept when that gives one
+    (``docs/detector.md``): its weak points keep their scores.
 
     >>> import pnlviz
     >>> from pnlviz.api import detect  # pnlviz.detect, as type checkers see it

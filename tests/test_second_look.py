@@ -131,3 +131,118 @@ def test_pnlviz_detect_and_the_app_keep_the_reading_take_look_decides(tmp_path):
         assert st.detected[ds.stems[0]] == weak.second and st.detected[ds.stems[0]].second is None
     finally:
         st.close()
+
+
+def _pan(t: int) -> Camera:
+    """Frame ``t`` of a slow pan from the main camera's place."""
+    return Camera.from_look_at(np.array([0.0, 55.0, -18.0]), np.array([-30.0 + 1.5 * t, 5.0, 0.0]), hfov_deg=40.0,
+                               width=W, height=H)
+
+
+def _grid_error(a: Camera, b: Camera) -> float:
+    """Median distance (px) between where two cameras put a 5 m grid of the pitch in view."""
+    gx, gy = np.meshgrid(np.arange(-50.0, 51.0, 5.0), np.arange(-30.0, 31.0, 5.0))
+    grid = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], 1)
+    pa, za = a.project_with_depth(grid)
+    ok = (za > 0) & a.in_image(pa)
+    return float(np.median(np.hypot(*(pa[ok] - b.project(grid[ok])).T)))
+
+
+def _misread_clip(weak: range, T: int = 12):
+    """A pan whose frames ``weak`` the first reading leaves with two keypoints each and the second
+    look fills with weak peaks in the wrong places: those of a camera 40 m to the side."""
+    frames = [_seen(_pan(t)) for t in range(T)]
+    for t in weak:
+        wrong = _seen(Camera.from_look_at(np.array([40.0, 55.0, -18.0]), np.array([-20.0 + 1.5 * t, 5.0, 0.0]),
+                                          hfov_deg=40.0, width=W, height=H), p=0.25)
+        strong = dict(list(frames[t].keypoints.items())[:2])
+        frames[t] = Predictions(keypoints={**{k: v for k, v in wrong.keypoints.items() if k not in strong}, **strong})
+    return frames
+
+
+def test_a_shot_fits_the_first_reading_and_carries_the_frames_a_second_look_misread():
+    """Three frames in a row whose weak peaks fit another camera (a central view read again:
+    clip 113 of the clip benchmark): the shot places them from their neighbours."""
+    from pnlviz.calib.temporal import calibrate_clip_frames
+
+    weak = range(5, 8)
+    frames = _misread_clip(weak)
+    inputs = [FrameInputs((W, H), detections=p) for p in frames]
+    floor = FrameSettings(source="detections", detection_settings={"shot_min_score": [0.3, 0.4]})
+    for t in weak:  # each one's own camera follows its weak peaks
+        alone = calibrate_frame(inputs[t], floor)
+        assert alone.ok and _grid_error(_pan(t), alone.camera) > 50
+
+    fit = calibrate_clip_frames(inputs, floor)
+    assert fit.result.shots == [range(0, 12)]
+    for t in weak:
+        assert fit.per_frame[t] is None  # the first reading alone: no camera of its own
+        assert len(fit.observations[t].kp_ids) == 2
+        assert fit.result.choices[t].use == "shot" and _grid_error(_pan(t), fit.result.cameras[t]) < 2.0
+        assert fit.result.choices[t].reason == ("its own camera rests on detections under the detector's thresholds "
+                                                "(a second look), which a shot does not fit: the shot carries it")
+    assert fit.result.choices[4].reason != fit.result.choices[5].reason
+    # every detection in the shot: the misread frames keep their own (wrong) cameras
+    every = calibrate_clip_frames(inputs, FrameSettings(source="detections"))
+    assert all(_grid_error(_pan(t), every.result.cameras[t]) > 50 for t in weak)
+
+
+def test_confident_drops_what_scores_under_the_first_thresholds_and_nothing_else():
+    from pnlviz.calib.calibrate import CalibParams
+    from pnlviz.calib.looks import confident, for_shot
+
+    pred = Predictions(keypoints={1: (0.1, 0.2, 0.9), 2: (0.3, 0.4, 0.25), 3: (0.5, 0.5, 0.3)},
+                       lines={1: (0.1, 0.1, 0.9, 0.2, 0.2, 0.5), 2: (0.1, 0.1, 0.9, 0.2, 0.2, 0.35)})
+    kept = confident(pred, (0.3, 0.4))
+    assert set(kept.keypoints) == {1, 3} and set(kept.lines) == {1} and kept.keypoints[1] == pred.keypoints[1]
+    assert confident(kept, (0.3, 0.4)) is kept and confident(pred, (0.0, 0.0)) is pred
+    inputs = FrameInputs((W, H), detections=pred)
+    assert for_shot(inputs, CalibParams()) is inputs  # no floor stated: every detection
+    assert for_shot(inputs, CalibParams(shot_min_score=(0.3, 0.4))).detections == kept
+    bare = FrameInputs((W, H), annotation={})
+    assert for_shot(bare, CalibParams(shot_min_score=(0.3, 0.4))) is bare
+
+
+def test_the_apps_clip_model_fits_what_the_shot_sees_whatever_cameras_it_is_given(tmp_path):
+    """The app builds a clip's model from a prediction zip and the detector's settings beside it,
+    handing over the frames' own cameras (from all their detections): the misread frames still
+    get the shot's camera, and the shot shows their two confident points only."""
+    import shutil
+
+    from pnlviz import EXAMPLES_DIR
+    from pnlviz.data import write_predictions, write_predictions_info
+    from pnlviz.pipeline.clip import clip_solver, dataset_clips
+    from pnlviz.pipeline.reader import FrameReader
+
+    weak = range(5, 8)
+    frames = _misread_clip(weak)
+    data = tmp_path / "clip"
+    data.mkdir()
+    stems = [f"m-IMG_{t + 1}" for t in range(len(frames))]
+    for s in stems:  # one picture for every frame: no cut in the clip
+        shutil.copy(EXAMPLES_DIR / "sample" / "00000.jpg", data / f"{s}.jpg")
+    preds = tmp_path / "preds.zip"
+    write_predictions(preds, dict(zip(stems, frames)))
+    write_predictions_info(preds, {"calibration": {"shot_min_score": [0.3, 0.4]}})
+    reader = FrameReader.open(data, detections=preds)
+    try:
+        assert dataset_clips(reader.stems)["m"] == stems
+        own = [calibrate_frame(FrameInputs((W, H), detections=p), FrameSettings(source="detections")).camera
+               for p in frames]
+        for cameras in (None, own):
+            solver = clip_solver(reader, "m", stems, cameras=cameras)
+            for t in weak:
+                assert solver.own_camera(t) is None and len(solver.shown_observations(t).kp_ids) == 2
+                assert solver.choice(t).use == "shot" and _grid_error(_pan(t), solver.camera(t)) < 2.0
+                assert "(a second look)" in solver.choice(t).reason
+    finally:
+        reader.close()
+
+
+def test_a_frame_without_the_shots_camera_is_told_its_own_rests_on_a_second_look():
+    from pnlviz.calib.shot_check import CameraChoice, second_look_choice
+
+    told = second_look_choice(CameraChoice("none", "the shot has no camera, and the frame has none of its own"))
+    assert told.use == "none" and told.reason == (
+        "the shot has no camera; its own camera rests on detections under the detector's thresholds "
+        "(a second look), which a shot does not fit")

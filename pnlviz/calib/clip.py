@@ -120,6 +120,9 @@ class ClipSolver:
     #: the keypoint edits made so far: ``{frame: {"id": [x, y] | None}}`` (``cameras``, when given,
     #: are the frames' own cameras with them)
     keypoint_edits: Mapping[int, Mapping[str, Sequence[float] | None]] | None = None
+    #: frames whose camera of their own rests on a second look at their detections: ``cameras``
+    #: gives them none, their observations hold what the shot fits (:func:`pnlviz.calib.looks.for_shot`)
+    looked: frozenset[int] = frozenset()
 
     def __post_init__(self):
         self.field_model: FieldModel = self.model or load_field_model()
@@ -133,7 +136,7 @@ class ClipSolver:
         data = [self._frame_data(t) for t in range(self.T)]
         own = ([_own_camera(self.calib_params, self.field_model, d.obs if d else None) for d in data]
                if self.cameras is None else list(self.cameras))
-        self._solver = ShotSolver(data, own, self.size, self.params, self.calib_params, self.field_model)
+        self._solver = ShotSolver(data, own, self.size, self.params, self.calib_params, self.field_model, self.looked)
         #: the shots found (before the hand's cuts; the fit's splits included)
         found = find_shots(own, self.changes, self.params)
         parts, self.unrelated = self._solver.solve(found, self.cuts)

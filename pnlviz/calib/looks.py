@@ -12,17 +12,28 @@ The look is decided by calibrating, not by counting points. Reading again every 
 than 4 keypoints took the camera from frames that had one (``docs/detector.md``). So whoever
 keeps detections (``pnlviz detect``, the app's background detection, the benchmarks) calls
 :func:`take_look` before keeping them: a zip holds one reading.
+
+A shot never sees a second look (:func:`for_shot`). Its frames are carried by their neighbours:
+a central view whose first reading gives no camera is placed within a pixel or two by its shot,
+while the camera its weaker peaks fit alone is often far off (clip 113 of ``bench_clip_edits.py``:
+cameras standing on the pitch 4.6 m up; the shot model then took 348 edits instead of 27). The
+detector states its first thresholds with its calibration settings (``shot_min_score``), and the
+shot fits each frame's detections scoring at least those: the first reading again.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 
+from dataclasses import replace
+from typing import Any
+
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
 from pnlviz.calib.inputs import Detections
+from pnlviz.calib.params import CalibParams
 from pnlviz.field.model import FieldModel
 
-__all__ = ["take_look"]
+__all__ = ["confident", "for_shot", "take_look"]
 
 
 def take_look(pred: Detections, size: tuple[int, int], detection_settings: Mapping | None = None,
@@ -45,4 +56,31 @@ def take_look(pred: Detections, size: tuple[int, int], detection_settings: Mappi
 
 def _alone(pred):
     """``pred``'s reading without a second one attached."""
-    return type(pred)(keypoints=pred.keypoints, lines=pred.lines)
+    return _reading(pred, pred.keypoints, pred.lines)
+
+
+def _reading(like: Detections, keypoints: Mapping, lines: Mapping) -> Detections:
+    """Detections of ``like``'s kind (:class:`pnlviz.data.Predictions`) holding these."""
+    make: Any = type(like)
+    return make(keypoints=dict(keypoints), lines=dict(lines))
+
+
+def confident(pred: Detections, floor: tuple[float, float]) -> Detections:
+    """``pred`` without the keypoints scoring under ``floor[0]`` and the lines with an end under
+    ``floor[1]``; ``pred`` itself when nothing is under them."""
+    kp_min, line_min = (float(v) for v in floor)
+    kps = {k: v for k, v in pred.keypoints.items() if v[2] >= kp_min}
+    lines = {k: v for k, v in pred.lines.items() if min(v[2], v[5]) >= line_min}
+    if len(kps) == len(pred.keypoints) and len(lines) == len(pred.lines):
+        return pred
+    return _reading(pred, kps, lines)
+
+
+def for_shot(inputs: FrameInputs, params: CalibParams) -> FrameInputs:
+    """A clip frame's inputs as its shot fits them: its detections scoring at least the
+    detector's first thresholds (``params.shot_min_score``); ``inputs`` itself when that drops
+    nothing (a frame the first reading calibrated, an annotation)."""
+    if inputs.detections is None or not any(params.shot_min_score):
+        return inputs
+    kept = confident(inputs.detections, params.shot_min_score)
+    return inputs if kept is inputs.detections else replace(inputs, detections=kept)

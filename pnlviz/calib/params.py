@@ -31,6 +31,10 @@ class CalibParams:
     #: The development halves' cameras: 3.4-27 m high, at most 107 m away; a pin dragged 60 px
     #: against ten detections zoomed out can give a camera 300 m away that fits what is seen
     max_distance_m: float = 1000.0
+    #: a shot fits a frame's detections scoring at least these (keypoint, line end): a detector's
+    #: second look (weaker peaks read again for a frame its first reading leaves without a camera)
+    #: serves that frame's own camera, never its shot's (:func:`pnlviz.calib.looks.for_shot`)
+    shot_min_score: tuple[float, float] = (0.0, 0.0)
     pnl: bool = True  #: run the PnL refinement
     alpha: float = DEFAULT_ALPHA  #: PnL weight of lines vs points (paper: 0.6)
     line_gate_px: float = 20.0  #: a line/circle joins PnL when all its points are this close to its projection

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -39,7 +39,7 @@ from .problem import FrameData
 from .shot import FrameDistances, TemporalParams
 from .shot_fit import distances
 
-__all__ = ["MIN_RUN", "CameraChoice", "Use", "alone_kept_by_shot", "frame_noise", "judge_frame"]
+__all__ = ["MIN_RUN", "CameraChoice", "Use", "alone_kept_by_shot", "frame_noise", "judge_frame", "second_look_choice"]
 
 #: which camera a clip frame uses: its shot's, its own (per-frame calibration), or none
 Use = Literal["shot", "own", "none"]
@@ -131,6 +131,17 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
         return CameraChoice("shot", f"the shot's camera fits {len(better)} item(s) the frame's own camera misses",
                             worse, better)
     return CameraChoice("shot", "the shot's camera fits the frame as well as its own", worse, better)
+
+
+def second_look_choice(choice: CameraChoice) -> CameraChoice:
+    """``choice`` (judged without a camera of its own) of a frame whose own camera rests on a
+    second look at its detections, which a shot does not fit (:func:`pnlviz.calib.looks.for_shot`):
+    its reason says so."""
+    why = ("its own camera rests on detections under the detector's thresholds (a second look), "
+           "which a shot does not fit")
+    if choice.use == "shot":
+        return replace(choice, reason=f"{why}: the shot carries it")
+    return replace(choice, reason=f"{choice.reason.replace(', and the frame has none of its own', '')}; {why}")
 
 
 def _verdict(data: FrameData, d: FrameDistances, calib: CalibParams, width: float) -> str | None:

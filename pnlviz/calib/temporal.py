@@ -15,7 +15,7 @@ cuts.
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Sequence, Set
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
@@ -29,7 +29,7 @@ from .cuts import CutEdits, apply_cuts, find_shots
 from .observations import Observations
 from .problem import FrameData
 from .shot import FrameDistances, TemporalParams, frame_data
-from .shot_check import CameraChoice, alone_kept_by_shot, judge_frame
+from .shot_check import CameraChoice, alone_kept_by_shot, judge_frame, second_look_choice
 from .shot_fit import ShotFit, distances, fit_shot, fit_window, window_of
 
 if TYPE_CHECKING:  # imported when called (frame imports this module's neighbours)
@@ -109,7 +109,7 @@ def calibrate_clip(observations: Sequence[Observations | None], cameras: Sequenc
                    size: tuple[float, float], params: TemporalParams = TemporalParams(),
                    changes: Sequence[float | None] | None = None, model: FieldModel | None = None, *,
                    calib: CalibParams = CalibParams(), cuts: CutEdits = CutEdits(),
-                   data: Sequence[FrameData | None] | None = None) -> ClipResult:
+                   data: Sequence[FrameData | None] | None = None, looked: Set[int] = frozenset()) -> ClipResult:
     """A clip in time order: ``observations[t]`` and the per-frame ``cameras[t]`` (its own
     calibration, None without one) of its frames, images of ``size`` (W, H), the image
     ``changes`` from each frame to the next when known, the ``cuts`` changed by hand. Returns its
@@ -117,13 +117,15 @@ def calibrate_clip(observations: Sequence[Observations | None], cameras: Sequenc
     camera of each shot (:func:`fit_shot`) and the camera each frame uses
     (:func:`pnlviz.calib.shot_check.judge_frame`): its shot's where that is not worse than its
     own. Frames with nothing observed keep no camera. A clip whose shots are mostly single frames
-    is a folder of unrelated pictures: each frame keeps its own camera."""
+    is a folder of unrelated pictures: each frame keeps its own camera. ``looked``: the frames
+    whose camera of their own rests on a second look at their detections (given here as None:
+    :func:`pnlviz.calib.looks.for_shot`), for the reason each frame is told."""
     model = model or load_field_model()
     T = len(observations)
     if len(cameras) != T:
         raise ValueError("one camera (or None) per frame")
     fd = list(data) if data is not None else frame_data(observations, model)
-    solver = ShotSolver(fd, list(cameras), size, params, calib, model)
+    solver = ShotSolver(fd, list(cameras), size, params, calib, model, looked)
     found = find_shots(cameras, changes, params)
     parts, unrelated = solver.solve(found, cuts)
     shots = [p.frames for p in parts]
@@ -142,11 +144,14 @@ class ShotSolver:
     frame's observations laid out (None: nothing observed), ``own[t]`` its own camera. Both may be
     changed by the caller between solves (a hand's edit): :meth:`forget` then drops what was
     measured with the old ones. ``stale``: frames whose own camera no longer matches their data
-    (edited, not recalibrated yet): they use the shot's camera, which carries the hand's points."""
+    (edited, not recalibrated yet): they use the shot's camera, which carries the hand's points.
+    ``looked``: frames whose camera of their own rests on a second look (not in ``own``): their
+    reason says so."""
 
     def __init__(self, data: list[FrameData | None], own: list[Camera | None], size: tuple[float, float],
-                 params: TemporalParams, calib: CalibParams, model: FieldModel):
+                 params: TemporalParams, calib: CalibParams, model: FieldModel, looked: Set[int] = frozenset()):
         self.data, self.own, self.size, self.params, self.calib, self.model = data, own, size, params, calib, model
+        self.looked = frozenset(looked)
         self.stale: set[int] = set()
         self._own: dict[int, FrameDistances | None] = {}
 
@@ -234,10 +239,13 @@ class ShotSolver:
     def _judge(self, t: int, i: int, fit: ShotFit | None) -> CameraChoice:
         if t in self.stale and fit is not None and fit.converged and self.data[t] is not None:
             return CameraChoice("shot", "corrected by hand: the shot's camera carries the hand's points")
-        return judge_frame(self.data[t], None if fit is None else fit.cameras[i], self.own[t], self.params,
-                           self.calib, True if fit is None else fit.converged,
-                           shot_distances=None if fit is None or fit.distances is None else fit.distances[i],
-                           own_distances=self.own_distances(t))
+        choice = judge_frame(self.data[t], None if fit is None else fit.cameras[i], self.own[t], self.params,
+                             self.calib, True if fit is None else fit.converged,
+                             shot_distances=None if fit is None or fit.distances is None else fit.distances[i],
+                             own_distances=self.own_distances(t))
+        if t in self.looked and self.own[t] is None:
+            return second_look_choice(choice)
+        return choice
 
     def split(self, part: ShotPart, removed: frozenset[int], depth: int) -> list[ShotPart]:
         """``part`` split where that leaves fewer frames worse off than their own cameras and the
@@ -332,8 +340,12 @@ def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameS
     ``settings`` their :class:`~pnlviz.calib.frame.FrameSettings`. The per-frame cameras (computed
     with :func:`~pnlviz.calib.frame.calibrate_frame` unless given), the frames' observations, and
     :func:`calibrate_clip` with the shot's lens fitted the way the frames' calibration fits it (no
-    k1 for detections whose detector says ``refine_k1: false``)."""
+    k1 for detections whose detector says ``refine_k1: false``). The shots fit each frame's
+    detections above the detector's first thresholds (:func:`pnlviz.calib.looks.for_shot`): a
+    frame those change has no camera of its own there (its first reading gave none: that is why
+    it holds a second look)."""
     from .frame import calib_params, calibrate_frame, observations_for
+    from .looks import for_shot
 
     model = model or load_field_model()
     sizes = {(i.size[0], i.size[1]) for i in inputs if i is not None}
@@ -341,11 +353,13 @@ def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameS
         raise ValueError("the frames of a clip must have one size")
     if cameras is None:
         cameras = [calibrate_frame(i, settings, model).camera if i is not None else None for i in inputs]
-    found = [observations_for(i, settings.source, model) if i is not None else (None, None) for i in inputs]
-    origin = next((g for _, g in found if g is not None), None)
+    origin = next((g for i in inputs if i is not None and (g := observations_for(i, settings.source, model)[1])), None)
     calib = calib_params(settings, origin)
+    seen = [None if i is None else for_shot(i, calib) for i in inputs]
+    looked = {t for t, (i, s) in enumerate(zip(inputs, seen)) if s is not i}
+    cameras = [None if t in looked else c for t, c in enumerate(cameras)]
+    obs = [observations_for(s, settings.source, model)[0] if s is not None else None for s in seen]
     params = TemporalParams(fit_k1=calib.refine_k1)
-    obs = [o for o, _ in found]
     result = calibrate_clip(obs, list(cameras), sizes.pop(), params, changes=changes, model=model, calib=calib,
-                            cuts=cuts)
+                            cuts=cuts, looked=looked)
     return ClipCalibration(list(cameras), obs, result)

@@ -69,6 +69,9 @@ class Detector:
             if not (0.0 <= kp <= 1.0 and 0.0 <= line <= 1.0):
                 raise ValueError(f"second_look: two thresholds in [0, 1] (keypoints, lines), got {self.second_look!r}")
             self.second_look = (min(kp, self.kp_threshold), min(line, self.line_threshold))
+            # a shot fits the first reading alone (pnlviz.calib.looks.for_shot): its thresholds,
+            # whatever the sidecar says, travel with the calibration settings as the detections do
+            self.calibration = {**self.calibration, "shot_min_score": [self.kp_threshold, self.line_threshold]}
         if self.device != "cpu":
             for net in (self.kp_net, self.line_net):
                 if net is not None:

@@ -20,6 +20,7 @@ from pathlib import Path
 from pnlviz.calib.clip import ClipSolver
 from pnlviz.calib.cuts import CutEdits
 from pnlviz.calib.frame import calib_params, detection_settings_apply, observations_for
+from pnlviz.calib.looks import for_shot
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.shot import TemporalParams
 from pnlviz.calib.temporal import image_changes
@@ -92,9 +93,11 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
     model = model or load_field_model()
     settings = settings or reader.default_settings()
     fs = reader.frame_settings(settings)
+    cameras = None if cameras is None else list(cameras)
     base: list[Observations | None] = []
     origins: list[str | dict[int, str]] = []
     edits: dict[int, dict] = {}
+    looked: set[int] = set()
     origin0: str | None = None
     size: tuple[int, int] | None = None
     for t, stem in enumerate(stems):
@@ -105,6 +108,12 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
             continue
         size = size or (int(read.inputs.size[0]), int(read.inputs.size[1]))
         obs, origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, model)
+        inputs = for_shot(read.inputs, calib_params(fs, origin))
+        if inputs is not read.inputs:  # the shot sees the detections above the first thresholds
+            obs = observations_for(replace(inputs, keypoint_edits=None), fs.source, model)[0]
+            looked.add(t)
+            if cameras is not None:  # which give no camera: that is why the frame holds a second look
+                cameras[t] = None
         origin0 = origin0 or origin
         base.append(obs)
         # what each point is called: the rule of a frame's own review snapshot (annotation wins)
@@ -116,7 +125,7 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
     frame_size = size or (int(reader.size[0]), int(reader.size[1]))
     return ClipSolver(base, frame_size, TemporalParams(fit_k1=cp.refine_k1), cp, changes=changes,
                       cuts=read_cuts(reader, clip), origins=origins, model=model, keypoint_edits=edits,
-                      cameras=None if cameras is None else list(cameras))
+                      cameras=cameras, looked=frozenset(looked))
 
 
 def shot_snapshot(reader: FrameReader, solver: ClipSolver, clip: str, stems: Sequence[str], t: int,

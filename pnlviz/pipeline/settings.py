@@ -19,6 +19,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     "alpha": (0.0, 1.0), "min_hfov_deg": (0.01, 179.0), "max_hfov_deg": (0.01, 179.0), "tol": (1e-15, 0.5),
     "min_points": (3, 1000), "refine_top": (1, 1000), "class_tolerance_px": (0.0, 1000.0),  # 0: off
     "min_height_m": (0.0, 1000.0),  # 0: any camera above the pitch
+    "shot_min_score": (0.0, 1.0),  # each of the two scores; 0: a shot fits every detection
 }
 _POSITIVE_MAX = 1e6
 
@@ -42,7 +43,9 @@ def _problem(key: str, value: Any, default: Any) -> str | None:
     if key == "subsets":
         ok = isinstance(value, (list, tuple)) and value and all(v in SUBSETS for v in value)
         return None if ok else f"must be a list of {', '.join(SUBSETS)}, got {value!r}"[:120]
-    if isinstance(default, tuple):  # ransac_thresholds
+    if key == "shot_min_score" and not (isinstance(value, (list, tuple)) and len(value) == 2):
+        return f"must be two scores [keypoint, line], got {value!r}"[:120]
+    if isinstance(default, tuple):  # ransac_thresholds, shot_min_score
         if not isinstance(value, (list, tuple)) or not value:
             return f"must be a list of numbers, got {value!r}"[:120]
         return next((p for p in (_number(key, v, False) for v in value) if p), None)
