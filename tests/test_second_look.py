@@ -246,3 +246,31 @@ def test_a_frame_without_the_shots_camera_is_told_its_own_rests_on_a_second_look
     assert told.use == "none" and told.reason == (
         "the shot has no camera; its own camera rests on detections under the detector's thresholds "
         "(a second look), which a shot does not fit")
+
+
+def test_the_card_says_when_a_frames_detections_are_a_second_look(tmp_path):
+    """A frame whose detections hold points under the detector's thresholds (read again because
+    the others gave no camera) says so on its card, with how many; the other frames do not."""
+    import shutil
+
+    from pnlviz import EXAMPLES_DIR
+    from pnlviz.app.cards import calibration_card
+    from pnlviz.app.state import AppState
+    from pnlviz.data import write_predictions, write_predictions_info
+
+    data = tmp_path / "frames"
+    data.mkdir()
+    for s in ("a", "b"):
+        shutil.copy(EXAMPLES_DIR / "sample" / "00000.jpg", data / f"{s}.jpg")
+    full = _seen(_camera())
+    weak = Predictions(keypoints={**dict(list(full.keypoints.items())[:1]),
+                                  **{k: (x, y, 0.25) for k, (x, y, _) in list(full.keypoints.items())[1:]}})
+    preds = tmp_path / "preds.zip"
+    write_predictions(preds, {"a": weak, "b": full})
+    write_predictions_info(preds, {"calibration": {"shot_min_score": [0.3, 0.4]}})
+    with AppState(data, detections=preds, edits=tmp_path / "edits") as st:
+        card = calibration_card(st.view("a"), st)
+        assert st.view("a").result.ok
+        assert (f"**a second look**: {len(full.keypoints) - 1} of its detections score under the detector's "
+                "thresholds (0.3 keypoints, 0.4 lines)") in card
+        assert "second look" not in calibration_card(st.view("b"), st)

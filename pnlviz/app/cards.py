@@ -15,6 +15,7 @@ from pnlviz.app.overlay import Overlay
 from pnlviz.app.shots import SHOT_SUBSET
 from pnlviz.app.state import AppState, FrameView
 from pnlviz.calib.line_start import LINE_SUBSET
+from pnlviz.calib.looks import confident
 
 
 #: the starts of a frame whose keypoints are too few for a homography (its result's ``subset``), in words
@@ -34,6 +35,9 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         used = ", ".join(f"{k}={v}" for k, v in settings.items())
         lines.append(f"calibrated from: **{view.origin}**"
                      + (f" (the detector's settings: {used})" if settings else ""))
+        looked = second_look_line(state.reader.detections(view.stem), settings)
+        if looked is not None and (view.result is None or view.result.subset != SHOT_SUBSET):
+            lines.append(looked)  # (a shot's camera says why it carries the frame)
     if view.reference_camera is not None:
         lines.append("reference camera (magenta): known for this frame")
     if res is None:
@@ -73,6 +77,21 @@ def calibration_card(view: FrameView, state: AppState) -> str:
         lines.append("JaC vs annotation: " + ", ".join(f"@{t} **{v:.2f}**" for t, v in view.jac.items()))
     lines.append(f"computed in {view.ms:.0f} ms")
     return "\n\n".join(lines)
+
+
+def second_look_line(pred, settings: Mapping) -> str | None:
+    """The card's word on detections read a second time (their first reading gave no camera):
+    how many score under the detector's thresholds (``shot_min_score``); None when none do."""
+    floor = settings.get("shot_min_score")
+    if pred is None or not floor:
+        return None
+    kept = confident(pred, tuple(floor))
+    weak = len(pred.keypoints) + len(pred.lines) - len(kept.keypoints) - len(kept.lines)
+    if not weak:
+        return None
+    return (f"**a second look**: {weak} of its detections score under the detector's thresholds "
+            f"({floor[0]:g} keypoints, {floor[1]:g} lines); read because the others gave no camera, "
+            "they often fit a wrong one: check it against the picture")
 
 
 def _left_out(ids: Sequence[int], unmarked: Mapping[int, str]) -> str:
