@@ -115,13 +115,12 @@ def polyline_block(poly: np.ndarray, pts: np.ndarray,
                    vertex_jacobian: Callable[[np.ndarray], np.ndarray] | None = None) -> Block:
     """Distance of observed points ``pts`` (M, 2) to a projected polyline ``poly`` (S, 2), one
     residual per point. ``vertex_jacobian(indices)`` gives d(vertex)/d(params) (n, 2, P) of the
-    vertices asked for (only the ends of the closest segments are)."""
+    vertices asked for (only the ends of the closest segments are, each once per point)."""
     c = closest(pts, poly)
     if vertex_jacobian is None:
         return Block(c.distance, None)
-    used, inverse = np.unique(np.concatenate([c.segment, c.segment + 1]), return_inverse=True)
-    Jv = vertex_jacobian(used)
-    Ja, Jb = Jv[inverse[:len(pts)]], Jv[inverse[len(pts):]]
+    m = len(pts)
+    Jv = vertex_jacobian(np.concatenate([c.segment, c.segment + 1]))
     unit = c.offset / np.maximum(c.distance, 1e-12)[:, None]  # d(dist)/d(closest point) = -unit
-    Jc = (1 - c.t)[:, None, None] * Ja + c.t[:, None, None] * Jb
-    return Block(c.distance, -np.einsum("nk,nkj->nj", unit, Jc))
+    Jc = (1 - c.t)[:, None, None] * Jv[:m] + c.t[:, None, None] * Jv[m:]
+    return Block(c.distance, -(unit[:, 0, None] * Jc[:, 0] + unit[:, 1, None] * Jc[:, 1]))
