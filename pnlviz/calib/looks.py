@@ -24,7 +24,6 @@ shot fits each frame's detections scoring at least those: the first reading agai
 from __future__ import annotations
 
 from collections.abc import Mapping
-
 from dataclasses import replace
 from typing import Any
 
