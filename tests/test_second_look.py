@@ -1,6 +1,8 @@
 """A second look at a frame's detections (issue #35): the detector reads its heatmaps again at
 lower thresholds, and the frame keeps that reading only where the first gives no camera
-(:func:`pnlviz.calib.looks.take_look`); `pnlviz detect` and the app keep what it decides."""
+(:func:`pnlviz.calib.looks.take_look`); `pnlviz detect` and the app keep what it decides. A clip's
+shots fit each frame's first reading only (:func:`pnlviz.calib.looks.for_shot`), and the card says
+when a frame's detections are a second look."""
 
 import numpy as np
 import pytest
