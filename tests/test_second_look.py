@@ -250,14 +250,12 @@ def test_a_frame_without_the_shots_camera_is_told_its_own_rests_on_a_second_look
         "(a second look), which a shot does not fit")
 
 
-def test_the_card_says_when_a_frames_detections_are_a_second_look(tmp_path):
-    """A frame whose detections hold points under the detector's thresholds (read again because
-    the others gave no camera) says so on its card, with how many; the other frames do not."""
+def _looked_folder(tmp_path):
+    """Two frames of one picture with a prediction zip and its settings file: "a" read a second
+    time (one keypoint above the thresholds, the others under them), "b" not."""
     import shutil
 
     from pnlviz import EXAMPLES_DIR
-    from pnlviz.app.cards import calibration_card
-    from pnlviz.app.state import AppState
     from pnlviz.data import write_predictions, write_predictions_info
 
     data = tmp_path / "frames"
@@ -270,9 +268,35 @@ def test_the_card_says_when_a_frames_detections_are_a_second_look(tmp_path):
     preds = tmp_path / "preds.zip"
     write_predictions(preds, {"a": weak, "b": full})
     write_predictions_info(preds, {"calibration": {"shot_min_score": [0.3, 0.4]}})
+    return data, preds, len(full.keypoints) - 1
+
+
+def test_the_card_says_when_a_frames_detections_are_a_second_look(tmp_path):
+    """A frame whose detections hold points under the detector's thresholds (read again because
+    the others gave no camera) says so on its card, with how many; the other frames do not."""
+    from pnlviz.app.cards import calibration_card
+    from pnlviz.app.state import AppState
+
+    data, preds, weak = _looked_folder(tmp_path)
     with AppState(data, detections=preds, edits=tmp_path / "edits") as st:
         card = calibration_card(st.view("a"), st)
         assert st.view("a").result.ok
-        assert (f"**a second look**: {len(full.keypoints) - 1} of its detections score under the detector's "
+        assert (f"**a second look**: {weak} of its detections score under the detector's "
                 "thresholds (0.3 keypoints, 0.4 lines)") in card
         assert "second look" not in calibration_card(st.view("b"), st)
+
+
+def test_calibrate_reports_the_frames_whose_camera_rests_on_a_second_look(tmp_path):
+    """`pnlviz calibrate --report` says what the card says: how many of a frame's detections
+    score under the detector's thresholds, for that frame alone."""
+    import json
+
+    from pnlviz.cli import main
+
+    data, preds, weak = _looked_folder(tmp_path)
+    report = tmp_path / "frames.jsonl"
+    assert main(["calibrate", "--data", str(data), "--detections", str(preds), "--out", str(tmp_path / "cams.zip"),
+                 "--report", str(report), "--no-progress"]) == 0
+    rows = {r["stem"]: r for r in map(json.loads, report.read_text().splitlines())}
+    assert rows["a"]["second_look"] == weak and "second_look" not in rows["b"]
+    assert "failure" not in rows["a"]  # the camera it rests on was given

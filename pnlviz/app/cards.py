@@ -15,7 +15,7 @@ from pnlviz.app.overlay import Overlay
 from pnlviz.app.shots import SHOT_SUBSET
 from pnlviz.app.state import AppState, FrameView
 from pnlviz.calib.line_start import LINE_SUBSET
-from pnlviz.calib.looks import confident
+from pnlviz.calib.looks import second_look_count
 
 
 #: the starts of a frame whose keypoints are too few for a homography (its result's ``subset``), in words
@@ -82,13 +82,10 @@ def calibration_card(view: FrameView, state: AppState) -> str:
 def second_look_line(pred, settings: Mapping) -> str | None:
     """The card's word on detections read a second time (their first reading gave no camera):
     how many score under the detector's thresholds (``shot_min_score``); None when none do."""
-    floor = settings.get("shot_min_score")
-    if pred is None or not floor:
-        return None
-    kept = confident(pred, tuple(floor))
-    weak = len(pred.keypoints) + len(pred.lines) - len(kept.keypoints) - len(kept.lines)
+    weak = second_look_count(pred, settings)
     if not weak:
         return None
+    floor = settings["shot_min_score"]
     return (f"**a second look**: {weak} of its detections score under the detector's thresholds "
             f"({floor[0]:g} keypoints, {floor[1]:g} lines); read because the others gave no camera, "
             "they often fit a wrong one: check it against the picture")

@@ -32,7 +32,7 @@ from pnlviz.calib.inputs import Detections
 from pnlviz.calib.params import CalibParams
 from pnlviz.field.model import FieldModel
 
-__all__ = ["confident", "for_shot", "take_look"]
+__all__ = ["confident", "for_shot", "second_look_count", "take_look"]
 
 
 def take_look(pred: Detections, size: tuple[int, int], detection_settings: Mapping | None = None,
@@ -83,3 +83,15 @@ def for_shot(inputs: FrameInputs, params: CalibParams) -> FrameInputs:
         return inputs
     kept = confident(inputs.detections, params.shot_min_score)
     return inputs if kept is inputs.detections else replace(inputs, detections=kept)
+
+
+def second_look_count(pred: Detections | None, detection_settings: Mapping) -> int:
+    """How many of a frame's detections score under the detector's first thresholds (its
+    ``shot_min_score``, in the calibration settings that applied to them): more than 0 only for
+    a frame read a second time, whose camera rests on them (the app's card and ``pnlviz
+    calibrate --report`` say so)."""
+    floor = detection_settings.get("shot_min_score")
+    if pred is None or not floor:
+        return 0
+    kept = confident(pred, (float(floor[0]), float(floor[1])))
+    return len(pred.keypoints) + len(pred.lines) - len(kept.keypoints) - len(kept.lines)

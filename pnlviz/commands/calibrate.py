@@ -103,7 +103,8 @@ def calibrate_stem(reader, stem: str, settings) -> tuple[str, dict | None, dict]
     """One frame: read its inputs (:func:`frame_inputs`), run the engine's one path
     (:func:`pnlviz.calib.frame.calibrate_frame`): (stem, camera dict at 960x540 or None, report).
     Never raises on bad input."""
-    from pnlviz.calib.frame import calibrate_frame
+    from pnlviz.calib.frame import calibrate_frame, detection_settings_apply
+    from pnlviz.calib.looks import second_look_count
 
     report: dict = {"stem": stem}
     inputs, problem = frame_inputs(reader, stem)
@@ -126,6 +127,9 @@ def calibrate_stem(reader, stem: str, settings) -> tuple[str, dict | None, dict]
         "line_residuals_initial": {k: round(v, 3) for k, v in res.line_residuals_initial.items()},
         "line_residuals": {k: round(v, 3) for k, v in res.line_residuals.items()},
     })
+    weak = second_look_count(inputs.detections, detection_settings_apply(fc.origin, settings))
+    if weak:  # the camera rests on a second look at the detections (pnlviz.calib.looks)
+        report["second_look"] = weak
     if res.camera is None:  # not res.ok
         return stem, None, report
     return stem, res.camera.scaled(*EVAL_SIZE).to_soccernet(), report
