@@ -13,7 +13,9 @@ the clip is then corrected twice by the same simulated annotator (:class:`Annota
   pins weighing more: :func:`pnlviz.calib.frame.calibrate_frame`);
 * **shot model**: an edit is a pinned constraint of its shot's solve, and every frame of the shot
   gets its new camera (:class:`pnlviz.calib.clip.ClipSolver`, solved again from its previous
-  solution), each frame keeping its own camera where the shot's is worse.
+  solution), each frame keeping its own camera where the shot's is worse. As in the app, the
+  shots fit each frame's first reading (:func:`pnlviz.calib.looks.for_shot`): a frame the detector
+  read a second time (its first reading gave no camera) is carried by its shot.
 
 The annotator sees only what the app shows. It picks the next frame by the app's signals, never by
 the ground truth: a frame without a camera first; then the frame whose error (the median distance
