@@ -100,7 +100,7 @@ def render_and_detect(plan, cache: Path | None):
     if where is not None and (where / "preds.zip").exists():
         preds = read_predictions(where / "preds.zip")
         return anns, [preds[s] for s in stems], json.loads((where / "changes.json").read_text())
-    from pnlviz.calib.looks import take_look
+    from pnlviz.calib.looks import detect_kept
     from pnlviz.detect.run import Detector
     from pnlviz.synth.clip import clip_frame
 
@@ -111,7 +111,7 @@ def render_and_detect(plan, cache: Path | None):
         if prev is not None:
             changes.append(image_change(prev, img))
         prev = img
-        preds.append(take_look(det.detect([img])[0], (img.shape[1], img.shape[0]), det.calibration)[0])
+        preds.append(detect_kept(det, img))
     if where is not None:
         where.mkdir(parents=True, exist_ok=True)
         write_predictions(where / "preds.zip", dict(zip(stems, preds)))
@@ -158,19 +158,15 @@ class ShotModel:
 
     def __init__(self, start: PerFrame, preds, settings, changes, params, calib_params, size, model):
         from pnlviz.calib.clip import ClipSolver
-        from pnlviz.calib.frame import FrameInputs, observations_for
-        from pnlviz.calib.looks import for_shot
+        from pnlviz.calib.frame import FrameInputs
+        from pnlviz.calib.looks import shot_observations
 
         obs, cams, looked = [], [], set()
         for t, pred in enumerate(preds):  # as the app does: the shot fits the first reading alone
-            inputs = FrameInputs(size, detections=pred)
-            seen = for_shot(inputs, calib_params)
-            if seen is inputs:
-                obs.append(start.observations(t))
-                cams.append(start.camera(t))
-            else:  # a second look: its first reading gave no camera
-                obs.append(observations_for(seen, settings.source, model)[0])
-                cams.append(None)
+            seen, _, second = shot_observations(FrameInputs(size, detections=pred), settings, model)
+            obs.append(seen)
+            cams.append(None if second else start.camera(t))  # a second look: its first reading gave none
+            if second:
                 looked.add(t)
         self.solver = ClipSolver(obs, size, params, calib_params, cameras=cams, changes=changes, model=model,
                                  looked=frozenset(looked))

@@ -114,7 +114,7 @@ def real_clips(shared: Path) -> None:
 
 def synthetic_clips(n_clips: int, frames: int, seed: int) -> None:
     from pnlviz.calib.frame import FrameInputs
-    from pnlviz.calib.looks import take_look
+    from pnlviz.calib.looks import detect_kept
     from pnlviz.calib.temporal import image_change
     from pnlviz.data import open_dataset
     from pnlviz.detect.run import Detector
@@ -137,7 +137,7 @@ def synthetic_clips(n_clips: int, frames: int, seed: int) -> None:
         if prev is not None:
             changes[s] = image_change(prev, img)
         prev = img
-        pred = take_look(det.detect([img])[0], (img.shape[1], img.shape[0]), det.calibration)[0]
+        pred = detect_kept(det, img)
         inputs[s] = FrameInputs((img.shape[1], img.shape[0]), detections=pred)
         truth[s] = Camera.from_soccernet(ds.camera_dict(s), 960, 540)
     detect_s = time.perf_counter() - t0

@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
-from pnlviz.calib.looks import take_look
+from pnlviz.calib.looks import detect_kept, take_look
 from pnlviz.data import open_dataset
 from pnlviz.detect.run import DEFAULT_MODEL, Detector, light_detector
 from pnlviz.labels import LabelParams, keypoints_from_annotation, line_extremities
@@ -128,7 +128,7 @@ def main() -> None:
         img = cv2.imread(str(args.shared / "data" / "frames" / name))
         if img is None:
             continue
-        pred = take_look(det.detect([img])[0], (img.shape[1], img.shape[0]), det.calibration)[0]
+        pred = detect_kept(det, img)
         tiles.append(caption(draw_detections(img, pred), f"{name}: {len(pred.keypoints)} keypoints, "
                                                           f"{len(pred.lines)} lines"))
     if tiles:

@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
-from pnlviz.calib.looks import take_look
+from pnlviz.calib.looks import detect_kept, take_look
 from pnlviz.data import read_homographies
 from pnlviz.data.layout import sort_stems
 from pnlviz.detect.run import DEFAULT_MODEL, Detector, light_detector
@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
                                      f"reprojection {e:.1f} px"))
             messi = cv2.imread(str(data / "frames" / "messi_sample.png"))
             if messi is not None:
-                pred = take_look(det.detect([messi])[0], (messi.shape[1], messi.shape[0]), det.calibration)[0]
+                pred = detect_kept(det, messi)
                 fc = calibrate_frame(FrameInputs((messi.shape[1], messi.shape[0]), detections=pred),
                                      FrameSettings(detection_settings=det.calibration))
                 tiles.append(caption(draw(messi, pred, fc.result.camera if fc.ok else None),

@@ -27,12 +27,13 @@ from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
-from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
+from pnlviz.calib.frame import FrameInputs, FrameSettings, calib_params, calibrate_frame, observations_for
 from pnlviz.calib.inputs import Detections
+from pnlviz.calib.observations import Observations
 from pnlviz.calib.params import CalibParams
 from pnlviz.field.model import FieldModel
 
-__all__ = ["confident", "for_shot", "second_look_count", "take_look"]
+__all__ = ["confident", "detect_kept", "for_shot", "second_look_count", "shot_observations", "take_look"]
 
 
 def take_look(pred: Detections, size: tuple[int, int], detection_settings: Mapping | None = None,
@@ -51,6 +52,12 @@ def take_look(pred: Detections, size: tuple[int, int], detection_settings: Mappi
     if calibrate_frame(FrameInputs(size, detections=second), settings, model).ok:
         return _alone(second), True
     return first, False
+
+
+def detect_kept(detector, image) -> Detections:
+    """One BGR image's detections as they are kept: ``detector``'s first reading, or its second
+    where only that gives a camera (:func:`take_look` with the detector's calibration settings)."""
+    return take_look(detector.detect([image])[0], (image.shape[1], image.shape[0]), detector.calibration)[0]
 
 
 def _alone(pred):
@@ -83,6 +90,18 @@ def for_shot(inputs: FrameInputs, params: CalibParams) -> FrameInputs:
         return inputs
     kept = confident(inputs.detections, params.shot_min_score)
     return inputs if kept is inputs.detections else replace(inputs, detections=kept)
+
+
+def shot_observations(inputs: FrameInputs, settings: FrameSettings,
+                      model: FieldModel) -> tuple[Observations | None, str | None, bool]:
+    """A clip frame's observations as its shot fits them (:func:`for_shot`), their origin, and
+    whether the frame was read a second time (the floor left some of its detections out: its
+    first reading gave no camera, so it has none of its own in the clip)."""
+    obs, origin = observations_for(inputs, settings.source, model)
+    seen = for_shot(inputs, calib_params(settings, origin))
+    if seen is inputs:
+        return obs, origin, False
+    return observations_for(seen, settings.source, model)[0], origin, True
 
 
 def second_look_count(pred: Detections | None, detection_settings: Mapping) -> int:

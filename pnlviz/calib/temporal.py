@@ -344,8 +344,8 @@ def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameS
     detections above the detector's first thresholds (:func:`pnlviz.calib.looks.for_shot`): a
     frame those change has no camera of its own there (its first reading gave none: that is why
     it holds a second look)."""
-    from .frame import calib_params, calibrate_frame, observations_for
-    from .looks import for_shot
+    from .frame import calib_params, calibrate_frame
+    from .looks import shot_observations
 
     model = model or load_field_model()
     sizes = {(i.size[0], i.size[1]) for i in inputs if i is not None}
@@ -353,12 +353,11 @@ def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameS
         raise ValueError("the frames of a clip must have one size")
     if cameras is None:
         cameras = [calibrate_frame(i, settings, model).camera if i is not None else None for i in inputs]
-    origin = next((g for i in inputs if i is not None and (g := observations_for(i, settings.source, model)[1])), None)
-    calib = calib_params(settings, origin)
-    seen = [None if i is None else for_shot(i, calib) for i in inputs]
-    looked = {t for t, (i, s) in enumerate(zip(inputs, seen)) if s is not i}
+    found = [(None, None, False) if i is None else shot_observations(i, settings, model) for i in inputs]
+    calib = calib_params(settings, next((g for _, g, _ in found if g is not None), None))
+    looked = {t for t, (_, _, second) in enumerate(found) if second}
     cameras = [None if t in looked else c for t, c in enumerate(cameras)]
-    obs = [observations_for(s, settings.source, model)[0] if s is not None else None for s in seen]
+    obs = [o for o, _, _ in found]
     params = TemporalParams(fit_k1=calib.refine_k1)
     result = calibrate_clip(obs, list(cameras), sizes.pop(), params, changes=changes, model=model, calib=calib,
                             cuts=cuts, looked=looked)

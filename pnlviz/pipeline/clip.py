@@ -20,7 +20,7 @@ from pathlib import Path
 from pnlviz.calib.clip import ClipSolver
 from pnlviz.calib.cuts import CutEdits
 from pnlviz.calib.frame import calib_params, detection_settings_apply, observations_for
-from pnlviz.calib.looks import for_shot
+from pnlviz.calib.looks import shot_observations
 from pnlviz.calib.observations import Observations
 from pnlviz.calib.shot import TemporalParams
 from pnlviz.calib.temporal import image_changes
@@ -107,12 +107,10 @@ def clip_solver(reader: FrameReader, clip: str, stems: Sequence[str], settings: 
             origins.append("detection")
             continue
         size = size or (int(read.inputs.size[0]), int(read.inputs.size[1]))
-        obs, origin = observations_for(replace(read.inputs, keypoint_edits=None), fs.source, model)
-        inputs = for_shot(read.inputs, calib_params(fs, origin))
-        if inputs is not read.inputs:  # the shot sees the detections above the first thresholds
-            obs = observations_for(replace(inputs, keypoint_edits=None), fs.source, model)[0]
+        obs, origin, second = shot_observations(replace(read.inputs, keypoint_edits=None), fs, model)
+        if second:  # its first reading gave no camera: that is why the frame holds a second look
             looked.add(t)
-            if cameras is not None:  # which give no camera: that is why the frame holds a second look
+            if cameras is not None:
                 cameras[t] = None
         origin0 = origin0 or origin
         base.append(obs)
