@@ -47,6 +47,8 @@ Use = Literal["shot", "own", "none"]
 WORSE_BY = 2
 #: ... on at least this many consecutive frames (or the whole shot, when shorter)
 MIN_RUN = 3
+#: how a reason ends for a frame that has no camera of its own to keep
+NONE_OF_ITS_OWN = ", and the frame has none of its own"
 
 
 @dataclass(frozen=True)
@@ -101,7 +103,7 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
     if shot is None or not converged:
         why = "the shot has no camera" if shot is None else "the shot's solve did not converge"
         if own is None:
-            return CameraChoice("none", f"{why}, and the frame has none of its own")
+            return CameraChoice("none", f"{why}{NONE_OF_ITS_OWN}")
         return CameraChoice("own", f"{why}: the frame keeps its own camera")
     W = float(shot.width)
     d_shot = shot_distances or distances(data, shot)
@@ -109,8 +111,7 @@ def judge_frame(data: FrameData | None, shot: Camera | None, own: Camera | None,
     fail = _verdict(data, d_shot, calib, W)
     if own is None:
         if fail:
-            return CameraChoice("none", f"the shot's camera fails the frame's verdict ({fail}), and the frame has "
-                                        "none of its own")
+            return CameraChoice("none", f"the shot's camera fails the frame's verdict ({fail}){NONE_OF_ITS_OWN}")
         return CameraChoice("shot", "the frame has no camera of its own: the shot carries it")
     d_own = own_distances or distances(data, own)
     _check_length(d_own, data)
@@ -141,7 +142,7 @@ def second_look_choice(choice: CameraChoice) -> CameraChoice:
            "which a shot does not fit")
     if choice.use == "shot":
         return replace(choice, reason=f"{why}: the shot carries it")
-    return replace(choice, reason=f"{choice.reason.replace(', and the frame has none of its own', '')}; {why}")
+    return replace(choice, reason=f"{choice.reason.removesuffix(NONE_OF_ITS_OWN)}; {why}")
 
 
 def _verdict(data: FrameData, d: FrameDistances, calib: CalibParams, width: float) -> str | None:
