@@ -69,6 +69,18 @@ class CameraModel:
             k1 = min(max(s.k1 + float(delta[self.free.index(7)]), -self.k1_bound), self.k1_bound)
         return CameraState(so3_exp(delta[:3]) @ s.R, s.C + delta[3:6], f, k1)
 
+    def held(self, s: CameraState, delta: np.ndarray) -> np.ndarray | None:
+        """The free parameters a step ``delta`` cannot move (see :func:`levenberg_marquardt`):
+        k1 at its bound, pushed further out by the step; None when there is none."""
+        if 7 not in self.free:
+            return None
+        i = self.free.index(7)
+        if abs(s.k1) < self.k1_bound or s.k1 * float(delta[i]) <= 0:
+            return None
+        fixed = np.zeros(len(delta), bool)
+        fixed[i] = True
+        return fixed
+
     # ------------------------------------------------------------------ what the blocks need
     @staticmethod
     def lift(X: np.ndarray) -> np.ndarray:

@@ -116,7 +116,8 @@ class CameraProblem:
             for name in bad & rows.keys():
                 w[rows[name]] *= gain
             state, _ = levenberg_marquardt(weighted, self.model.retract, self.model.start(cam),
-                                           replace(self.params.solver, max_iter=TIGHTEN_ITERATIONS))
+                                           replace(self.params.solver, max_iter=TIGHTEN_ITERATIONS),
+                                           held=self.model.held)
             cam = self.model.camera(state)
             bad = self.beyond(cam, tolerance)
             if len(bad) < n_best:
@@ -127,5 +128,5 @@ class CameraProblem:
         if self.n_res < self.n_free:
             return self.cam0, {"success": False, "message": "fewer residuals than parameters", "iterations": 0}
         state, info = levenberg_marquardt(self.problem.evaluate, self.model.retract, self.model.start(),
-                                          self.params.solver)
+                                          self.params.solver, held=self.model.held)
         return self.model.camera(state), info

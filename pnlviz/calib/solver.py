@@ -96,6 +96,8 @@ def robust_cost(r: np.ndarray, loss: str, c: float) -> float:
 
 
 Evaluate = Callable[[Any, bool], tuple[np.ndarray, np.ndarray | None]]
+#: ``held(x, delta)``: mask of the parameters a step from ``x`` cannot move, or None
+Held = Callable[[Any, np.ndarray], np.ndarray | None]
 
 
 class _Step(NamedTuple):
@@ -111,7 +113,8 @@ class _Step(NamedTuple):
 
 def levenberg_marquardt(evaluate: Evaluate, retract: Callable[[Any, np.ndarray], Any], x0: Any,
                         params: SolverParams = SolverParams(),
-                        jacobian: Callable[[Any, np.ndarray], Any] | None = None) -> tuple[Any, dict]:
+                        jacobian: Callable[[Any, np.ndarray], Any] | None = None,
+                        held: Held | None = None) -> tuple[Any, dict]:
     """Minimise the robust cost of ``evaluate(x, jac) -> (r (n,), J (n, p) or None)``.
 
     ``retract(x, delta)`` is the model after a step ``delta`` (p,) from ``x``. Returns the final
@@ -125,6 +128,12 @@ def levenberg_marquardt(evaluate: Evaluate, retract: Callable[[Any, np.ndarray],
     residuals at that point (a Jacobian by finite differences costs many evaluations: the clip's
     in :mod:`pnlviz.calib.shot`). ``J`` may be a scipy sparse matrix; the normal matrix is then
     made dense (it has one row and column per parameter).
+
+    ``held(x, delta) -> mask or None``: the parameters a step cannot move (one at a bound that
+    ``retract`` clamps, pushed further out); the step is then solved again without them. Else the
+    other parameters would move to make up for a change the clamp undoes, the step is rejected,
+    and the descent zigzags along the bound (a camera's k1 at its limit took the 20 iterations
+    allowed where it now takes a few).
     """
     p = params
     x = x0
@@ -138,7 +147,7 @@ def levenberg_marquardt(evaluate: Evaluate, retract: Callable[[Any, np.ndarray],
             assert jacobian is not None, "evaluate(x, True) gave no Jacobian"
             J = jacobian(x, r)
         A, g = _normal_equations(J, r, p)
-        step, lam = _descend(evaluate, retract, x, A, g, cost, lam, p, jacobian is None)
+        step, lam = _descend(evaluate, retract, x, A, g, cost, lam, p, jacobian is None, held)
         if step is None:
             success = True  # no descent direction left: at a minimum
             break
@@ -192,8 +201,20 @@ def _damped_step(A, g: np.ndarray, damping: np.ndarray) -> np.ndarray | None:
     return -delta if np.all(np.isfinite(delta)) else None
 
 
+def _held_step(A: np.ndarray, g: np.ndarray, damping: np.ndarray, fixed: np.ndarray) -> np.ndarray | None:
+    """:func:`_damped_step` with the parameters of mask ``fixed`` kept where they are (``A``
+    dense)."""
+    free = ~fixed
+    sub = _damped_step(A[np.ix_(free, free)], g[free], damping[free])
+    if sub is None:
+        return None
+    step = np.zeros(len(g))
+    step[free] = sub
+    return step
+
+
 def _descend(evaluate: Evaluate, retract, x, A: np.ndarray, g: np.ndarray, cost: float, lam: float,
-             p: SolverParams, with_jacobian: bool) -> tuple[_Step | None, float]:
+             p: SolverParams, with_jacobian: bool, held: Held | None = None) -> tuple[_Step | None, float]:
     """Damped steps from ``x``, more damped after each rejection, until one does not raise the
     cost: ``(that step, lam)``, or ``(None, lam)`` when none is left to try."""
     d = np.maximum(A.diagonal(), 1e-9)  # Marquardt's scaling of the damping
@@ -201,6 +222,9 @@ def _descend(evaluate: Evaluate, retract, x, A: np.ndarray, g: np.ndarray, cost:
     while lam <= 1e12 and (p.max_trials is None or trials < p.max_trials):
         trials += 1
         delta = _damped_step(A, g, lam * d)
+        fixed = None if delta is None or held is None else held(x, delta)
+        if fixed is not None:
+            delta = _held_step(A, g, lam * d, fixed)
         if delta is None:
             lam *= 10
             continue
