@@ -62,7 +62,8 @@ def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float | np.ndarray, aspec
     """
     Xc = as_points(Xc, 3, "Xc")
     z = np.maximum(Xc[:, 2], CLAMP_DEPTH)
-    xn, yn = Xc[:, 0] / z, Xc[:, 1] / z  # normalised
+    p = Xc[:, :2] / z[:, None]  # normalised
+    xn, yn = p[:, 0], p[:, 1]
     r2 = xn * xn + yn * yn
     g = 1 + k1 * r2
     fa = f * aspect
@@ -71,27 +72,27 @@ def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float | np.ndarray, aspec
     uv[:, 1] = fa * g * yn + cy
     if not jac:
         return uv, None
-    # d(normalised point)/d(dw, dC), with dXc = -[Xc]x dw - R dC (one row each for xn and yn):
+    # d(normalised point)/d(dw, dC), with dXc = -[Xc]x dw - R dC (row 0 for xn, row 1 for yn):
     #   dxn/ddw = (-xn yn, zr + xn^2, -yn), dyn/ddw = (-(zr + yn^2), xn yn, xn), with zr = Xc_z / z
     #   (1 but for points clamped behind the camera); dp/dC = (p R[2] - R[:2]) / z
     n = len(Xc)
     zr, xy = Xc[:, 2] / z, xn * yn
-    R2, iz = R[..., 2, :], (1.0 / z)[:, None]
-    dx, dy = np.empty((n, 6)), np.empty((n, 6))
-    dx[:, 0], dx[:, 1], dx[:, 2] = -xy, zr + xn * xn, -yn
-    dy[:, 0], dy[:, 1], dy[:, 2] = -(zr + yn * yn), xy, xn
-    dx[:, 3:] = (xn[:, None] * R2 - R[..., 0, :]) * iz
-    dy[:, 3:] = (yn[:, None] * R2 - R[..., 1, :]) * iz
+    D = np.empty((n, 2, 6))
+    D[:, 0, 0], D[:, 0, 1], D[:, 0, 2] = -xy, zr + xn * xn, -yn
+    D[:, 1, 0], D[:, 1, 1], D[:, 1, 2] = -(zr + yn * yn), xy, xn
+    D[:, :, 3:] = (p[:, :, None] * R[..., None, 2, :] - R[..., :2, :]) * (1.0 / z)[:, None, None]
     # then the lens and the focal length: d(pixels)/dp = diag(f, f aspect) (g I + 2 k1 p p^T)
     J = np.empty((n, 2, N_CAMERA_PARAMS))
-    if k1 == 0.0:  # g = 1 and no cross term
-        J[:, 0, :6] = np.reshape(f, (-1, 1)) * dx  # one focal length, or one per point
-        J[:, 1, :6] = np.reshape(fa, (-1, 1)) * dy
+    if k1 == 0.0 and np.ndim(f) == 0:  # g = 1 and no cross term
+        J[:, :, :6] = D * np.array([[f], [fa]])
+    elif k1 == 0.0:  # one focal length per point
+        J[:, 0, :6] = np.reshape(f, (-1, 1)) * D[:, 0]
+        J[:, 1, :6] = np.reshape(fa, (-1, 1)) * D[:, 1]
     else:
-        k2 = 2 * k1 * xy
+        dx, dy, k2 = D[:, 0], D[:, 1], 2 * k1 * xy
         J[:, 0, :6] = (f * (g + 2 * k1 * xn * xn))[:, None] * dx + (f * k2)[:, None] * dy
         J[:, 1, :6] = (fa * k2)[:, None] * dx + (fa * (g + 2 * k1 * yn * yn))[:, None] * dy
-    J[:, 0, 6], J[:, 1, 6] = uv[:, 0] - cx, uv[:, 1] - cy  # d/d log f
+    J[:, :, 6] = uv - (cx, cy)  # d/d log f
     J[:, 0, 7], J[:, 1, 7] = xn * r2 * f, yn * r2 * fa  # d/d k1
     return uv, J
 
