@@ -110,3 +110,29 @@ def test_the_errors_of_one_camera_are_computed_once_and_handed_out_as_copies(mon
     points = kind.point_errors(cam)
     points[int(obs.kp_ids[0])] = 1e9
     assert kind.point_errors(cam)[int(obs.kp_ids[0])] < 1e-6
+
+
+def test_the_solver_skips_the_last_steps_jacobian_and_ends_where_it_did(monkeypatch):
+    """The step predicted to end the solve is evaluated without its Jacobian; the solve takes the
+    same steps to the same camera, bit for bit, as when every trial has its Jacobian."""
+    import pnlviz.calib.solver as solver_module
+
+    cam, _ = _frame_with_crossbar()
+    obs = keypoint_obs(cam, np.random.default_rng(5), noise=1.0, lines=True)  # noisy: a minimum above 0
+    start = Camera(cam.fx * 1.05, cam.fy * 1.05, 480, 270, so3_exp(np.array([0.01, -0.005, 0.0])) @ cam.R,
+                   cam.C + np.array([1.0, -0.5, 0.5]), 960, 540)
+
+    def solve_counting():
+        prob = CameraProblem(start, obs, RefineParams(refine_k1=True, tol=1e-6))
+        asked = []
+        evaluate = prob.problem.evaluate
+        prob.problem.evaluate = lambda state, jac=False: asked.append(jac) or evaluate(state, jac)
+        out, info = prob.solve()
+        return out, info, asked
+
+    out, info, asked = solve_counting()
+    monkeypatch.setattr(solver_module, "_likely_last", lambda *args: False)
+    out_all, info_all, asked_all = solve_counting()
+    assert info["success"] and info["iterations"] == info_all["iterations"] >= 2
+    assert all(asked_all) and asked[-1] is False and sum(asked) == len(asked_all) - 1
+    assert np.array_equal(out.R, out_all.R) and np.array_equal(out.C, out_all.C) and out.fx == out_all.fx
