@@ -51,9 +51,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 
@@ -280,11 +278,10 @@ class CameraKind:
         self.observed = data if observed is None else observed
         #: why the last plane camera was refused as no broadcast's (:func:`_sane`), for the failure
         self.refused: str | None = None
-        #: the plane fits, by (plane, points) and threshold, and by (plane, points) the first that
-        #: kept every point, with its threshold (see :meth:`_plane_camera`)
-        self._plane_fits: dict[tuple, Any] = {}
-        #: the errors of the last camera asked about, by kind (see :meth:`_last_errors`)
-        self._last: dict[str, tuple[Camera, dict]] = {}
+        #: the plane fits by (plane, points, threshold), and by (plane, points) the first that kept
+        #: every point, with its threshold (see :meth:`_plane_camera`)
+        self._plane_fits: dict[tuple[str, bytes, float], tuple[Camera, np.ndarray] | None] = {}
+        self._kept_all: dict[tuple[str, bytes], tuple[float, tuple[Camera, np.ndarray]]] = {}
 
     @classmethod
     def of(cls, obs: Observations, params: CalibParams, model: FieldModel | None = None) -> "CameraKind":
@@ -337,19 +334,19 @@ class CameraKind:
         share the fit (OpenCV's RANSAC is deterministic), and a fit that kept every point is the
         fit of every larger threshold too (RANSAC would keep them all again, and its least-squares
         refit on all of them is the same camera). Thresholds come in increasing order."""
-        key = (plane, ids.tobytes())
-        every = self._plane_fits.get(key)
+        points = (plane, ids.tobytes())
+        every = self._kept_all.get(points)
         if every is not None and every[0] <= thr_px:
             return every[1]
-        if (key, thr_px) not in self._plane_fits:
+        key = (*points, thr_px)
+        if key not in self._plane_fits:
             fit = plane_homography(local_xy, xy, thr_px)
             cam0 = None if fit is None else camera_from_plane_homography(fit[0], plane, self.data.obs.width,
                                                                          self.data.obs.height, self.data.model)
-            got = None if fit is None or cam0 is None else (cam0, fit[1])
-            self._plane_fits[(key, thr_px)] = got
+            got = self._plane_fits[key] = None if fit is None or cam0 is None else (cam0, fit[1])
             if got is not None and got[1].all():
-                self._plane_fits[key] = (thr_px, got)
-        return self._plane_fits[(key, thr_px)]
+                self._kept_all[points] = (thr_px, got)
+        return self._plane_fits[key]
 
     def scorer(self, first: Camera):
         return CameraProblem(first, self.data, RefineParams(alpha=0.5)).residuals  # residuals at any camera
@@ -395,18 +392,10 @@ class CameraKind:
         return f"degenerate geometry: no plane with {self.params.min_points} consistent keypoints ({counts})"
 
     def point_errors(self, cam: Camera) -> dict[int, float]:
-        return self._last_errors("points", cam, lambda: point_residuals(cam, self.data.obs))
+        return point_residuals(cam, self.data.obs)
 
     def class_errors(self, cam: Camera) -> dict[str, float]:
-        return self._last_errors("classes", cam, lambda: line_residuals(cam, self.observed))
-
-    def _last_errors(self, what: str, cam: Camera, compute: Callable[[], dict]) -> dict:
-        """A copy of ``compute()``, kept for the last camera asked about (the pipeline asks twice
-        about the camera PnL ends at: to gate again, then for its result)."""
-        last = self._last.get(what)
-        if last is None or last[0] is not cam:
-            last = self._last[what] = (cam, compute())
-        return dict(last[1])
+        return line_residuals(cam, self.observed)
 
     def pnl_solve(self, cam: Camera, keypoints: np.ndarray, lines: list[str], circles: list[str]) -> Camera | None:
         """The paper's PnL (pose, K fixed) or, by default, PnL over pose + focal + k1 (with the

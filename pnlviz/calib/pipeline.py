@@ -344,10 +344,36 @@ def refit_with(kind: Kind[ResultT], params, start) -> ResultT:
     return result
 
 
+class _LastErrors:
+    """``kind`` with the errors of the last estimate asked about kept, handed out as copies:
+    :func:`_finish` asks twice about the estimate PnL ends at (to gate again, then for the result)
+    and about one PnL did not move (before and after). Everything else is ``kind``'s own."""
+
+    def __init__(self, kind: Kind):
+        self._kind = kind
+        self._last: dict[str, tuple[Any, dict]] = {}
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._kind, name)
+
+    def point_errors(self, estimate) -> dict[int, float]:
+        return self._remembered("points", estimate, self._kind.point_errors)
+
+    def class_errors(self, estimate) -> dict[str, float]:
+        return self._remembered("classes", estimate, self._kind.class_errors)
+
+    def _remembered(self, what: str, estimate, compute) -> dict:
+        last = self._last.get(what)
+        if last is None or last[0] is not estimate:
+            last = self._last[what] = (estimate, compute(estimate))
+        return dict(last[1])
+
+
 def _finish(result: FrameResult, estimate, kind: Kind, params, solve: bool = False) -> None:
     """Steps 3 and 4 on ``result`` from ``estimate``, the voted (or given) model; the solve runs
     with PnL and something to refine against, or always with ``solve`` (a given model is not
     fitted to these observations yet)."""
+    kind = _LastErrors(kind)
     obs = kind.data.obs
     result.estimate = result.initial_estimate = estimate
     result.point_residuals_initial = kind.point_errors(estimate)
