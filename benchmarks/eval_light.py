@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
-from pnlviz.calib.looks import detect_kept, take_look
+from pnlviz.calib.looks import detect_kept, kept_reading
 from pnlviz.data import open_dataset
 from pnlviz.detect.run import DEFAULT_MODEL, Detector, light_detector
 from pnlviz.labels import LabelParams, keypoints_from_annotation, line_extremities
@@ -76,7 +76,7 @@ def evaluate_synthetic(det: Detector, frames: int, seed: int) -> dict:
         t0 = time.perf_counter()
         pred = det.detect([img])[0]
         times.append(time.perf_counter() - t0)
-        pred = take_look(pred, (img.shape[1], img.shape[0]), det.calibration)[0]  # the second look, where needed
+        pred = kept_reading(pred, img, det)  # the second look, where needed
         H, W = img.shape[:2]
         ann = ds.annotation(stem)
         labels = keypoints_from_annotation(ann, W, H, LabelParams(lr_disambiguation=True))

@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 
 from pnlviz.calib.frame import FrameInputs, FrameSettings, calibrate_frame
-from pnlviz.calib.looks import detect_kept, take_look
+from pnlviz.calib.looks import detect_kept, kept_reading
 from pnlviz.data import read_homographies
 from pnlviz.data.layout import sort_stems
 from pnlviz.detect.run import DEFAULT_MODEL, Detector, light_detector
@@ -80,7 +80,7 @@ def run_frames(det: Detector, images: dict[str, np.ndarray], homographies: dict[
         t0 = time.perf_counter()
         pred = det.detect([img])[0]
         times.append(time.perf_counter() - t0)
-        pred = take_look(pred, (img.shape[1], img.shape[0]), det.calibration)[0]  # the second look, where needed
+        pred = kept_reading(pred, img, det)  # the second look, where needed
         preds[stem] = pred
         Hs = homography_for_size(homographies[stem], SIZE)
         truth = labels_from_homography(Hs, W, H).labels.keypoints

@@ -33,7 +33,8 @@ from pnlviz.calib.observations import Observations
 from pnlviz.calib.params import CalibParams
 from pnlviz.field.model import FieldModel
 
-__all__ = ["confident", "detect_kept", "for_shot", "second_look_count", "shot_observations", "take_look"]
+__all__ = ["confident", "detect_kept", "for_shot", "kept_reading", "second_look_count", "shot_observations",
+           "take_look"]
 
 
 def take_look(pred: Detections, size: tuple[int, int], detection_settings: Mapping | None = None,
@@ -54,10 +55,16 @@ def take_look(pred: Detections, size: tuple[int, int], detection_settings: Mappi
     return first, False
 
 
+def kept_reading(pred: Detections, image, detector) -> Detections:
+    """``detector``'s detections ``pred`` of a BGR ``image`` as they are kept: the first reading,
+    or the second where only that gives a camera (:func:`take_look` with the detector's
+    calibration settings)."""
+    return take_look(pred, (image.shape[1], image.shape[0]), detector.calibration)[0]
+
+
 def detect_kept(detector, image) -> Detections:
-    """One BGR image's detections as they are kept: ``detector``'s first reading, or its second
-    where only that gives a camera (:func:`take_look` with the detector's calibration settings)."""
-    return take_look(detector.detect([image])[0], (image.shape[1], image.shape[0]), detector.calibration)[0]
+    """One BGR image's detections as they are kept (:func:`kept_reading`)."""
+    return kept_reading(detector.detect([image])[0], image, detector)
 
 
 def _alone(pred):

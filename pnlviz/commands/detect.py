@@ -113,8 +113,8 @@ def _load_detector(args):
 def _detect_here(ds, det, stems: list[str], step: int):
     """``(stem, Predictions | None, problem | None)`` of every frame, ``step`` frames per pass;
     each frame's second reading kept where its first gives no camera
-    (:func:`pnlviz.calib.looks.take_look`)."""
-    from pnlviz.calib.looks import take_look
+    (:func:`pnlviz.calib.looks.kept_reading`)."""
+    from pnlviz.calib.looks import kept_reading
     from pnlviz.data import DataError
 
     for i in range(0, len(stems), step):
@@ -126,7 +126,7 @@ def _detect_here(ds, det, stems: list[str], step: int):
             except DataError as exc:
                 yield stem, None, str(exc)
         for stem, img, p in zip(batch, images, det.detect(images) if images else []):
-            yield stem, take_look(p, (img.shape[1], img.shape[0]), det.calibration)[0], None
+            yield stem, kept_reading(p, img, det), None
 
 
 def _detector_key(kw: dict) -> str:
