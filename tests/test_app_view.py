@@ -459,6 +459,69 @@ def test_a_grab_takes_the_point_under_the_pointer_whatever_instance_the_browser_
     assert nodes._instance(2, nodes.uv[1] - [0.5, 0.0]) == 1
 
 
+def test_a_frames_overlays_leave_in_a_batch_before_its_grab_meshes(data):
+    """The page applies a message batch of panel elements as it arrives, but holds one with a
+    scene node until its next animation frame and mounts the node before any of the batch shows
+    (under load a release's overlay reached the screen 50-80 ms after it was sent, behind a grab
+    mesh made anew). So the tab's batch that draws the overlays (the frame's, a drag's preview)
+    makes no scene node; the grab meshes follow in a batch of their own, as the tab's next action
+    (queued once however many draws came before it), where the points are then. Meanwhile a
+    press is resolved against the points as drawn."""
+    import contextlib
+    import threading
+    from types import SimpleNamespace
+
+    from pnlviz.app.drawing import Painter
+    from pnlviz.app.modes import DragMode, PointKind
+    from pnlviz.app.state import AppState
+    from pnlviz.app.workspace import Workspace
+
+    batches: list[list[str]] = []  # the scene nodes made in each message batch, in order
+    made = batches.append
+
+    class Scene(_Scene):
+        def add_batched_meshes_simple(self, name, *a, **kw):
+            batches[-1].append(name)
+            return super().add_batched_meshes_simple(name, *a, **kw)
+
+        def add_mesh_simple(self, name, *a, **kw):
+            batches[-1].append(name)
+            return _Node(name, np.zeros((1, 3)), np.ones(1))
+
+    @contextlib.contextmanager
+    def atomic():
+        made([])
+        yield
+
+    queued: list = []
+    with AppState(data) as st:
+        view = st.view("00000")
+        ws = Workspace(Scene(), "/t", SimpleNamespace(drag=lambda e: None, pan=lambda *a: None,
+                                                      screen_to_pixel=lambda xy: np.asarray(xy, float)))
+        tab = SimpleNamespace(state=st, queue=SimpleNamespace(enqueue=queued.append, closed=False),
+                              lock=threading.RLock(), atomic=atomic, workspace=ws,
+                              editor=SimpleNamespace(drag_mode=DragMode.KEYPOINTS))
+        painter = Painter(tab)
+        painter.layers.findings = False
+        with atomic():  # the frame's batch, as Painter.draw makes it
+            ws.show_image("00000", np.zeros((view.size[1], view.size[0], 3), np.uint8))
+            painter.show_overlay(view)
+        keypoints = ws.points[PointKind.KEYPOINTS]
+        assert len(keypoints.keys) == view.observations.n_keypoints > 0 and keypoints.grab is None
+        assert not any("grab" in name for name in batches[0])  # the pick surfaces only
+        painter.show_overlay(view, preview=True)  # a drag's preview drawn before the queue gets there
+        assert len(queued) == 1 and len(batches) == 1
+        # a press before the grab meshes exist takes the point drawn nearest it
+        assert keypoints._instance(None, keypoints.uv[2] + [1.0, -1.0]) == 2
+        queued.pop()()
+        assert len(batches) == 2 and any("keypoints/grab" in name for name in batches[1])
+        assert all("grab" in name for name in batches[1])
+        n = len(keypoints.keys)
+        np.testing.assert_allclose(keypoints.grab.batched_positions[:n], ws.plane.world(keypoints.uv, "grab"))
+        painter.show_overlay(view)  # the next draw queues the next sync
+        assert len(queued) == 1
+
+
 def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     """Tab B's release adds a point to the frame tab A is dragging on: A's grab mesh is made anew
     (more instances). A's drag lives on the old mesh: it stays through A's release and for a grace

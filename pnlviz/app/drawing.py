@@ -79,6 +79,7 @@ class Painter:
         self._top_key: tuple | None = None  # what the panel's bird's-eye view was drawn from
         self._judged: tuple[FrameView, list] | None = None  # the last view judged and its findings' marks
         self._judging: FrameView | None = None  # a view whose verdict is queued
+        self._grabs_queued = False  # the grab meshes' sync is on the tab's queue
         self.shown: FrameView | None = None
         self.overlay: Overlay | None = None
         self.drawn = 0
@@ -232,8 +233,21 @@ class Painter:
         tab.workspace.show_overlay(overlay, opacity=self.opacity, keypoints=self.layers.keypoints,
                                    ghosts=self.layers.ghosts, ids=self.layers.ids,
                                    line_points=tab.editor.drag_mode is DragMode.LINE_POINTS)
+        if not self._grabs_queued:
+            self._grabs_queued = True
+            tab.queue.enqueue(self._sync_grabs)
         if not preview:
             self.overlay = overlay
+
+    def _sync_grabs(self) -> None:
+        """The points' grab meshes, as the tab's next action: in a message batch after the one
+        that shows the overlays (:meth:`pnlviz.app.workspace.Workspace.sync_grabs` says why).
+        A press that comes before them takes the point nearest it all the same."""
+        self._grabs_queued = False
+        with self.tab.lock:
+            if not self.tab.queue.closed:
+                with self._atomic():
+                    self.tab.workspace.sync_grabs()
 
     # ------------------------------------------------------------------ the panel
     def show_panel(self, view: FrameView) -> None:

@@ -83,9 +83,20 @@ class PointNodes:
         self._grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
 
     def show(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
+        """:meth:`place` the points and :meth:`sync_grab` their grab mesh."""
+        self.place(markers, plane, world_per_px)
+        self.sync_grab()
+
+    def place(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
+        """The points are these now (what the page draws, what a press takes); the grab mesh
+        follows at :meth:`sync_grab`."""
         self.keys, self.plane, self.world_per_px = list(markers.keys), plane, world_per_px
         self.uv = np.asarray(markers.uv, float).reshape(-1, 2).copy()
         self.colors = np.asarray(markers.colors, np.uint8).reshape(-1, 3)
+
+    def sync_grab(self) -> None:
+        """The grab mesh where the points are (made anew, changed in place or left: see the
+        class docstring)."""
         if not self.keys and self.grab is None:
             return
         capacity = max(8, 1 << max(0, len(self.keys) - 1).bit_length())
@@ -153,7 +164,7 @@ class PointNodes:
     def rescale(self, world_per_px: float) -> None:
         self.world_per_px = world_per_px
         if self.grab is not None and self.keys:
-            self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
+            self.sync_grab()
 
     def move(self, index: int, uv) -> None:
         """Put point ``index`` at pixel ``uv`` (while it is dragged)."""
@@ -161,7 +172,7 @@ class PointNodes:
             return
         self.uv[index] = uv
         if self.grab is not None:
-            self._set_grab(*self._grab_layout(len(self.grab.batched_positions)))
+            self.sync_grab()
         if self.moved is not None:
             self.moved()
 

@@ -170,7 +170,7 @@ class Workspace:
     def show_overlay(self, overlay: Overlay, *, opacity: float = 1.0, keypoints: bool = True, ghosts: bool = True,
                      line_points: bool = False, ids: bool = True) -> None:
         """Every layer of ``overlay``, as the marks the page draws (``opacity``: the lines', over
-        the image), and the points to grab."""
+        the image), and the points to grab (their grab meshes follow at :meth:`sync_grabs`)."""
         plane = placed(self.plane)  # the frame is shown first
         layers = sorted(overlay.segments, key=lambda n: (_LINE_RANK.get(n, len(_LINE_RANK)), n))
         self._line_marks = [m for name in layers
@@ -180,7 +180,7 @@ class Workspace:
                  PointKind.GHOSTS: overlay.ghosts if ghosts else Markers(),
                  PointKind.LINE_POINTS: overlay.line_points if line_points else Markers()}
         for kind, markers in shown.items():
-            self.points[kind].show(markers, plane, self.world_per_px)
+            self.points[kind].place(markers, plane, self.world_per_px)
         observed, ghosted = shown[PointKind.KEYPOINTS], shown[PointKind.GHOSTS]
         self.id_labels = []
         if ids:  # observed keypoints first (an occluded one's label is "(12)"), then the ghosts
@@ -189,6 +189,15 @@ class Workspace:
             self.id_labels = [(text, float(uv[0]), float(uv[1])) for _, text, uv in labelled]
         self.pins = {k: k in overlay.flagged for k in overlay.pinned if k in observed.keys}
         self.changed()
+
+    def sync_grabs(self) -> None:
+        """The points' grab meshes where :meth:`show_overlay` put the points. Apart, because a
+        message batch that holds scene nodes waits in the page for its next animation frame and
+        mounts them before anything of it is shown, while one of panel elements only (the
+        frame's pixels, its overlays and ids, the panel) is applied as it arrives: the tab sends
+        this in a batch of its own, after the frame's."""
+        for nodes in self.points.values():
+            nodes.sync_grab()
 
     @property
     def marks(self) -> list[Mark]:
