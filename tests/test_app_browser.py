@@ -600,8 +600,8 @@ def test_the_dark_frame_around_the_image_is_the_pages_and_goes_in_the_3d_view(da
     """Around the frame the image view shows a dark frame: the page's background behind the
     canvas (a mesh there filled pixels on every software-WebGL frame); the 3D view is drawn on
     viser's own background, and coming back brings the frame back. WebGL draws nothing in the image
-    view, whatever the frame shown (everything seen there is the page's), and draws the 3D view;
-    coming back wipes what the 3D view left on the canvas."""
+    view and clears nothing, whatever the frame shown (everything seen there is the page's), and
+    draws the 3D view; coming back wipes what the 3D view left on the canvas."""
     import cv2
     import numpy as np
 
@@ -610,22 +610,23 @@ def test_the_dark_frame_around_the_image_is_the_pages_and_goes_in_the_3d_view(da
 
     app = serve(data)
     page = browser.new_page(viewport={"width": 1600, "height": 900})
-    page.add_init_script("""(() => { window.__glDraws = 0;  // the draw calls that reach a WebGL context
+    page.add_init_script("""(() => { window.__glDraws = 0; window.__glClears = 0;  // the calls that reach a WebGL context
       for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) for (const k of ["drawArrays", "drawElements",
-          "drawArraysInstanced", "drawElementsInstanced", "drawRangeElements"]) {
+          "drawArraysInstanced", "drawElementsInstanced", "drawRangeElements", "clear"]) {
         const f = C.prototype[k];
-        if (f) C.prototype[k] = function (...a) { window.__glDraws += 1; return f.apply(this, a); };
+        const n = k === "clear" ? "__glClears" : "__glDraws";
+        if (f) C.prototype[k] = function (...a) { window[n] += 1; return f.apply(this, a); };
       } })()""")
     page.goto(app.page_url)
     wait_for_text(page, "focal")
     session = tab(app)
     box = canvas_box(page)
 
-    def draws_while(action) -> int:  # WebGL draw calls while ``action`` is done and drawn
-        page.evaluate("() => { window.__glDraws = 0; }")
+    def draws_while(action) -> int:  # WebGL draw calls and clears while ``action`` is done and drawn
+        page.evaluate("() => { window.__glDraws = 0; window.__glClears = 0; }")
         action()
         time.sleep(1.0)  # viser draws for 250 ms after each change
-        return page.evaluate("() => window.__glDraws")
+        return page.evaluate("() => window.__glDraws + window.__glClears")
 
     def corner() -> np.ndarray:  # the canvas's top-left corner, outside the fitted frame
         png = page.screenshot(clip={"x": box["x"] + 4, "y": box["y"] + 4, "width": 8, "height": 8})

@@ -206,8 +206,10 @@
   // In the image view WebGL draws nothing anyone sees (the image, the overlays and the ids are the
   // page's; the scene holds only invisible meshes that take the pointer, which three.js raycasts on
   // the CPU), yet software WebGL filled every one of them pixel by pixel on every frame viser drew.
-  // There the viewer's context skips its draw calls (its clears still go: the canvas shows the
-  // background three.js clears it to, never what the 3D view left); the 3D view gets them back.
+  // There the viewer's context skips its draw calls, and its clears but the first (which wipes
+  // what the 3D view left: the canvas is transparent from then on): a frame with neither leaves
+  // the canvas as it is, so the browser composites nothing new for it (in software, a clear of the
+  // whole canvas and its copy to the screen on every frame viser drew). The 3D view gets them back.
   const GL_DRAWS = ["drawArrays", "drawElements", "drawArraysInstanced", "drawElementsInstanced", "drawRangeElements"];
   const quietGl = (canvas, quiet) => {
     const gl = canvas.getContext("webgl2") || canvas.getContext("webgl");
@@ -216,6 +218,17 @@
     for (const k of GL_DRAWS) {
       if (quiet) gl[k] = () => {};
       else delete gl[k]; // the context's own method again
+    }
+    if (quiet) {
+      let wiped = false;
+      const clear = Object.getPrototypeOf(gl).clear;
+      gl.clear = (mask) => {
+        if (wiped || !(mask & gl.COLOR_BUFFER_BIT)) return;
+        wiped = true;
+        clear.call(gl, mask);
+      };
+    } else {
+      delete gl.clear;
     }
   };
   // keep the transform within what the server allows: the zoom limits, the frame's centre on screen
