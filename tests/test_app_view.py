@@ -522,6 +522,51 @@ def test_a_frames_overlays_leave_in_a_batch_before_its_grab_meshes(data):
         assert len(queued) == 1
 
 
+def test_a_dragged_points_grab_mesh_is_left_as_it_is_until_the_release():
+    """The browser picks a batched mesh where its instances were when it was made, so a mesh
+    changed in place picks no better, and each change is a scene message that the page holds for
+    its next animation frame with every message after it (the dragged disc, the live preview).
+    While a point is dragged its grab mesh is not touched; the release's redraw makes it anew
+    where the points are."""
+    import asyncio
+    from types import SimpleNamespace
+
+    from pnlviz.app.modes import PointKind
+    from pnlviz.app.overlay import Markers
+    from pnlviz.app.points import PointNodes
+
+    dragged: list = []
+    events = SimpleNamespace(drag=dragged.append, screen_to_pixel=lambda xy: np.asarray(xy, float),
+                             pan=lambda *a: None)
+    scene = _Scene()
+    nodes = PointNodes(scene, "/t", PointKind.KEYPOINTS, events=events)
+    plane = ImagePlane(960, 540)
+    uv = np.array([[100.0 + 50 * i, 200.0] for i in range(6)])
+    black = np.zeros((6, 3), np.uint8)
+    nodes.show(Markers(list(range(1, 7)), uv, black), plane, plane.scale)
+    first = nodes.grab
+    made = first.batched_positions.copy()
+
+    def event(phase, at):
+        xyz = plane.world(np.asarray(at, float).reshape(1, 2), "grab")[0]
+        return SimpleNamespace(phase=phase, start_position=xyz, end_position=xyz, instance_index=1,
+                               start_screen_pos=(0.0, 0.0), end_screen_pos=(0.0, 0.0))
+
+    asyncio.run(first.handlers["drag"](event("start", uv[1])))
+    for step in range(1, 4):
+        asyncio.run(first.handlers["drag"](event("update", uv[1] + [4.0 * step, 0.0])))
+        moved = uv.copy()
+        moved[1] += [4.0 * step, 0.0]
+        nodes.show(Markers(list(range(1, 7)), moved, black), plane, plane.scale)  # a preview's redraw
+    np.testing.assert_allclose(nodes.uv[1], uv[1] + [12.0, 0.0])  # the point follows the hand
+    assert nodes.grab is first and len(scene.nodes) == 1 and np.array_equal(first.batched_positions, made)
+    asyncio.run(first.handlers["drag"](event("end", uv[1] + [12.0, 0.0])))
+    assert [e.key for e in dragged] == [2] * 5 and np.allclose(dragged[-1].uv, uv[1] + [12.0, 0.0])
+    nodes.show(Markers(list(range(1, 7)), nodes.uv.copy(), black), plane, plane.scale)  # the release's redraw
+    assert nodes.grab is not first and len(scene.nodes) == 2
+    np.testing.assert_allclose(nodes.grab.batched_positions[:6], plane.world(nodes.uv, "grab"))
+
+
 def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     """Tab B's release adds a point to the frame tab A is dragging on: A's grab mesh is made anew
     (more instances). A's drag lives on the old mesh: it stays through A's release and for a grace

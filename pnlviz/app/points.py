@@ -49,13 +49,16 @@ class PointNodes:
     was made: once they are moved or resized in place, a press on a point reports no instance
     and no position, and viser then sends no drag update until the release (the point would not
     follow the hand on any frame but the first). So the grab mesh is made anew, under a new name,
-    whenever its instances change, except while one of its points is dragged: then it is
-    changed in place (the drag follows the pointer on a plane, not by hitting the mesh), and it
-    holds a few spare instances (parked out of sight) so that a point more or less does not
-    re-create it under the hand. A replaced grab mesh stays (invisible, as every grab mesh) for
-    :data:`GRACE_S` seconds, and after that until the next one is made: a press the browser
-    took on it before the server's redraw reached the page (another tab's edit, under load) is
-    still a press on the points (removed at once, such a press was lost: no drag, no pan). A
+    whenever its instances change, except while one of its points is dragged: then it is left as
+    it is (the drag follows the pointer on a plane, not by hitting the mesh; changed in place,
+    it would pick no better, and each change is a scene message, which the page holds for its
+    next animation frame with every message after it: the dragged disc and the live preview) and
+    made anew after the release; it holds a few spare instances (parked out of sight) so that a
+    point more or less does not re-create it under the hand. A replaced grab mesh stays
+    (invisible, as every grab mesh) for :data:`GRACE_S` seconds, and after that until the next
+    one is made: a press the browser took on it before the server's redraw reached the page
+    (another tab's edit, under load) is still a press on the points (removed at once, such a
+    press was lost: no drag, no pan). A
     press on any grab mesh takes the point nearest the pointer; with none within reach, the
     press is the image's (a click, a pan). A kept mesh sinks behind the one in use
     (:data:`SINK`, in the message batch that makes the new one), so the browser picks the new one
@@ -95,23 +98,21 @@ class PointNodes:
         self.colors = np.asarray(markers.colors, np.uint8).reshape(-1, 3)
 
     def sync_grab(self) -> None:
-        """The grab mesh where the points are (made anew, changed in place or left: see the
-        class docstring)."""
+        """The grab mesh where the points are (made anew, or left: see the class docstring)."""
         if not self.keys and self.grab is None:
             return
         capacity = max(8, 1 << max(0, len(self.keys) - 1).bit_length())
         self._set_grab(*self._grab_layout(capacity))
 
     def _set_grab(self, pos: np.ndarray, scales: np.ndarray) -> None:
-        """The grab mesh's instances: made anew when they changed (see the class docstring), in
-        place while a point is dragged and the capacity holds."""
-        made = self._grab_made  # None once changed in place: the browser's picking is stale
+        """The grab mesh's instances: made anew when they changed (see the class docstring), left
+        as they are while a point is dragged and the capacity holds."""
+        made = self._grab_made  # None once its points moved during a drag: made anew after it
         if made is not None and made[0].shape == pos.shape and np.array_equal(made[1], scales) \
                 and np.max(np.abs(made[0] - pos), initial=0.0) <= GRAB_SLACK_PX * self.world_per_px:
             return  # where the points are (self.uv) decides what a press takes; the discs are close enough
         if self.grab is not None and self.dragging and len(self.grab.batched_positions) == len(pos):
-            update_changed(self.grab, batched_positions=pos, batched_scales=scales)
-            self._grab_made = None
+            self._grab_made = None  # the drag lives on it as it is
             return
         if self.grab is not None and self.dragging:
             self._retired.append(self.grab)  # the drag lives on it until its release
