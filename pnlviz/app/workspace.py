@@ -5,8 +5,8 @@ with the view): the frame's pixels behind viser's transparent canvas (sent once 
 (:attr:`Workspace.id_labels`); the dark frame around them is the page's background
 (:data:`pnlviz.app.bridge.BACKDROP_RGB`). The scene holds only what the pointer hits, invisible:
 a surface over the image and around it, and the points' grab meshes
-(:class:`pnlviz.app.points.PointNodes`), changed in place where they can be, so a drag in
-progress is never cut short by a redraw.
+(:class:`pnlviz.app.points.PointNodes`), left as they are while a point is dragged, so a drag in
+progress is never cut short by a redraw, and sent after the overlays (:meth:`Workspace.sync_grabs`).
 
 Pointer events come back as image pixels through :class:`WorkspaceEvents`; what they mean (pan,
 select, move, place) is the tab's business (:mod:`pnlviz.app.viewcontrol`,
