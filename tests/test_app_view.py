@@ -400,6 +400,13 @@ class _Scene:
         return self.nodes[-1]
 
 
+def _shown(nodes, markers, plane, world_per_px) -> None:
+    """``nodes``' points are ``markers`` and their grab mesh follows, as a tab's draw and its next
+    action do (:meth:`pnlviz.app.workspace.Workspace.sync_grabs`)."""
+    nodes.place(markers, plane, world_per_px)
+    nodes.sync_grab()
+
+
 def test_points_a_fraction_of_a_pixel_off_keep_their_grab_mesh():
     """Another tab's redraw after a shot's re-solve moves its points a fraction of a pixel: no new
     grab mesh goes to the page for that (the press takes the nearest point wherever the disc is),
@@ -419,18 +426,18 @@ def test_points_a_fraction_of_a_pixel_off_keep_their_grab_mesh():
     wpp = plane.scale / 2.0  # 2 screen pixels per image pixel
     uv = np.array([[100.0 + 50 * i, 200.0] for i in range(5)])
     black = np.zeros((5, 3), np.uint8)
-    nodes.show(Markers(list(range(1, 6)), uv, black), plane, wpp)
+    _shown(nodes, Markers(list(range(1, 6)), uv, black), plane, wpp)
     assert len(scene.nodes) == 1
     near = uv + [0.9 * GRAB_SLACK_PX / 2.0, -0.2]  # under half a screen pixel at 2 screen px per image px
-    nodes.show(Markers(list(range(1, 6)), near, black), plane, wpp)
+    _shown(nodes, Markers(list(range(1, 6)), near, black), plane, wpp)
     assert len(scene.nodes) == 1 and nodes.grab is scene.nodes[0]
     assert np.allclose(nodes.uv, near)  # presses resolve against where the points are now
     assert nodes._instance(None, near[3] + [3.0, 0.0]) == 3
     for moved, scale in ((uv + [1.0, 0.0], wpp), (uv, 0.5 * wpp)):  # a pixel farther; a zoom
         n0 = len(scene.nodes)
-        nodes.show(Markers(list(range(1, 6)), moved, black), plane, scale)
+        _shown(nodes, Markers(list(range(1, 6)), moved, black), plane, scale)
         assert len(scene.nodes) == n0 + 1 and nodes.grab is scene.nodes[-1]
-    nodes.show(Markers(list(range(1, 10)), np.vstack([uv, uv[:4] + [0.0, 80.0]]), np.zeros((9, 3), np.uint8)),
+    _shown(nodes, Markers(list(range(1, 10)), np.vstack([uv, uv[:4] + [0.0, 80.0]]), np.zeros((9, 3), np.uint8)),
                plane, 0.5 * wpp)  # more points than the mesh holds
     assert len(scene.nodes) == 4
 
@@ -477,7 +484,6 @@ def test_a_frames_overlays_leave_in_a_batch_before_its_grab_meshes(data):
     from pnlviz.app.workspace import Workspace
 
     batches: list[list[str]] = []  # the scene nodes made in each message batch, in order
-    made = batches.append
 
     class Scene(_Scene):
         def add_batched_meshes_simple(self, name, *a, **kw):
@@ -490,7 +496,7 @@ def test_a_frames_overlays_leave_in_a_batch_before_its_grab_meshes(data):
 
     @contextlib.contextmanager
     def atomic():
-        made([])
+        batches.append([])
         yield
 
     queued: list = []
@@ -543,7 +549,7 @@ def test_a_dragged_points_grab_mesh_is_left_as_it_is_until_the_release():
     plane = ImagePlane(960, 540)
     uv = np.array([[100.0 + 50 * i, 200.0] for i in range(6)])
     black = np.zeros((6, 3), np.uint8)
-    nodes.show(Markers(list(range(1, 7)), uv, black), plane, plane.scale)
+    _shown(nodes, Markers(list(range(1, 7)), uv, black), plane, plane.scale)
     first = nodes.grab
     made = first.batched_positions.copy()
 
@@ -557,12 +563,12 @@ def test_a_dragged_points_grab_mesh_is_left_as_it_is_until_the_release():
         asyncio.run(first.handlers["drag"](event("update", uv[1] + [4.0 * step, 0.0])))
         moved = uv.copy()
         moved[1] += [4.0 * step, 0.0]
-        nodes.show(Markers(list(range(1, 7)), moved, black), plane, plane.scale)  # a preview's redraw
+        _shown(nodes, Markers(list(range(1, 7)), moved, black), plane, plane.scale)  # a preview's redraw
     np.testing.assert_allclose(nodes.uv[1], uv[1] + [12.0, 0.0])  # the point follows the hand
     assert nodes.grab is first and len(scene.nodes) == 1 and np.array_equal(first.batched_positions, made)
     asyncio.run(first.handlers["drag"](event("end", uv[1] + [12.0, 0.0])))
     assert [e.key for e in dragged] == [2] * 5 and np.allclose(dragged[-1].uv, uv[1] + [12.0, 0.0])
-    nodes.show(Markers(list(range(1, 7)), nodes.uv.copy(), black), plane, plane.scale)  # the release's redraw
+    _shown(nodes, Markers(list(range(1, 7)), nodes.uv.copy(), black), plane, plane.scale)  # the release's redraw
     assert nodes.grab is not first and len(scene.nodes) == 2
     np.testing.assert_allclose(nodes.grab.batched_positions[:6], plane.world(nodes.uv, "grab"))
 
@@ -589,7 +595,7 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     nodes = PointNodes(scene, "/t", PointKind.KEYPOINTS, events=events)
     plane = ImagePlane(960, 540)
     uv = np.array([[100.0 + 50 * i, 200.0] for i in range(8)])
-    nodes.show(Markers(list(range(1, 9)), uv, np.zeros((8, 3), np.uint8)), plane, plane.scale)
+    _shown(nodes, Markers(list(range(1, 9)), uv, np.zeros((8, 3), np.uint8)), plane, plane.scale)
     first = nodes.grab
 
     def event(phase, at):
@@ -600,7 +606,7 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
     asyncio.run(first.handlers["drag"](event("start", uv[0])))
     assert nodes.dragging
     more = np.vstack([uv, [[700.0, 400.0]]])  # the other tab's point: 9 points, more than the 8 made
-    nodes.show(Markers(list(range(1, 10)), more, np.zeros((9, 3), np.uint8)), plane, plane.scale)
+    _shown(nodes, Markers(list(range(1, 10)), more, np.zeros((9, 3), np.uint8)), plane, plane.scale)
     assert nodes.grab is not first and not first.removed  # the drag's mesh lives on
     # the drag's mesh is changed in place until its release (the drag lives on it)
     assert np.allclose(first.batched_positions[0, 2], nodes.grab.batched_positions[0, 2])
@@ -627,7 +633,7 @@ def test_a_drag_survives_its_grab_mesh_being_made_anew_by_another_tab():
         points.time.monotonic = lambda: later
         second = nodes.grab
         more = more + [0.0, 3.0]  # the points moved: the grab mesh is made anew
-        nodes.show(Markers(list(range(1, 10)), more, np.zeros((9, 3), np.uint8)), plane, plane.scale)
+        _shown(nodes, Markers(list(range(1, 10)), more, np.zeros((9, 3), np.uint8)), plane, plane.scale)
     finally:
         points.time.monotonic = orig
     assert first.removed and not second.removed and not nodes.grab.removed

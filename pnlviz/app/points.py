@@ -85,11 +85,6 @@ class PointNodes:
         self._stale: list = []  # (grab mesh replaced, when): removed after the grace period
         self._grabbed: dict = {}  # the drag in progress: key, where it was grabbed, the point's pixel then
 
-    def show(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
-        """:meth:`place` the points and :meth:`sync_grab` their grab mesh."""
-        self.place(markers, plane, world_per_px)
-        self.sync_grab()
-
     def place(self, markers: Markers, plane: ImagePlane, world_per_px: float) -> None:
         """The points are these now (what the page draws, what a press takes); the grab mesh
         follows at :meth:`sync_grab`."""

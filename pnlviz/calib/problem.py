@@ -230,12 +230,12 @@ class Problem:
         """A circle's block: its samples ``T`` (the model's space), their pixels ``uv`` and, in a
         Jacobian evaluation, their derivatives ``J``; the samples behind the camera left out."""
         front = self.model.front(T)
-        if front.all():  # the usual case: no sample to leave out
-            return self.w_ln, polyline_block(uv, pts, None if J is None else J.__getitem__)
-        if front.sum() < 2:
-            return 1.0, Block(np.full(len(pts), BEHIND), None if J is None else np.zeros((len(pts), self.model.n_params)))
-        Jf = None if J is None else J[front]
-        return self.w_ln, polyline_block(uv[front], pts, None if Jf is None else Jf.__getitem__)
+        if not front.all():  # (usually all are in front: nothing to leave out, no copy)
+            if front.sum() < 2:
+                return 1.0, Block(np.full(len(pts), BEHIND),
+                                  None if J is None else np.zeros((len(pts), self.model.n_params)))
+            uv, J = uv[front], None if J is None else J[front]
+        return self.w_ln, polyline_block(uv, pts, None if J is None else J.__getitem__)
 
     def residuals(self, state) -> np.ndarray:
         return self.evaluate(state)[0]

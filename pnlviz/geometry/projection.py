@@ -83,11 +83,8 @@ def camera_to_pixels(Xc: np.ndarray, R: np.ndarray, f: float | np.ndarray, aspec
     D[:, :, 3:] = (p[:, :, None] * R[..., None, 2, :] - R[..., :2, :]) * (1.0 / z)[:, None, None]
     # then the lens and the focal length: d(pixels)/dp = diag(f, f aspect) (g I + 2 k1 p p^T)
     J = np.empty((n, 2, N_CAMERA_PARAMS))
-    if k1 == 0.0 and np.ndim(f) == 0:  # g = 1 and no cross term
-        J[:, :, :6] = D * np.array([[f], [fa]])
-    elif k1 == 0.0:  # one focal length per point
-        J[:, 0, :6] = np.reshape(f, (-1, 1)) * D[:, 0]
-        J[:, 1, :6] = np.reshape(fa, (-1, 1)) * D[:, 1]
+    if k1 == 0.0:  # g = 1 and no cross term: one focal length, or one per point
+        J[:, :, :6] = D * (np.array([[f], [fa]]) if np.ndim(f) == 0 else np.stack([f, fa], -1)[:, :, None])
     else:
         dx, dy, k2 = D[:, 0], D[:, 1], 2 * k1 * xy
         J[:, 0, :6] = (f * (g + 2 * k1 * xn * xn))[:, None] * dx + (f * k2)[:, None] * dy
