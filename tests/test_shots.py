@@ -60,8 +60,13 @@ def test_a_clip_of_few_keypoints_and_a_missed_cut_is_no_worse_than_its_frames():
     forced = calibrate_clip(obs, clip.per_frame, (W, H), cuts=CutEdits(removed=frozenset(range(1, 40))))
     assert len(forced.shots) == 1
     kept = [c for c in forced.choices if c.use == "own"]
-    assert len(kept) >= 20 and all("misses" in c.reason or "verdict" in c.reason for c in kept)
-    assert np.mean([_accuracy(c, a) for c, a in zip(forced.cameras, anns)]) > 0.8
+    # one camera centre cannot carry both positions: the frames of at least one of them keep their own
+    assert all(c.use == "own" for c in forced.choices[true_cut:]) or all(c.use == "own" for c in
+                                                                          forced.choices[:true_cut])
+    assert all("misses" in c.reason or "verdict" in c.reason for c in kept)
+    # and no frame is worse than with its own camera
+    got = [_accuracy(c, a) for c, a in zip(forced.cameras, anns)]
+    assert all(g >= o - 1e-6 for g, o in zip(got, own)), [(t, g, o) for t, (g, o) in enumerate(zip(got, own)) if g < o]
 
 
 def _frame(seed: int = 4):
@@ -175,7 +180,8 @@ def test_a_frame_alone_in_preferring_its_own_camera_keeps_the_shots():
     """A broadcast camera moves smoothly: the shot's camera cannot be wrong on one frame only.
     A frame whose items prefer its own camera while its neighbours' do not has observations that
     are off (its own camera follows them): it keeps the shot's camera, reported suspect; three
-    frames in a row (or a whole shorter shot) keep their own."""
+    frames in a row (or a whole shorter shot) keep their own, and so does a frame beside one whose
+    shot camera fails its verdict."""
     from pnlviz.calib.shot_check import CameraChoice, alone_kept_by_shot
 
     own = CameraChoice("own", "the shot's camera misses keypoint 4 (9 px, own 0.5), which the frame's own camera fits",
@@ -186,3 +192,6 @@ def test_a_frame_alone_in_preferring_its_own_camera_keeps_the_shots():
     assert [c.use for c in got] == ["shot", "shot", "shot", "own", "own", "own", "shot", "own", "shot"]
     assert "suspect observations" in got[1].reason and got[1].worse == own.worse
     assert [c.use for c in alone_kept_by_shot([own, own])] == ["own", "own"]  # the whole shot
+    # beside a frame whose shot camera fails its verdict, the shot's camera is wrong there too: not alone
+    assert [c.use for c in alone_kept_by_shot([shot, shot, own, verdict, shot, shot])] == [
+        "shot", "shot", "own", "own", "shot", "shot"]

@@ -162,18 +162,20 @@ def _verdict(data: FrameData, d: FrameDistances, calib: CalibParams, width: floa
 def alone_kept_by_shot(choices: list[CameraChoice]) -> list[CameraChoice]:
     """The choices of a shot's frames (in order) with each run of frames that keep their own
     camera by their items (``by_items``) shorter than :data:`MIN_RUN` frames (and than the shot)
-    given back to the shot's camera: see the module docstring."""
+    given back to the shot's camera: see the module docstring. A run that touches a frame keeping
+    its own camera for another reason (the shot's camera fails its verdict) is not alone: the shot's
+    camera is wrong there too, and the run keeps its own."""
     out = list(choices)
     need = min(MIN_RUN, len(choices))
     i = 0
     while i < len(out):
-        if not out[i].by_items:
+        if out[i].use != "own":
             i += 1
             continue
         j = i
-        while j < len(out) and out[j].by_items:
+        while j < len(out) and out[j].use == "own":
             j += 1
-        if j - i < need:
+        if j - i < need and all(out[k].by_items for k in range(i, j)):
             for k in range(i, j):
                 c = out[k]
                 out[k] = CameraChoice("shot", c.reason.replace("the shot's camera misses", "its observations disagree "
