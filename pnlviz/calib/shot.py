@@ -61,8 +61,9 @@ class TemporalParams:
     accel_deg: float = 0.01
     #: ... of log focal length (1 / frame^2)
     accel_log_f: float = 0.001
-    #: soft-L1 threshold, in units of ``noise_px``
-    robust: float = 3.0
+    #: soft-L1 threshold, in units of ``noise_px``, on every row but the pins' (chosen on tuning
+    #: clips: ``benchmarks/tune_shot_loss.py``; the smallest that leaves every frame its camera)
+    robust: float = 1.5
     #: for the first solve, an observation joins when its own frame's camera puts it within this
     #: (px at 960 px width; looser than the frame's gates: a per-frame camera is itself a few pixels
     #: off where it extrapolates). After it, the frame pipeline's PnL gates decide
@@ -221,6 +222,17 @@ class ShotProblem:
                 for t, f in enumerate(np.exp(per[:, 3]).tolist())]
 
     # ------------------------------------------------------------------ residuals
+    def loss_bends(self, bend: float) -> float | np.ndarray:
+        """Where the robust loss bends (noise units) on the rows of :meth:`evaluate`: at ``bend``
+        for the observations and the prior, nowhere (squares) for the pins, which bound their own
+        loss (:func:`pin_block`) and are never outliers; ``bend`` itself for a shot without pins."""
+        pins = self.rows.kp_pin
+        if not pins.any():
+            return bend
+        out = np.full(self.rows.n_res + 4 * max(self.T - 2, 0) + int(self.params.fit_k1), bend)
+        out[:2 * len(pins)][np.repeat(pins, 2)] = np.inf
+        return out
+
     def evaluate(self, x: np.ndarray, jac: bool = False) -> tuple[np.ndarray, scipy.sparse.csr_matrix | None]:
         """Residuals (n,) at ``x`` (keypoints, line points' perpendicular distances and overshoots,
         circle points, then the prior rows) and, with ``jac``, their Jacobian (n, 4 + 4 T) as a

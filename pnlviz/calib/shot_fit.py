@@ -8,7 +8,8 @@
   (within ``start_outlier_px``; all of a frame that has none), then the ones the shot's camera
   agrees with by the frame pipeline's PnL gates (a keypoint within ``point_gate_px``, a line or
   circle when all its points are within ``line_gate_px``), until that set stops changing; and a
-  soft-L1 loss on every residual (``robust``, in units of the noise);
+  soft-L1 loss on every residual but the pins' (``robust``, in units of the noise; a pin bounds its
+  own loss);
 * **solved jointly** by the one Levenberg-Marquardt solver (:mod:`pnlviz.calib.solver`) on the
   whole shot, with the model's analytic sparse Jacobian (the normal equations are small: 4 per
   frame + 4 columns).
@@ -133,9 +134,10 @@ def camera_vector(cam: Camera) -> np.ndarray:
 
 def _solve(m: ShotProblem, x: np.ndarray, params: TemporalParams, tol: float,
            free: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
-    """The shot solved from ``x`` by the one solver, soft-L1 (``robust``); ``free``: a mask of the
-    parameters it may change (None: all), the others hold their value in ``x``."""
-    solver = SolverParams(loss="soft_l1", f_scale=params.robust, max_iter=params.max_iterations, tol=tol,
+    """The shot solved from ``x`` by the one solver, soft-L1 (``robust``) but on the pins
+    (:meth:`ShotProblem.loss_bends`); ``free``: a mask of the parameters it may change (None: all),
+    the others hold their value in ``x``."""
+    solver = SolverParams(loss="soft_l1", f_scale=m.loss_bends(params.robust), max_iter=params.max_iterations, tol=tol,
                           step_tol=1e-10 * float(np.linalg.norm(x)), max_trials=12)
     if free is None:
         return levenberg_marquardt(m.evaluate, lambda x, dx: x + dx, x, solver)

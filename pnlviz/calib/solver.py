@@ -58,15 +58,17 @@ def _check_stop() -> None:
 @dataclass(frozen=True)
 class SolverParams:
     loss: str = "linear"  #: linear, huber, soft_l1 or cauchy
-    f_scale: float = 2.0  #: where a robust loss bends (the residuals' unit: pixels)
+    #: where a robust loss bends (the residuals' unit: pixels); one per residual, np.inf where the
+    #: residual is squared as it is (a pin of a shot, which bounds its own loss)
+    f_scale: float | np.ndarray = 2.0
     max_iter: int = 50
     tol: float = 1e-8  #: stop when the cost drops by less than this fraction
     step_tol: float = 1e-12  #: ... or the step is shorter than this
     max_trials: int | None = None  #: stop after this many rejected steps in a row (None: until lam > 1e12)
 
 
-def robust_weights(r: np.ndarray, loss: str, c: float) -> np.ndarray:
-    """sqrt of the IRLS weight rho'(s) for s = (r / c)^2."""
+def robust_weights(r: np.ndarray, loss: str, c: float | np.ndarray) -> np.ndarray:
+    """sqrt of the IRLS weight rho'(s) for s = (r / c)^2 (1 where ``c`` is infinite)."""
     if loss == "linear":
         return np.ones_like(r)
     s = (r / c) ** 2
@@ -79,8 +81,9 @@ def robust_weights(r: np.ndarray, loss: str, c: float) -> np.ndarray:
     raise ValueError(f"unknown loss {loss!r}; one of {LOSSES}")
 
 
-def robust_cost(r: np.ndarray, loss: str, c: float) -> float:
-    """``0.5 sum rho(r^2)`` (``0.5 c^2 sum rho((r / c)^2)`` for the robust losses)."""
+def robust_cost(r: np.ndarray, loss: str, c: float | np.ndarray) -> float:
+    """``0.5 sum rho(r^2)`` (``0.5 c^2 sum rho((r / c)^2)`` for the robust losses; ``0.5 r^2``
+    where ``c``, one per residual, is infinite)."""
     if loss == "linear":
         return 0.5 * float(r @ r)
     s = (r / c) ** 2
@@ -92,7 +95,11 @@ def robust_cost(r: np.ndarray, loss: str, c: float) -> float:
         rho = np.log1p(s)
     else:
         raise ValueError(f"unknown loss {loss!r}; one of {LOSSES}")
-    return 0.5 * c**2 * float(np.sum(rho))
+    if np.ndim(c) == 0:
+        return 0.5 * float(c) ** 2 * float(np.sum(rho))
+    squared = np.isinf(c)
+    bend = np.where(squared, 0.0, c)
+    return 0.5 * float(np.sum(np.where(squared, r * r, bend * bend * rho)))
 
 
 Evaluate = Callable[[Any, bool], tuple[np.ndarray, np.ndarray | None]]

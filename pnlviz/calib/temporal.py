@@ -334,7 +334,8 @@ class ClipCalibration:
 def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameSettings, *,
                           cameras: Sequence[Camera | None] | None = None,
                           changes: Sequence[float | None] | None = None,
-                          model: FieldModel | None = None, cuts: CutEdits = CutEdits()) -> ClipCalibration:
+                          model: FieldModel | None = None, cuts: CutEdits = CutEdits(),
+                          temporal: TemporalParams = TemporalParams()) -> ClipCalibration:
     """A clip as ``pnlviz calibrate --temporal`` calibrates it: ``inputs`` are the frames'
     :class:`pnlviz.calib.frame.FrameInputs` in time order (None: unreadable), all of one size, and
     ``settings`` their :class:`~pnlviz.calib.frame.FrameSettings`. The per-frame cameras (computed
@@ -358,7 +359,7 @@ def calibrate_clip_frames(inputs: Sequence[FrameInputs | None], settings: FrameS
     looked = {t for t, (_, _, second) in enumerate(found) if second}
     cameras = [None if t in looked else c for t, c in enumerate(cameras)]
     obs = [o for o, _, _ in found]
-    params = TemporalParams(fit_k1=calib.refine_k1)
+    params = replace(temporal, fit_k1=calib.refine_k1)
     result = calibrate_clip(obs, list(cameras), sizes.pop(), params, changes=changes, model=model, calib=calib,
                             cuts=cuts, looked=looked)
     return ClipCalibration(list(cameras), obs, result)
