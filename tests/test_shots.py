@@ -195,3 +195,37 @@ def test_a_frame_alone_in_preferring_its_own_camera_keeps_the_shots():
     # beside a frame whose shot camera fails its verdict, the shot's camera is wrong there too: not alone
     assert [c.use for c in alone_kept_by_shot([shot, shot, own, verdict, shot, shot])] == [
         "shot", "shot", "own", "own", "shot", "shot"]
+
+
+def test_the_shots_robust_loss_leaves_the_pins_out():
+    """The soft-L1 loss bends at ``robust`` on every row of the shot's problem but a pin's, which
+    has a bounded loss of its own and is squared. The bends line up with the rows the problem
+    evaluates: the rows a move of the pin changes are exactly the squared ones."""
+    from dataclasses import replace
+
+    from pnlviz.calib.shot import ShotProblem, frame_data
+    from pnlviz.calib.shot_fit import initial
+
+    plan, anns = _annotated_clip(5, 6)
+    clip = calibrate_clip_frames([FrameInputs((W, H), annotation=a) for a in anns], FrameSettings())
+    obs = list(clip.observations)
+    assert all(o.lines for o in obs) and obs[2].n_keypoints >= 2
+    pinned = np.zeros(obs[2].n_keypoints, bool)
+    pinned[1] = True
+    obs[2] = replace(obs[2], kp_pinned=pinned)
+    C, k1, per = initial(clip.per_frame, len(obs))
+    x = np.concatenate([C, [k1], per.ravel()])
+
+    def problem(observations):
+        return ShotProblem(frame_data(observations, load_field_model()), (W, H), TemporalParams())
+
+    m = problem(obs)
+    bends = m.loss_bends(1.5)
+    r, _ = m.evaluate(x)
+    assert bends.shape == r.shape and m.n_data < len(r)
+    moved = obs[2].kp_xy.copy()
+    moved[1] += 10.0
+    changed = problem(obs[:2] + [replace(obs[2], kp_xy=moved)] + obs[3:]).evaluate(x)[0] != r
+    assert np.array_equal(np.flatnonzero(changed), np.flatnonzero(np.isinf(bends))), "the pin's rows"
+    assert np.sum(changed) == 2 and np.all(bends[~changed] == 1.5)  # the other observations and the priors
+    assert problem(clip.observations).loss_bends(1.5) == 1.5  # no pin: one bend for every row

@@ -61,8 +61,9 @@ class TemporalParams:
     accel_deg: float = 0.01
     #: ... of log focal length (1 / frame^2)
     accel_log_f: float = 0.001
-    #: soft-L1 threshold, in units of ``noise_px``, on every row but the pins' (chosen on tuning
-    #: clips: ``benchmarks/tune_shot_loss.py``; the smallest that leaves every frame its camera)
+    #: soft-L1 threshold, in units of ``noise_px``, on every row but the pins'
+    #: (:meth:`ShotProblem.loss_bends`); chosen on tuning clips by ``benchmarks/tune_shot_loss.py``
+    #: (the smallest that leaves every frame its camera)
     robust: float = 1.5
     #: for the first solve, an observation joins when its own frame's camera puts it within this
     #: (px at 960 px width; looser than the frame's gates: a per-frame camera is itself a few pixels
@@ -223,9 +224,10 @@ class ShotProblem:
 
     # ------------------------------------------------------------------ residuals
     def loss_bends(self, bend: float) -> float | np.ndarray:
-        """Where the robust loss bends (noise units) on the rows of :meth:`evaluate`: at ``bend``
-        for the observations and the prior, nowhere (squares) for the pins, which bound their own
-        loss (:func:`pin_block`) and are never outliers; ``bend`` itself for a shot without pins."""
+        """Where the robust loss bends (noise units) on each row of :meth:`evaluate`: at ``bend``
+        for the observations and the priors; nowhere (np.inf: squares) for the pins, which bound
+        their own loss (:func:`pin_block`) and are never outliers. ``bend`` itself for a shot
+        without pins."""
         pins = self.rows.kp_pin
         if not pins.any():
             return bend
