@@ -65,6 +65,11 @@ class SolverParams:
     tol: float = 1e-8  #: stop when the cost drops by less than this fraction
     step_tol: float = 1e-12  #: ... or the step is shorter than this
     max_trials: int | None = None  #: stop after this many rejected steps in a row (None: until lam > 1e12)
+    #: soft-L1 only: the normal equations take the loss's own curvature along each residual,
+    #: ``rho' + 2 s rho''`` (Triggs' correction), instead of the reweighting's ``rho'``, which
+    #: overstates it ``1 + s`` times past the bend and shortens the steps there: the same minimum in
+    #: fewer iterations when many residuals are past the bend
+    exact_curvature: bool = False
 
 
 def robust_weights(r: np.ndarray, loss: str, c: float | np.ndarray) -> np.ndarray:
@@ -177,6 +182,11 @@ def _normal_equations(J, r: np.ndarray, p: SolverParams) -> tuple[Any, np.ndarra
     else:
         w = robust_weights(r, p.loss, p.f_scale)
         rw = r * w
+        if p.exact_curvature and p.loss == "soft_l1":
+            # w = (1 + s)^-1/4 = sqrt(rho'): the rows weighed w^3 (the curvature (1 + s)^-3/2), their
+            # residuals r / w, so that the gradient stays J^T (rho' r)
+            rw = r / w
+            w = w ** 3
         if dense:
             Jw = J * w[:, None]
         else:
