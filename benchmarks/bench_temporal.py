@@ -38,13 +38,16 @@ def _clip_groups(stems):
     return video_clips(stems)
 
 
-def per_frame_and_temporal(inputs: dict, size, detection_settings: dict, changes: dict | None = None):
+def per_frame_and_temporal(inputs: dict, size, detection_settings: dict, changes: dict | None = None,
+                           temporal=None):
     """``{stem: FrameInputs}`` -> (per-frame cameras, temporal cameras, observations, seconds of the
     temporal pass), all ``{stem: Camera | None}`` at ``size``, clip by clip as ``pnlviz calibrate
     --temporal`` does (:func:`pnlviz.calib.temporal.calibrate_clip_frames`); ``detection_settings``:
     the detector's calibration settings; ``changes``: ``{stem: image change from the previous
-    frame}`` (as the command measures when the frames have images)."""
+    frame}`` (as the command measures when the frames have images); ``temporal``: the shot model's
+    :class:`~pnlviz.calib.shot.TemporalParams` (None: its defaults)."""
     from pnlviz.calib.frame import FrameSettings, calibrate_frame
+    from pnlviz.calib.shot import TemporalParams
     from pnlviz.calib.temporal import calibrate_clip_frames
     from pnlviz.field import load_field_model
 
@@ -60,7 +63,8 @@ def per_frame_and_temporal(inputs: dict, size, detection_settings: dict, changes
             cams.append(fc.result.camera if fc.ok else None)
         t0 = time.perf_counter()
         ch = [changes.get(s) for s in members[1:]] if changes else None
-        fit = calibrate_clip_frames(frames, settings, cameras=cams, changes=ch, model=model)
+        fit = calibrate_clip_frames(frames, settings, cameras=cams, changes=ch, model=model,
+                                    temporal=temporal or TemporalParams())
         seconds += time.perf_counter() - t0
         for s, a, b, ob in zip(members, cams, fit.result.cameras, fit.observations):
             per[s], temp[s], obs[s] = a, b, ob
@@ -78,7 +82,8 @@ def _residual(cams: dict, obs: dict, scale: float) -> float:
     return float(np.median(np.concatenate(r))) if r else float("nan")
 
 
-def _jitter(cams: dict) -> np.ndarray:
+def jitter_by_clip(cams: dict) -> np.ndarray:
+    """The jitter of ``{stem: Camera | None}``, clip by clip (no triple across two clips)."""
     from pnlviz.metrics.temporal import jitter
 
     out = []
@@ -101,7 +106,7 @@ def real_clips(shared: Path) -> None:
     inputs = {s: FrameInputs(size, detections=p) for s, p in preds.items()}
     per, temp, obs, seconds = per_frame_and_temporal(inputs, size, {})
     n = len(inputs)
-    jp, jt = _jitter(per), _jitter(temp)
+    jp, jt = jitter_by_clip(per), jitter_by_clip(temp)
     print(f"real TS-WorldCup clips: {len(_clip_groups(inputs))} clips, {n} frames (PnLCalib's detections, 1280x720)")
     print("| calibration | CR | jitter median (px) | jitter p90 (px) | keypoint residual median (px) |")
     print("|---|---|---|---|---|")
@@ -112,23 +117,25 @@ def real_clips(shared: Path) -> None:
     print(f"temporal pass: {seconds:.2f} s for {n} frames ({1e3 * seconds / n:.1f} ms/frame)")
 
 
-def synthetic_clips(n_clips: int, frames: int, seed: int) -> None:
+def render_and_detect(root: Path, seeds, frames: int):
+    """Synthetic clips of ``seeds`` (``pnlviz synth --clip``, 960x540) made in ``root`` and detected
+    with the light default model: (dataset, ``{stem: FrameInputs}``, ``{stem: true Camera}``,
+    ``{stem: image change from the previous frame}``, the detector's calibration settings,
+    seconds rendering, seconds detecting)."""
     from pnlviz.calib.frame import FrameInputs
     from pnlviz.calib.looks import detect_kept
     from pnlviz.calib.temporal import image_change
     from pnlviz.data import open_dataset
     from pnlviz.detect.run import Detector
     from pnlviz.geometry.camera import Camera
-    from pnlviz.metrics.soccernet import evaluate_dataset
     from pnlviz.synth import generate
 
     det = Detector.from_weights(None, None)
-    tmp = Path(tempfile.mkdtemp())
     inputs, truth, changes = {}, {}, {}
     t0 = time.perf_counter()
-    for k in range(n_clips):
-        generate(tmp, frames, seed + k, clip=True, progress=False, force=True)
-    ds = open_dataset(tmp)
+    for seed in seeds:
+        generate(root, frames, seed, clip=True, progress=False, force=True)
+    ds = open_dataset(root)
     render_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     prev = None
@@ -140,16 +147,24 @@ def synthetic_clips(n_clips: int, frames: int, seed: int) -> None:
         pred = detect_kept(det, img)
         inputs[s] = FrameInputs((img.shape[1], img.shape[0]), detections=pred)
         truth[s] = Camera.from_soccernet(ds.camera_dict(s), 960, 540)
-    detect_s = time.perf_counter() - t0
-    per, temp, obs, seconds = per_frame_and_temporal(inputs, (960, 540), det.calibration, changes)
+    return ds, inputs, truth, changes, det.calibration, render_s, time.perf_counter() - t0
+
+
+def synthetic_clips(n_clips: int, frames: int, seed: int) -> None:
+    from pnlviz.metrics.soccernet import evaluate_dataset
+
+    tmp = Path(tempfile.mkdtemp())
+    ds, inputs, truth, changes, calibration, render_s, detect_s = render_and_detect(
+        tmp, range(seed, seed + n_clips), frames)
+    per, temp, obs, seconds = per_frame_and_temporal(inputs, (960, 540), calibration, changes)
     print(f"synthetic clips: {n_clips} x {frames} frames (seeds {seed}-{seed + n_clips - 1}), light default detector; "
           f"rendering {render_s:.0f} s, detection {detect_s:.0f} s")
     print("| calibration | FS@5 | JaC@5 | CR | jitter median (px) | jitter p90 (px) |")
     print("|---|---|---|---|---|---|")
-    jtrue = _jitter(truth)
+    jtrue = jitter_by_clip(truth)
     for name, cams in (("per frame", per), ("temporal", temp)):
         s = evaluate_dataset(ds, {k: v for k, v in cams.items() if v is not None}, progress=False)
-        j = _jitter(cams)
+        j = jitter_by_clip(cams)
         print(f"| {name} | {s.final_score:.3f} | {s.jac(5):.3f} | {s.completeness:.3f} | {np.median(j):.2f} | "
               f"{np.percentile(j, 90):.2f} |")
     print(f"| ground truth | | | | {np.median(jtrue):.2f} | {np.percentile(jtrue, 90):.2f} |")

@@ -25,12 +25,12 @@ from pnlviz.geometry.camera import Camera
 
 from .shot import TemporalParams
 
-__all__ = ["CutEdits", "apply_cuts", "find_shots", "segment_shots"]
+__all__ = ["CutEdits", "apply_cuts", "find_shots", "segment_shots", "view_change"]
 
 _GRID = pitch_grid(5.0)
 
 
-def _view_change(a: Camera, b: Camera) -> float:
+def view_change(a: Camera, b: Camera) -> float:
     """Median displacement (pixels of ``a``) of the pitch grid points both cameras see (inf when
     they see none in common)."""
     pa = a.project(_GRID)
@@ -58,7 +58,7 @@ def segment_shots(cameras: Sequence[Camera | None], changes: Sequence[float | No
 
     def apart(a: Camera, b: Camera, ref: np.ndarray) -> bool:
         return (float(np.linalg.norm(a.C - ref)) > params.cut_centre_m
-                and _view_change(a, b) > params.cut_view * a.width)
+                and view_change(a, b) > params.cut_view * a.width)
 
     for t in range(T):
         if t > 0 and changes is not None and (change := changes[t - 1]) is not None and change > params.cut_image:
