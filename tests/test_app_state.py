@@ -40,6 +40,24 @@ def test_views_calibrate_on_demand_and_agree_with_the_annotation(data):
     assert st.view("00001").result.ok  # the rest keeps working
 
 
+def test_a_preview_is_scored_only_when_its_view_is_kept(data):
+    """A preview (a point being dragged) is not scored against the annotation; once that position
+    is released its view is the frame's, and its JaC is the score of its camera."""
+    from pnlviz.conventions import EVAL_SIZE
+    from pnlviz.metrics.soccernet import evaluate_frame
+
+    st = AppState(data)
+    obs = st.view("00001").observations
+    kid, (x, y) = int(obs.kp_ids[0]), obs.kp_xy[0] + [3.0, 2.0]
+    preview = st.preview("00001", st.default_settings, kid, x, y)
+    assert preview.measured_jac is None  # nothing measured while the point moves
+    st.move_keypoint("00001", kid, x, y)
+    kept = st.view("00001")
+    assert kept is preview
+    truth = evaluate_frame(kept.result.camera.scaled(*EVAL_SIZE), kept.annotation)
+    assert kept.jac == {t: truth.accuracy(t) for t in (5, 10, 20)} and kept.jac[5] > 0.5
+    assert kept.measured_jac is kept.jac  # measured once
+
 def test_pnl_and_alpha_change_the_calibration(data):
     st = AppState(data)
     with_pnl = st.view("00002").result

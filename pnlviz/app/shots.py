@@ -248,7 +248,7 @@ class ClipShots:
                      if lab.residual is not None and lab.provenance != "shot"}
         result = CalibrationResult(estimate=cam, subset=SHOT_SUBSET, point_residuals=residuals,
                                    pinned=[k for k, lab in labels.items() if lab.provenance == "hand"])
-        return replace(view, result=result, jac={}, shot_note=f"why the shot's camera here: {choice.reason}")
+        return replace(view, result=result, measured_jac={}, shot_note=f"why the shot's camera here: {choice.reason}")
 
     def strip(self, stem: str, settings) -> tuple[list[float], list[int], list[int]] | None:
         """The clip's strip under its model: each frame's error to its shot's camera, the cuts

@@ -6,7 +6,7 @@ against the frame's annotation (JaC@5/10/20). What the app shows of a frame and 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
@@ -34,7 +34,8 @@ class FrameView:
     annotation: Mapping[str, np.ndarray] | None
     observations: Observations | None
     result: CalibrationResult | None
-    jac: dict[int, float] = field(default_factory=dict)  # JaC@5/10/20 against the annotation
+    #: JaC@5/10/20 against the annotation once measured (:attr:`jac`); None: not yet
+    measured_jac: dict[int, float] | None = None
     error: str | None = None  # a problem reading the frame
     ms: float = 0.0
     reference_camera: Camera | None = None  # a known camera (e.g. synthetic ground truth), scaled to the frame
@@ -51,14 +52,28 @@ class FrameView:
             return self.result.camera
         return self.reference_camera
 
+    @property
+    def jac(self) -> dict[int, float]:
+        """JaC@5/10/20 of the calibration's camera against the frame's annotation ({} without
+        either), measured when first asked: a preview drawn while a point is dragged never asks
+        (it was a tenth of the preview's time), the view kept when that point is let go does."""
+        if self.measured_jac is None:
+            from pnlviz.metrics.soccernet import evaluate_frame
+
+            camera = self.result.camera if self.result is not None else None
+            jac: dict[int, float] = {}
+            if camera is not None and self.annotation:
+                fr = evaluate_frame(camera.scaled(*EVAL_SIZE), self.annotation)
+                jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
+            self.measured_jac = jac
+        return self.measured_jac
+
 
 def frame_view(reader: FrameReader, stem: str, settings: Settings, model: FieldModel | None = None,
                keypoint_edits: Mapping | None = None) -> FrameView:
-    """The frame ``stem`` (one the reader's dataset has) read, calibrated under ``settings`` and
-    scored; with ``keypoint_edits``, as it would be with these instead of its saved ones. Never
+    """The frame ``stem`` (one the reader's dataset has) read and calibrated under ``settings``
+    (scored when its :attr:`FrameView.jac` is first asked); with ``keypoint_edits``, as it would be with these instead of its saved ones. Never
     raises on bad data."""
-    from pnlviz.metrics.soccernet import evaluate_frame
-
     idx = reader.index_of(stem)
     read = reader.read(stem, keypoint_edits)
     if read.inputs is None:
@@ -66,13 +81,7 @@ def frame_view(reader: FrameReader, stem: str, settings: Settings, model: FieldM
     fc = calibrate_frame(read.inputs, reader.frame_settings(settings), model)
     # nothing to calibrate from is not an error of the frame: the card asks for keypoints
     engine_error = fc.failure.message if fc.failure is not None and fc.failure.code == "internal" else None
-    ann = read.inputs.annotation
-    jac = {}
-    camera = fc.camera  # None unless fc.ok
-    if camera is not None and ann:
-        fr = evaluate_frame(camera.scaled(*EVAL_SIZE), ann)
-        jac = {t: fr.accuracy(t) for t in (5, 10, 20)}
-    return FrameView(stem, idx, read.has_image, read.inputs.size, ann, fc.observations, fc.result, jac,
+    return FrameView(stem, idx, read.has_image, read.inputs.size, read.inputs.annotation, fc.observations, fc.result,
                      error=read.image_error or engine_error, ms=fc.ms, reference_camera=read.reference_camera,
                      # the engine's inputs hold them untyped (calib does not import data)
                      detections=cast("Predictions | None", read.inputs.detections), origin=fc.origin, settings=settings)
