@@ -617,6 +617,54 @@ def test_the_background_pass_waits_while_a_tab_acts_and_goes_on_after(data, tmp_
         queue.close(wait=True)
 
 
+def test_the_background_pass_gives_a_frame_up_when_a_tab_acts_and_takes_it_again(data, tmp_path, monkeypatch):
+    """A tab that acts while the pass calibrates a frame stops that work at the solver's next
+    iteration (nothing of it kept); once the tabs are quiet the frame is calibrated from the start,
+    to the summary it would have had anyway, and the pass goes on to the end."""
+    import threading
+
+    from pnlviz.app.triage import Triage
+
+    with AppState(data, edits=tmp_path / "reference") as ref:
+        expected = {s: ref.triage.calibrate(s) for s in ref.stems}
+    with AppState(data, edits=tmp_path / "edits") as st:
+        calls, real = [], Triage.calibrate
+
+        def calibrate(triage, stem):
+            calls.append(stem)
+            if stem == "00001" and calls.count(stem) == 1:
+                st.activity.begin()  # the hand starts a drag as the frame begins
+                threading.Timer(0.5, st.activity.end).start()
+            return real(triage, stem)
+
+        monkeypatch.setattr(Triage, "calibrate", calibrate)
+        progress = st.triage.run(threading.Event(), lambda text: None)
+        assert st.triage.yielded == 1 and calls.count("00001") == 2  # given up once, then done
+        assert [c for c in calls if c != "00001"] == [s for s in st.stems if s != "00001"]
+        assert progress.finished and progress.done == len(st.stems)
+        got = st.triage.summaries()
+        assert set(got) == set(st.stems)
+        for stem, want in expected.items():
+            assert (got[stem].ok, got[stem].worst, got[stem].median, got[stem].suspect) == \
+                (want.ok, want.worst, want.median, want.suspect), stem
+
+
+def test_a_tab_busy_for_good_does_not_stop_the_pass(data, tmp_path):
+    """A tab that never pauses (a clip played for minutes) makes the pass wait its longest wait
+    before each frame, and the frame is then calibrated to its end, not given up."""
+    import threading
+
+    from pnlviz.app.triage import Triage
+
+    with AppState(data, edits=tmp_path / "edits") as st:
+        triage = Triage(st.host, st.triage.store, run_detector=st.run_detector, user_busy=st.activity.busy,
+                        wait_quiet=lambda stop: st.activity.wait_quiet(stop, longest=0.2))
+        st.activity.begin()  # and never ends
+        progress = triage.run(threading.Event(), lambda text: None)
+        assert progress.finished and progress.done == len(st.stems) and triage.yielded == 0
+        assert set(triage.summaries()) == set(st.stems)
+
+
 def test_waiting_for_quiet_tabs_ends_on_stop_and_after_the_quiet_time():
     import threading
     import time

@@ -126,7 +126,8 @@ class AppState:
         self.activity = UserActivity()
         #: every frame's calibration summary and the background pass
         self.triage = Triage(self.host, SummaryStore(summaries, edits_store.warnings),
-                             wait_quiet=self.activity.wait_quiet, run_detector=self.run_detector)
+                             wait_quiet=self.activity.wait_quiet, run_detector=self.run_detector,
+                             user_busy=self.activity.busy)
         self._shots: ClipShots | None = None
         self._shots_lock = threading.Lock()
         #: the frame a new tab opens: the first with an image, the most telling one

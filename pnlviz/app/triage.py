@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from pnlviz.app.host import FrameHost
+from pnlviz.calib.solver import Cancelled, cancellable
 from pnlviz.data import DataError
 from pnlviz.data.edits_layout import EditsLayout
 from pnlviz.data.predictions import parse_predictions, predictions_to_json
@@ -320,7 +321,9 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
                 pass
             fresh = triage.up_to_date(stem)  # its token holds whether it has detections
         stored = triage.store.get(stem) if fresh else None  # up to date: stored
-        summary = stored if stored is not None else triage.calibrate(stem)
+        summary = stored if stored is not None else _calibrate_yielding(triage, stem, stop)
+        if summary is None:  # stopped while it waited for the tabs
+            return progress
         progress.done += 1
         progress.failed += not summary.ok
         if i % every == 0 or i == len(host.stems) - 1:
@@ -331,20 +334,54 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
     return progress
 
 
+def _calibrate_yielding(triage: "Triage", stem: str, stop: threading.Event) -> FrameSummary | None:
+    """The pass's calibration of one frame (:meth:`Triage.calibrate`), given up the moment a tab
+    acts (``triage.user_busy``: its solves stop at their next iteration, nothing is kept) and
+    taken again from the start once the tabs are quiet. A tab that has not been quiet for the
+    longest wait (:meth:`pnlviz.app.activity.UserActivity.wait_quiet`) no longer stops it (a clip
+    played for minutes does not stop the pass for good). None: ``stop`` was set while it waited.
+
+    The pass started a frame only after a pause, and then ran it to its end: a drag that began
+    during one of its longer frames (the label-error finder costs one to 26 calibrations) shared
+    the interpreter and a core with it throughout, and the point's previews took several times
+    as long."""
+    busy = triage.user_busy
+    while True:
+        if busy is None:
+            return triage.calibrate(stem)
+        if busy():  # a tab acted since the pass last waited (during a detection, or the frame given up)
+            triage.wait_quiet(stop)
+            if stop.is_set():
+                return None
+            if busy():  # waited the longest: the frame is not given up again
+                return triage.calibrate(stem)
+        try:
+            with cancellable(busy):
+                return triage.calibrate(stem)
+        except Cancelled:
+            triage.yielded += 1
+
+
 
 
 class Triage:
     """The summaries of the session's frames (``host``, :class:`pnlviz.app.host.FrameHost`), kept
     up to date as views are computed (``store``: where they are kept), and the background pass,
-    which waits for the tabs with ``wait_quiet(stop)`` and detects with ``run_detector(stem)``.
+    which waits for the tabs with ``wait_quiet(stop)``, gives a frame up when ``user_busy()``
+    says a tab acts, and detects with ``run_detector(stem)``.
     Made by :class:`pnlviz.app.state.AppState`, which gives it these and nothing else."""
 
     def __init__(self, host: FrameHost, store: SummaryStore, *, wait_quiet: Callable[[threading.Event], object],
-                 run_detector: Callable[[str], None]):
+                 run_detector: Callable[[str], None], user_busy: Callable[[], bool] | None = None):
         self.host = host
         self.store = store
         self.wait_quiet = wait_quiet
         self.run_detector = run_detector
+        #: whether a tab is at work (an action running or just ended): the pass gives its frame up
+        #: then (None: it never does)
+        self.user_busy = user_busy
+        #: frames the pass gave up because a tab acted (each taken again later)
+        self.yielded = 0
         self.progress: PassProgress | None = None
 
     def has_detections(self, stem: str) -> bool:
