@@ -297,6 +297,11 @@ class PassProgress:
                 f"{self.failed} without" + (f", {self.detected} detected" if self.detected else "") + f" · {dt:.0f} s")
 
 
+#: how often the background pass gives up one frame because a tab acted before it runs that frame
+#: to its end (:func:`_calibrate_yielding`)
+YIELDS_PER_FRAME = 3
+
+
 def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None], every: int = 10) -> PassProgress:
     """Detect (when the state has a detector) and calibrate every frame of the triage's state
     under its default settings, keeping summaries only; frames whose summary is up to date are
@@ -339,27 +344,35 @@ def _calibrate_yielding(triage: "Triage", stem: str, stop: threading.Event) -> F
     acts (``triage.user_busy``: its solves stop at their next iteration, nothing is kept) and
     taken again from the start once the tabs are quiet. A tab that has not been quiet for the
     longest wait (:meth:`pnlviz.app.activity.UserActivity.wait_quiet`) no longer stops it (a clip
-    played for minutes does not stop the pass for good). None: ``stop`` was set while it waited.
+    played for minutes does not stop the pass for good), nor does a frame given up
+    :data:`YIELDS_PER_FRAME` times (the pass takes its frames in order: a frame longer than the
+    user's pauses would hold it up for as long as the user works). None: ``stop`` was set while it
+    waited.
 
     The pass started a frame only after a pause, and then ran it to its end: a drag that began
     during one of its longer frames (the label-error finder costs one to 26 calibrations) shared
     the interpreter and a core with it throughout, and the point's previews took several times
     as long."""
     busy = triage.user_busy
-    while True:
+    for _ in range(YIELDS_PER_FRAME):
         if busy is None:
-            return triage.calibrate(stem)
+            break
         if busy():  # a tab acted since the pass last waited (during a detection, or the frame given up)
             triage.wait_quiet(stop)
             if stop.is_set():
                 return None
             if busy():  # waited the longest: the frame is not given up again
-                return triage.calibrate(stem)
+                break
         try:
             with cancellable(busy):
                 return triage.calibrate(stem)
         except Cancelled:
             triage.yielded += 1
+    else:  # given up as often as it may be: run to its end at the next pause
+        triage.wait_quiet(stop)
+        if stop.is_set():
+            return None
+    return triage.calibrate(stem)
 
 
 
