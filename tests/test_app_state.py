@@ -58,6 +58,7 @@ def test_a_preview_is_scored_only_when_its_view_is_kept(data):
     assert kept.jac == {t: truth.accuracy(t) for t in (5, 10, 20)} and kept.jac[5] > 0.5
     assert kept.measured_jac is kept.jac  # measured once
 
+
 def test_pnl_and_alpha_change_the_calibration(data):
     st = AppState(data)
     with_pnl = st.view("00002").result

@@ -375,8 +375,6 @@ def _calibrate_yielding(triage: "Triage", stem: str, stop: threading.Event) -> F
     return triage.calibrate(stem)
 
 
-
-
 class Triage:
     """The summaries of the session's frames (``host``, :class:`pnlviz.app.host.FrameHost`), kept
     up to date as views are computed (``store``: where they are kept), and the background pass,

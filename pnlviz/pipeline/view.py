@@ -72,8 +72,8 @@ class FrameView:
 def frame_view(reader: FrameReader, stem: str, settings: Settings, model: FieldModel | None = None,
                keypoint_edits: Mapping | None = None) -> FrameView:
     """The frame ``stem`` (one the reader's dataset has) read and calibrated under ``settings``
-    (scored when its :attr:`FrameView.jac` is first asked); with ``keypoint_edits``, as it would be with these instead of its saved ones. Never
-    raises on bad data."""
+    (scored when its :attr:`FrameView.jac` is first asked); with ``keypoint_edits``, as it would
+    be with these instead of its saved ones. Never raises on bad data."""
     idx = reader.index_of(stem)
     read = reader.read(stem, keypoint_edits)
     if read.inputs is None:
