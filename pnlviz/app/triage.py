@@ -313,9 +313,9 @@ def run_pass(triage: "Triage", stop: threading.Event, say: Callable[[str], None]
     progress = PassProgress(len(host.stems), started=time.perf_counter())
     for i, stem in enumerate(host.stems):
         detect, fresh = host.needs_detection(stem), triage.up_to_date(stem)
-        if detect or not fresh:
+        if detect:
             triage.wait_quiet(stop)  # work to do: the tab the user is on goes first
-            detect = detect and host.needs_detection(stem)  # a tab may have had it detected meanwhile
+            detect = host.needs_detection(stem)  # a tab may have had it detected meanwhile
         if stop.is_set():
             return progress
         if detect:
@@ -353,26 +353,21 @@ def _calibrate_yielding(triage: "Triage", stem: str, stop: threading.Event) -> F
     during one of its longer frames (the label-error finder costs one to 26 calibrations) shared
     the interpreter and a core with it throughout, and the point's previews took several times
     as long."""
-    busy = triage.user_busy
-    for _ in range(YIELDS_PER_FRAME):
-        if busy is None:
-            break
-        if busy():  # a tab acted since the pass last waited (during a detection, or the frame given up)
-            triage.wait_quiet(stop)
-            if stop.is_set():
-                return None
-            if busy():  # waited the longest: the frame is not given up again
-                break
+    given_up = 0
+    while True:
+        triage.wait_quiet(stop)  # the tab the user is on goes first (at once when it is quiet)
+        if stop.is_set():
+            return None
+        busy = triage.user_busy
+        if busy is None or busy() or given_up == YIELDS_PER_FRAME:
+            # no tabs to give way to, a tab busy past the longest wait, or given up as often as it may be
+            return triage.calibrate(stem)
         try:
             with cancellable(busy):
                 return triage.calibrate(stem)
         except Cancelled:
+            given_up += 1
             triage.yielded += 1
-    else:  # given up as often as it may be: run to its end at the next pause
-        triage.wait_quiet(stop)
-        if stop.is_set():
-            return None
-    return triage.calibrate(stem)
 
 
 class Triage:

@@ -231,7 +231,7 @@ class ShotProblem:
         pins = self.rows.kp_pin
         if not pins.any():
             return bend
-        out = np.full(self.rows.n_res + 4 * max(self.T - 2, 0) + int(self.params.fit_k1), bend)
+        out = np.full(self.rows.n_res + self._prior.shape[0], bend)  # the data rows, then the prior's
         out[:2 * len(pins)][np.repeat(pins, 2)] = np.inf
         return out
 
